@@ -1,0 +1,245 @@
+/*
+ * kdray.h — the public API of the kdray core: SAH kd-trees over triangle
+ * soups and the four ways of walking them (single rays, omni-directional ray
+ * bundles, cone-shadow queries, interval frusta).
+ *
+ * The core is pure computation: no I/O, no globals, no locks. A built
+ * kdr_scene is read-only; every query function may be called on the same
+ * scene from any number of threads at once. All arrays are owned by the
+ * caller unless a function says otherwise.
+ *
+ * Conventions (the HTTP contract in shared/API.md uses the same ones):
+ *  - a triangle is 9 floats, vertices p0, p1, p2 in file order; triangles
+ *    keep the caller's numbering ("prim"); zero-area triangles keep their
+ *    number but are never hit;
+ *  - a ray is origin o, direction d (any non-zero length; t is measured in
+ *    units of |d|, as in Embree) and a closed interval [tmin, tmax];
+ *  - a hit has t, prim, and barycentrics u, v with
+ *    hit point = (1-u-v)*p0 + u*p1 + v*p2;
+ *  - a miss has prim = -1, t = -1, u = v = 0;
+ *  - among hits at exactly equal t the smallest prim wins, so every
+ *    traversal kind returns the same answer bit for bit.
+ */
+#ifndef KDRAY_H
+#define KDRAY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- errors ------------------------------------------------------------ */
+
+typedef enum kdr_status {
+    KDR_OK = 0,
+    KDR_ENOMEM = -1,   /* allocation failed */
+    KDR_EINVAL = -2,   /* invalid argument (NULL, bad count, non-finite) */
+    KDR_ERANGE = -3,   /* a size over a hard limit (e.g. > 2^30 triangles) */
+} kdr_status;
+
+const char *kdr_strerror(int status);
+
+/* ---- scenes ------------------------------------------------------------ */
+
+typedef struct kdr_scene kdr_scene; /* opaque, read-only once built */
+
+typedef struct kdr_bounds {
+    float min[3], max[3];
+} kdr_bounds;
+
+/* SAH build parameters; kdr_build_opts_default() gives the tuned values. */
+typedef struct kdr_build_opts {
+    float isect_cost;   /* cost of one ray-triangle test */
+    float trav_cost;    /* cost of one interior-node step */
+    float empty_bonus;  /* in [0,1): SAH discount for cutting off empty space */
+    int max_depth;      /* <= 0: 8 + 1.3 log2(N), as pbrt */
+    int leaf_size;      /* never split a node with at most this many refs */
+} kdr_build_opts;
+
+void kdr_build_opts_default(kdr_build_opts *opts);
+
+typedef struct kdr_tree_stats {
+    uint64_t nodes;        /* interior + leaf */
+    uint64_t leaves;
+    uint64_t empty_leaves;
+    uint64_t max_depth;
+    uint64_t refs;         /* triangle references in leaves */
+    double refs_per_leaf;  /* refs / non-empty leaves */
+    double sah_cost;       /* expected cost of a random ray, SAH units */
+    double build_ms;
+    uint64_t bytes;        /* nodes + leaf lists + triangle copy */
+} kdr_tree_stats;
+
+/* Progress callback for large builds (may be NULL). Called from the
+ * building thread only. */
+typedef void (*kdr_log_fn)(void *user, const char *msg);
+
+/* Builds a scene from ntris triangles (9*ntris floats, copied). Non-finite
+ * coordinates are KDR_EINVAL. ntris may be 0 (every ray misses). */
+int kdr_scene_build(const float *tris, size_t ntris, const kdr_build_opts *opts,
+                    kdr_log_fn log, void *log_user, kdr_scene **out);
+void kdr_scene_free(kdr_scene *scene);
+
+size_t kdr_scene_triangle_count(const kdr_scene *scene);
+void kdr_scene_bounds(const kdr_scene *scene, kdr_bounds *out);
+void kdr_scene_tree_stats(const kdr_scene *scene, kdr_tree_stats *out);
+/* Length of the bounding-box diagonal (0 for an empty scene). */
+float kdr_scene_diagonal(const kdr_scene *scene);
+/* The 9 floats of triangle prim (NULL if out of range). */
+const float *kdr_scene_triangle(const kdr_scene *scene, size_t prim);
+
+/* ---- traversal statistics (all optional: pass NULL) --------------------- */
+
+typedef struct kdr_trav_stats {
+    uint64_t rays;           /* rays answered */
+    uint64_t nodes_visited;  /* interior + leaf nodes entered (per ray, summed
+                                over rays; a bundle/frustum step counts once per
+                                active ray) */
+    uint64_t tri_tests;      /* ray-triangle tests */
+    uint64_t fallbacks;      /* bundles or frusta that fell back to single rays */
+} kdr_trav_stats;
+
+/* ---- single rays --------------------------------------------------------- */
+
+typedef struct kdr_ray {
+    float org[3];
+    float dir[3];
+    float tmin, tmax;
+} kdr_ray;
+
+typedef struct kdr_hit {
+    float t, u, v;
+    int32_t prim; /* -1: miss */
+} kdr_hit;
+
+typedef enum kdr_query {
+    KDR_CLOSEST = 0, /* nearest hit */
+    KDR_ANY = 1,     /* occlusion: any hit in [tmin, tmax] */
+} kdr_query;
+
+/* Closest hit; returns 1 on hit, 0 on miss (hit filled either way). A ray
+ * with tmax < tmin, or a NaN anywhere, misses. */
+int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
+                   kdr_trav_stats *stats);
+/* Any hit; returns 1 if some triangle is hit in [tmin, tmax]. */
+int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
+                  kdr_trav_stats *stats);
+
+/* ---- batches of rays (bundle query) --------------------------------------
+ * Inputs are AoS float triples, outputs SoA. A stride of 0 means "one value
+ * shared by every ray" (org: 3 floats; tmin/tmax: 1 float). Rays i in
+ * [first, first+count) are answered; outputs are indexed by i as well, so
+ * several threads can fill disjoint ranges of one output. */
+typedef struct kdr_ray_batch {
+    size_t n;
+    const float *org;  size_t org_stride;  /* 0 or 3 */
+    const float *dir;                      /* 3*n, stride 3 */
+    const float *tmin; size_t tmin_stride; /* 0 or 1 */
+    const float *tmax; size_t tmax_stride; /* 0 or 1 */
+} kdr_ray_batch;
+
+typedef struct kdr_hits {
+    float *t;       /* closest: n floats */
+    int32_t *prim;  /* closest: n ints */
+    float *u, *v;   /* closest: n floats each */
+    uint8_t *hit;   /* any: n bytes, 0 or 1 */
+} kdr_hits;
+
+typedef enum kdr_trav_mode {
+    KDR_TRAV_AUTO = 0,   /* best available: bundles of 8 (AVX2) or 4 */
+    KDR_TRAV_SINGLE = 1, /* one ray at a time */
+    KDR_TRAV_BUNDLE4 = 2,
+    KDR_TRAV_BUNDLE8 = 3, /* falls back to 4 without AVX2 */
+} kdr_trav_mode;
+
+/* Traces rays [first, first+count) of the batch. Results are identical to
+ * kdr_intersect1 / kdr_occluded1 ray by ray, whatever the mode. */
+int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
+                    size_t first, size_t count, kdr_query query,
+                    kdr_trav_mode mode, kdr_hits *out, kdr_trav_stats *stats);
+
+/* 1 if the CPU runs the 8-wide (AVX2) bundle code. */
+int kdr_cpu_has_avx2(void);
+
+/* ---- cone-shadow queries -------------------------------------------------- */
+
+typedef struct kdr_sphere_light {
+    float center[3];
+    float radius; /* > 0 */
+} kdr_sphere_light;
+
+typedef struct kdr_shadow_query {
+    size_t n;                 /* points */
+    const float *points;      /* 3*n */
+    const float *normals;     /* 3*n or NULL */
+    const kdr_sphere_light *lights;
+    size_t nlights;
+    uint32_t samples;         /* 1..4096 */
+    uint64_t seed;
+    float epsilon;            /* offset = epsilon * scene diagonal */
+} kdr_shadow_query;
+
+typedef struct kdr_shadow_stats {
+    uint64_t cones_decided;   /* (point, light) pairs answered without rays */
+    uint64_t rays_traced;
+    uint64_t nodes_visited;   /* cone traversal nodes + ray traversal nodes */
+} kdr_shadow_stats;
+
+typedef enum kdr_shadow_mode {
+    KDR_SHADOW_CONE = 0,      /* cone traversal, then samples vs candidates */
+    KDR_SHADOW_RAYS = 1,      /* every sample traced through the kd-tree */
+} kdr_shadow_mode;
+
+/* The exact shadow ray of sample s of point i toward light l (origin already
+ * offset, direction toward the sampled point of the sphere, tmin = 0,
+ * tmax = the distance to the sphere's near surface in units of dir).
+ * Every mode, and the Embree reference in tests, uses these rays. Returns
+ * KDR_EINVAL if the point is inside the light. */
+int kdr_shadow_ray(const kdr_scene *scene, const kdr_shadow_query *q, size_t i,
+                   size_t l, uint32_t s, kdr_ray *out);
+
+/* Visibility of lights for points [first, first+count): writes
+ * visibility[i*nlights + l] in [0,1]. */
+int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
+                     size_t first, size_t count, kdr_shadow_mode mode,
+                     float *visibility, kdr_shadow_stats *stats);
+
+/* ---- frustum queries ------------------------------------------------------ */
+
+typedef struct kdr_camera {
+    float eye[3], target[3], up[3];
+    float fov_y_deg;
+    uint32_t width, height;
+} kdr_camera;
+
+/* Checks the camera (finite, eye != target, up not parallel to the view,
+ * 0 < fov < 180, sizes >= 1). */
+int kdr_camera_validate(const kdr_camera *cam);
+/* The primary ray of pixel (px, py) exactly as shared/API.md defines it
+ * (unnormalised direction, tmin 0, tmax +inf). */
+void kdr_camera_ray(const kdr_camera *cam, uint32_t px, uint32_t py,
+                    kdr_ray *out);
+
+typedef enum kdr_frustum_mode {
+    KDR_FRUSTUM_MULTI4 = 0, /* four tiles per traversal, SIMD lanes */
+    KDR_FRUSTUM_SINGLE = 1, /* one tile per traversal */
+    KDR_FRUSTUM_RAYS = 2,   /* reference: each pixel's ray alone */
+} kdr_frustum_mode;
+
+/* Number of tile x tile tiles covering the image (row-major tile order). */
+size_t kdr_frustum_tile_count(const kdr_camera *cam, uint32_t tile);
+
+/* Traces tiles [first_tile, first_tile+count) of the image; output arrays
+ * have width*height entries in row-major pixel order. Results equal
+ * kdr_intersect1/kdr_occluded1 of kdr_camera_ray() pixel by pixel. */
+int kdr_frustum_trace(const kdr_scene *scene, const kdr_camera *cam,
+                      uint32_t tile, size_t first_tile, size_t count,
+                      kdr_query query, kdr_frustum_mode mode, kdr_hits *out,
+                      kdr_trav_stats *stats);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* KDRAY_H */
