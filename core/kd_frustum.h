@@ -1,0 +1,41 @@
+/*
+ * kd_frustum.h — the camera basis shared by kdr_camera_ray and the frustum
+ * traversal (core/kd_frustum*.c). Not part of the public API.
+ *
+ * The basis is computed once per camera; kd_camera_dir then evaluates one
+ * pixel's direction. kdr_camera_ray is defined as exactly these two steps,
+ * so the frustum code, the tests and the Embree reference all trace the
+ * same float rays.
+ */
+#ifndef KD_FRUSTUM_H
+#define KD_FRUSTUM_H
+
+#include <stdint.h>
+
+#include "kdray.h"
+
+typedef struct kd_camera_basis {
+    float eye[3];
+    float f[3], r[3], u[3]; /* forward, right, up: unit (up: nearly) */
+    float h, a;             /* tan(fov_y/2), width/height */
+    float w, hgt;           /* width, height as floats */
+} kd_camera_basis;
+
+/* Fills the basis of a camera that passed kdr_camera_validate. */
+void kd_camera_basis_init(const kdr_camera *cam, kd_camera_basis *b);
+
+/*
+ * Direction of pixel (px, py); the operation order is the definition:
+ *   sx = ((2 * (px + 0.5)) / w - 1) * h * a   (left to right)
+ *   sy = (1 - (2 * (py + 0.5)) / hgt) * h
+ *   d[i] = (f[i] + sx * r[i]) + sy * u[i]
+ */
+static inline void kd_camera_dir(const kd_camera_basis *b, uint32_t px,
+                                 uint32_t py, float d[3]) {
+    const float sx = ((2.0f * ((float)px + 0.5f)) / b->w - 1.0f) * b->h * b->a;
+    const float sy = (1.0f - (2.0f * ((float)py + 0.5f)) / b->hgt) * b->h;
+    for (int i = 0; i < 3; i++)
+        d[i] = (b->f[i] + sx * b->r[i]) + sy * b->u[i];
+}
+
+#endif /* KD_FRUSTUM_H */
