@@ -1,0 +1,176 @@
+/*
+ * kd_cone_sample.c — THE definition of a cone-shadow sample ray
+ * (kdr_shadow_ray). Every shadow mode and every test oracle draws its rays
+ * from here, so "cone traversal equals per-ray sampling" can be checked bit
+ * for bit.
+ *
+ * Sampling: uniform in solid angle over the cap of half-angle
+ * alpha = asin(r/D) around the direction to the light centre. cos(theta) is
+ * 1D-stratified (sample s takes stratum [s, s+1)/n with a hashed jitter) and
+ * the azimuth follows a golden-ratio lattice rotated per (point, light): a
+ * spherical-Fibonacci-like point set that is well spread for any n, not only
+ * squares. All randomness is a counter-based hash of (seed, point, light,
+ * sample): no state, thread-safe, reproducible.
+ *
+ * Offset (API.md: "epsilon * diagonal along the normal"): the normal is
+ * flipped to the light's side first, because glTF normals of single-sided
+ * or flipped geometry would otherwise push the start behind the very surface
+ * it lies on and shadow every point of it. Without normals (or with a zero
+ * normal) each ray's origin moves the same distance along the ray itself.
+ */
+#include <math.h>
+
+#include "kd_cone.h"
+#include "kd_internal.h"
+
+/* Odd constants that decorrelate the hash inputs (golden ratio, splitmix). */
+#define SAMPLE_KEY_POINT 0x9e3779b97f4a7c15ull
+#define SAMPLE_KEY_LIGHT 0xc2b2ae3d27d4eb4full
+#define SAMPLE_KEY_SAMPLE 0x165667b19e3779f9ull
+#define SAMPLE_KEY_PHI 0x27d4eb2f165667c5ull
+#define GOLDEN_FRACTION 0.6180339887498948482
+#define TWO_PI 6.283185307179586477
+
+/* splitmix64's finaliser: a bijective 64-bit mix. */
+static uint64_t mix64(uint64_t z) {
+    z += 0x9e3779b97f4a7c15ull;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+
+/* Uniform in [0, 1) with 53 bits. */
+static double unit_double(uint64_t h) { return (double)(h >> 11) * 0x1p-53; }
+
+static int finite3(const float *v) {
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+/* Duff et al.'s branch-free orthonormal basis around a unit vector. */
+static void basis_around(const double n[3], double b1[3], double b2[3]) {
+    const double sign = n[2] >= 0.0 ? 1.0 : -1.0;
+    const double a = -1.0 / (sign + n[2]);
+    const double b = n[0] * n[1] * a;
+    b1[0] = 1.0 + sign * n[0] * n[0] * a;
+    b1[1] = sign * b;
+    b1[2] = -sign * n[0];
+    b2[0] = b;
+    b2[1] = sign + n[1] * n[1] * a;
+    b2[2] = -n[1];
+}
+
+/* Moves the apex along the (light-facing) normal; returns 0 when there is no
+ * usable normal and the offset must go along each ray instead. */
+static int offset_along_normal(const float *nrm, const double *center,
+                               float off, float apex[3]) {
+    double n[3] = {nrm[0], nrm[1], nrm[2]};
+    double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(len > 0.0))
+        return 0;
+    double facing = 0.0;
+    for (int k = 0; k < 3; k++)
+        facing += n[k] * (center[k] - apex[k]);
+    const double scale = (facing < 0.0 ? -1.0 : 1.0) * (double)off / len;
+    for (int k = 0; k < 3; k++)
+        apex[k] = (float)((double)apex[k] + n[k] * scale);
+    return 1;
+}
+
+int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
+                         size_t i, size_t l, kd_shadow_frame *f) {
+    const float *p = q->points + 3 * i;
+    const kdr_sphere_light *light = &q->lights[l];
+    if (!finite3(p) || !finite3(light->center) || !isfinite(light->radius) ||
+        !(light->radius > 0.0f) || !isfinite(q->epsilon) || q->epsilon < 0.0f)
+        return KDR_EINVAL;
+    if (q->normals && !finite3(q->normals + 3 * i))
+        return KDR_EINVAL;
+    const float off = q->epsilon * kdr_scene_diagonal(scene);
+    for (int k = 0; k < 3; k++) {
+        f->apex[k] = p[k];
+        f->center[k] = light->center[k];
+    }
+    f->along = off;
+    if (q->normals && offset_along_normal(q->normals + 3 * i, f->center, off,
+                                          f->apex))
+        f->along = 0.0f;
+    double w[3], d2 = 0.0;
+    for (int k = 0; k < 3; k++) {
+        w[k] = f->center[k] - (double)f->apex[k];
+        d2 += w[k] * w[k];
+    }
+    f->radius = light->radius;
+    f->dist = sqrt(d2);
+    if (!(f->dist > f->radius) || !isfinite(f->dist))
+        return KDR_EINVAL;
+    for (int k = 0; k < 3; k++)
+        f->axis[k] = w[k] / f->dist;
+    basis_around(f->axis, f->b1, f->b2);
+    f->sin_a = f->radius / f->dist;
+    const double cos_a = sqrt((1.0 - f->sin_a) * (1.0 + f->sin_a));
+    f->one_minus_cos = f->sin_a * f->sin_a / (1.0 + cos_a);
+    f->key = mix64(mix64(mix64(q->seed) ^ (i * SAMPLE_KEY_POINT)) ^
+                   (l * SAMPLE_KEY_LIGHT));
+    f->phi_shift = unit_double(mix64(f->key ^ SAMPLE_KEY_PHI));
+    return KDR_OK;
+}
+
+/* Distance along dir (|dir| ~ 1) from the apex to the sphere's near side.
+ * The discriminant uses |oc x dir|^2 (Lagrange) so grazing samples at the
+ * cone's rim do not cancel catastrophically. */
+static double near_surface(const kd_shadow_frame *f, const float dir[3]) {
+    double oc[3], dd[3];
+    for (int k = 0; k < 3; k++) {
+        oc[k] = f->center[k] - (double)f->apex[k];
+        dd[k] = dir[k];
+    }
+    const double qq = dd[0] * dd[0] + dd[1] * dd[1] + dd[2] * dd[2];
+    const double b = oc[0] * dd[0] + oc[1] * dd[1] + oc[2] * dd[2];
+    const double cx = oc[1] * dd[2] - oc[2] * dd[1];
+    const double cy = oc[2] * dd[0] - oc[0] * dd[2];
+    const double cz = oc[0] * dd[1] - oc[1] * dd[0];
+    double disc = qq * f->radius * f->radius - (cx * cx + cy * cy + cz * cz);
+    if (disc < 0.0) /* a rim sample rounded just outside: tangent point */
+        disc = 0.0;
+    const double c = (f->dist - f->radius) * (f->dist + f->radius);
+    return c / (b + sqrt(disc));
+}
+
+void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
+                         uint32_t nsamples, kdr_ray *out) {
+    const uint64_t h = mix64(f->key ^ ((uint64_t)s * SAMPLE_KEY_SAMPLE));
+    const double u = ((double)s + unit_double(h)) / (double)nsamples;
+    const double one_minus_ct = u * f->one_minus_cos;
+    const double ct = 1.0 - one_minus_ct;
+    const double st = sqrt(one_minus_ct * (2.0 - one_minus_ct));
+    double phi = (double)s * GOLDEN_FRACTION + f->phi_shift;
+    phi = TWO_PI * (phi - floor(phi));
+    const double cp = cos(phi) * st, sp = sin(phi) * st;
+    double d[3], len2 = 0.0;
+    for (int k = 0; k < 3; k++) {
+        d[k] = ct * f->axis[k] + cp * f->b1[k] + sp * f->b2[k];
+        len2 += d[k] * d[k];
+    }
+    const double inv = 1.0 / sqrt(len2);
+    for (int k = 0; k < 3; k++)
+        out->dir[k] = (float)(d[k] * inv);
+    const double reach = near_surface(f, out->dir) - (double)f->along;
+    for (int k = 0; k < 3; k++)
+        out->org[k] = f->apex[k] + f->along * out->dir[k];
+    out->tmin = 0.0f;
+    out->tmax = reach > 0.0 ? (float)reach : 0.0f;
+}
+
+int kdr_shadow_ray(const kdr_scene *scene, const kdr_shadow_query *q, size_t i,
+                   size_t l, uint32_t s, kdr_ray *out) {
+    if (!scene || !q || !out || !q->points || !q->lights || i >= q->n ||
+        l >= q->nlights || q->samples < 1 || q->samples > 4096 ||
+        s >= q->samples)
+        return KDR_EINVAL;
+    kd_shadow_frame f;
+    int rc = kd_shadow_frame_init(scene, q, i, l, &f);
+    if (rc != KDR_OK)
+        return rc;
+    kd_shadow_frame_ray(&f, s, q->samples, out);
+    return KDR_OK;
+}
