@@ -1,0 +1,199 @@
+/*
+ * kdr_protocol.h — the HTTP/JSON contract (shared/API.md) as C: request
+ * bodies in, typed queries for the core out; core results in, response
+ * bodies out. No sockets, no scene loading: server/ moves the bytes,
+ * protocol/ gives them meaning.
+ *
+ * Conventions:
+ *  - Parsers take the body as bytes + length (not NUL-terminated). They
+ *    return 0 on success, otherwise the HTTP status (400, 413, 500) which is
+ *    also stored in err->status together with a detail naming the field and
+ *    element at fault ("directions[17]: not a finite number"). On failure the
+ *    request struct holds nothing to free (freeing it is still harmless).
+ *  - Parsed requests own their arrays; the embedded core structs
+ *    (kdr_ray_batch, kdr_shadow_query) point into them. Do not copy a request
+ *    struct by value and free both copies; free exactly once.
+ *  - Encoders append to a kdr_buf and return 0, or KDR_ENOMEM. The buffer's
+ *    data is malloc'd: it may be handed to libmicrohttpd with free() as the
+ *    free callback (then forget it: set the kdr_buf to {0}).
+ *  - Thread safety: every function is reentrant (no global state; the cJSON
+ *    error pointer is not used).
+ *
+ * Limits (documented in the contract's terms):
+ *  - bundle: N rays count as N; frustum: width*height; cone-shadow:
+ *    N * L * samples (the worst-case number of shadow rays). Over max_rays
+ *    -> 413 "batch of X rays exceeds the limit of M".
+ *  - cone-shadow: 1..KDR_PROTO_MAX_LIGHTS lights, samples default
+ *    KDR_PROTO_DEFAULT_SAMPLES.
+ *  - Numbers given as JSON must fit float32 where the field is a float
+ *    (|x| > FLT_MAX is "out of float32 range"), except tmin/tmax, which
+ *    saturate to +-infinity (so "tmax": 1e300 means "no limit").
+ *  - JSON output never contains nan/inf: a non-finite float (which the core
+ *    never produces) is written as null.
+ */
+#ifndef KDR_PROTOCOL_H
+#define KDR_PROTOCOL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "kdray.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- tuning / limits (one place) --------------------------------------- */
+
+#define KDR_PROTO_DEFAULT_MAX_RAYS ((size_t)4194304) /* used when max_rays == 0 */
+#define KDR_PROTO_MAX_LIGHTS 64
+#define KDR_PROTO_DEFAULT_SAMPLES 64
+#define KDR_PROTO_MAX_SAMPLES 4096
+#define KDR_PROTO_DEFAULT_SEED 1
+#define KDR_PROTO_DEFAULT_EPSILON 1e-4f
+#define KDR_PROTO_DEFAULT_TILE 8
+#define KDR_PROTO_MIN_TILE 4
+#define KDR_PROTO_MAX_TILE 64
+#define KDR_PROTO_MAX_IMAGE_SIDE 16384
+
+/* ---- output buffer ------------------------------------------------------ */
+
+typedef struct kdr_buf {
+    char *data; /* malloc'd, NOT NUL-terminated unless kdr_buf_cstr is called */
+    size_t len, cap;
+} kdr_buf;
+
+void kdr_buf_init(kdr_buf *b);
+void kdr_buf_free(kdr_buf *b); /* frees data, leaves an empty buffer */
+/* Makes room for extra more bytes; 0 or KDR_ENOMEM. */
+int kdr_buf_reserve(kdr_buf *b, size_t extra);
+int kdr_buf_append(kdr_buf *b, const void *bytes, size_t n);
+/* Appends a NUL after the data (not counted in len) and returns data. */
+const char *kdr_buf_cstr(kdr_buf *b);
+
+/* ---- errors ---------------------------------------------------------------- */
+
+typedef struct kdr_proto_error {
+    int status;        /* HTTP status: 400, 404, 405, 413, 415, 500, 503 */
+    char detail[256];  /* "field[index]: what is wrong" */
+} kdr_proto_error;
+
+/* Sets status and a printf-formatted detail; returns status. */
+int kdr_proto_error_set(kdr_proto_error *err, int status, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+/* "Bad Request", "Not Found", ...; "Error" for statuses not in the list. */
+const char *kdr_proto_status_title(int status);
+/* The RFC 7807 body: {"type":"about:blank","title":...,"status":...,
+ * "detail":...} (Content-Type application/problem+json). */
+int kdr_proto_encode_error(const kdr_proto_error *err, kdr_buf *out);
+
+/* ---- requests ---------------------------------------------------------------- */
+
+typedef enum kdr_encoding {
+    KDR_ENCODING_JSON = 0,   /* arrays of numbers */
+    KDR_ENCODING_BASE64 = 1, /* {"f32": ...} / {"i32": ...} */
+} kdr_encoding;
+
+/* POST /v1/scenes/{name}/bundle */
+typedef struct kdr_bundle_request {
+    kdr_ray_batch batch; /* ready for kdr_trace_batch */
+    kdr_query query;
+    kdr_encoding encoding;
+    float *owned[4];     /* org, dir, tmin, tmax storage (internal) */
+} kdr_bundle_request;
+
+int kdr_proto_parse_bundle(const char *body, size_t len, size_t max_rays,
+                           kdr_bundle_request *out, kdr_proto_error *err);
+void kdr_bundle_request_free(kdr_bundle_request *req);
+
+/* POST /v1/scenes/{name}/cone-shadow */
+typedef struct kdr_shadow_request {
+    kdr_shadow_query query; /* ready for kdr_shadow_trace */
+    int want_stats;         /* "stats": true */
+    kdr_encoding encoding;
+    float *owned_points, *owned_normals; /* internal */
+    kdr_sphere_light *owned_lights;      /* internal */
+} kdr_shadow_request;
+
+int kdr_proto_parse_shadow(const char *body, size_t len, size_t max_rays,
+                           kdr_shadow_request *out, kdr_proto_error *err);
+void kdr_shadow_request_free(kdr_shadow_request *req);
+
+/* POST /v1/scenes/{name}/frustum (owns nothing: no free function) */
+typedef struct kdr_frustum_request {
+    kdr_camera camera; /* validated: finite, eye != target, up not parallel */
+    uint32_t tile;
+    kdr_query query;
+    kdr_encoding encoding;
+    size_t rays;       /* width * height */
+} kdr_frustum_request;
+
+int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
+                            kdr_frustum_request *out, kdr_proto_error *err);
+
+/* ---- responses ------------------------------------------------------------------ */
+
+/* Bundle / frustum results for rays [0, n): closest ->
+ * {"count":N,"t":[...],"prim":[...],"u":[...],"v":[...]}, any ->
+ * {"count":N,"hit":[0|1,...]}. A ray with prim < 0 is written as a miss
+ * (t = -1, u = v = 0) whatever the other arrays hold. */
+int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
+                          kdr_encoding enc, kdr_buf *out);
+
+/* {"count":N,"visibility":[N*nlights floats]} plus "stats" when stats is
+ * not NULL. */
+int kdr_proto_encode_shadow(const float *visibility, size_t n, size_t nlights,
+                            const kdr_shadow_stats *stats, kdr_encoding enc,
+                            kdr_buf *out);
+
+/* Scene description, independent of scenes/: the server fills it. */
+typedef struct kdr_proto_mesh_range {
+    int64_t node, mesh, primitive;  /* glTF indices */
+    uint64_t first_prim, count;     /* global triangle numbers */
+} kdr_proto_mesh_range;
+
+typedef struct kdr_proto_scene_info {
+    const char *name;               /* UTF-8; escaped on output */
+    uint64_t triangles;
+    kdr_bounds bounds;
+    kdr_tree_stats tree;
+    const kdr_proto_mesh_range *meshes;
+    size_t nmeshes;
+} kdr_proto_scene_info;
+
+/* SCENE as in the contract. */
+int kdr_proto_encode_scene(const kdr_proto_scene_info *scene, kdr_buf *out);
+/* {"scenes":[SCENE,...]} */
+int kdr_proto_encode_scenes(const kdr_proto_scene_info *scenes, size_t n,
+                            kdr_buf *out);
+/* {"status":"ok","scenes":K} */
+int kdr_proto_encode_health(const char *status, size_t nscenes, kdr_buf *out);
+
+/* ---- building blocks (public for the tests and the fuzzer) ---------------- */
+
+/* Shortest decimal that reads back as exactly f (JSON number syntax:
+ * "-0", "1", "0.1", "1e-45", "3.4028235e38"); "null" for NaN/Inf.
+ * Writes at most KDR_FLOAT_CHARS bytes, no NUL; returns the length. */
+#define KDR_FLOAT_CHARS 24
+size_t kdr_format_float(float f, char *dst);
+
+/* RFC 4648 base64 with padding. encode writes kdr_base64_encoded_len(n)
+ * chars (no NUL) and returns that count. */
+size_t kdr_base64_encoded_len(size_t n);
+size_t kdr_base64_encode(const void *src, size_t n, char *dst);
+/* Upper bound of the decoded size of n chars. */
+size_t kdr_base64_decoded_max(size_t n);
+/* Strict decode (length a multiple of 4, '=' only as final padding, no
+ * whitespace, unused bits zero). Returns 0 and the byte count in *out_len,
+ * or -1 with the offset of the first bad character in *err_offset (n when
+ * the input is truncated). */
+int kdr_base64_decode(const char *src, size_t n, void *dst, size_t *out_len,
+                      size_t *err_offset);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* KDR_PROTOCOL_H */
