@@ -1,0 +1,46 @@
+/*
+ * metrics.h — the daemon's Prometheus counters: requests by endpoint and
+ * status, rays traced by query kind, a request latency histogram. Every
+ * update is a relaxed C11 atomic add, so the request path takes no lock;
+ * a scrape reads the counters without stopping anyone (counts may be a few
+ * requests apart, as Prometheus allows).
+ */
+#ifndef KDR_SRV_METRICS_H
+#define KDR_SRV_METRICS_H
+
+#include <stdint.h>
+
+#include "textbuf.h"
+
+typedef enum kdr_endpoint {
+    KDR_EP_HEALTH,
+    KDR_EP_METRICS,
+    KDR_EP_SCENES,
+    KDR_EP_SCENE,
+    KDR_EP_BUNDLE,
+    KDR_EP_CONE_SHADOW,
+    KDR_EP_FRUSTUM,
+    KDR_EP_OTHER, /* unknown paths */
+    KDR_EP_COUNT
+} kdr_endpoint;
+
+typedef enum kdr_ray_kind {
+    KDR_RAYS_BUNDLE,
+    KDR_RAYS_SHADOW,
+    KDR_RAYS_FRUSTUM,
+    KDR_RAYS_COUNT
+} kdr_ray_kind;
+
+const char *kdr_endpoint_name(kdr_endpoint ep);
+
+/* Records one answered request; latency in seconds. */
+void kdr_metrics_request(kdr_endpoint ep, unsigned status, double seconds);
+void kdr_metrics_rays(kdr_ray_kind kind, uint64_t rays);
+/* Requests currently between first byte and completion. */
+void kdr_metrics_inflight(int delta);
+long kdr_metrics_inflight_now(void);
+
+/* Appends every counter in Prometheus text format 0.0.4. */
+void kdr_metrics_render(kdr_tb *tb);
+
+#endif
