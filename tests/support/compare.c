@@ -1,0 +1,347 @@
+/*
+ * compare.c — the brute-force reference and the classification of kd vs
+ * Embree disagreements. Boundary cases are proven in double precision: the
+ * triangle's three edge functions in the ray's sheared frame (the frame of
+ * core/kd_tri.h) are compared with the rounding error their float
+ * evaluation can carry, so "on the edge" means "within rounding of it", not
+ * "close enough by eye".
+ */
+#include "compare.h"
+
+#include <float.h>
+#include <math.h>
+#include <string.h>
+
+#include "kd_internal.h"
+#include "kd_tri.h"
+
+/* How many float roundings of the edge functions' magnitude count as "on
+ * the edge" (Embree's Pluecker test and kd_tri.h round differently, and
+ * Embree widens edges by one ulp of the determinant). */
+#define EDGE_ULPS 64.0
+/* t agrees when within CMP_T_REL_TOL relative, or within this many ulps of
+ * the largest coordinate involved (the inputs' own rounding). */
+#define T_FLOOR_ULPS 8.0
+
+static const char *const class_names[CMP_NCLASSES] = {
+    "agree", "tie", "boundary", "kd_miss", "kd_extra", "wrong_prim", "t_error",
+};
+
+const char *cmp_class_name(cmp_class c) {
+    return (c >= 0 && c < CMP_NCLASSES) ? class_names[c] : "?";
+}
+
+int cmp_is_unexplained(cmp_class c) {
+    return c != CMP_AGREE && c != CMP_TIE && c != CMP_BOUNDARY;
+}
+
+/* ---- brute-force reference ------------------------------------------------ */
+
+int ref_tri_degenerate(const float *tri) {
+    const float e1[3] = {tri[3] - tri[0], tri[4] - tri[1], tri[5] - tri[2]};
+    const float e2[3] = {tri[6] - tri[0], tri[7] - tri[1], tri[8] - tri[2]};
+    const float nx = e1[1] * e2[2] - e1[2] * e2[1];
+    const float ny = e1[2] * e2[0] - e1[0] * e2[2];
+    const float nz = e1[0] * e2[1] - e1[1] * e2[0];
+    return nx == 0.0f && ny == 0.0f && nz == 0.0f;
+}
+
+static int ray_usable(const kdr_ray *r) {
+    for (int k = 0; k < 3; k++)
+        if (isnan(r->org[k]) || isnan(r->dir[k]))
+            return 0;
+    if (isnan(r->tmin) || isnan(r->tmax) || r->tmax < r->tmin)
+        return 0;
+    return r->dir[0] != 0.0f || r->dir[1] != 0.0f || r->dir[2] != 0.0f;
+}
+
+static void set_miss(kdr_hit *h) {
+    h->t = -1.0f;
+    h->u = h->v = 0.0f;
+    h->prim = -1;
+}
+
+int ref_intersect1(const float *tris, size_t ntris, const kdr_ray *ray,
+                   kdr_hit *hit) {
+    set_miss(hit);
+    if (!ray_usable(ray))
+        return 0;
+    kd_ray_pre pre;
+    kd_ray_precompute(ray->org, ray->dir, &pre);
+    float best = INFINITY;
+    int32_t best_prim = -1;
+    for (size_t i = 0; i < ntris; i++) {
+        const float *tri = tris + 9 * i;
+        float t, u, v;
+        if (ref_tri_degenerate(tri) ||
+            !kd_tri_intersect(&pre, tri, ray->tmin, ray->tmax, &t, &u, &v))
+            continue;
+        if (best_prim < 0 || kd_hit_better(t, (int32_t)i, best, best_prim)) {
+            best = t;
+            best_prim = (int32_t)i;
+            hit->t = t;
+            hit->u = u;
+            hit->v = v;
+            hit->prim = (int32_t)i;
+        }
+    }
+    return best_prim >= 0;
+}
+
+int ref_occluded1(const float *tris, size_t ntris, const kdr_ray *ray) {
+    if (!ray_usable(ray))
+        return 0;
+    kd_ray_pre pre;
+    kd_ray_precompute(ray->org, ray->dir, &pre);
+    for (size_t i = 0; i < ntris; i++) {
+        float t, u, v;
+        if (!ref_tri_degenerate(tris + 9 * i) &&
+            kd_tri_intersect(&pre, tris + 9 * i, ray->tmin, ray->tmax, &t, &u, &v))
+            return 1;
+    }
+    return 0;
+}
+
+/* ---- proofs of boundary cases --------------------------------------------- */
+
+/* The triangle seen from the ray, in double precision. margin is the
+ * smallest edge function (inside positive) over the rounding scale of the
+ * edge functions; parallel means the projected area is itself within
+ * rounding of zero (the ray lies in the triangle's plane). */
+typedef struct tri_view {
+    double margin;
+    int parallel;
+} tri_view;
+
+static void view_triangle(const kdr_ray *r, const float *tri, tri_view *out) {
+    kd_ray_pre p;
+    kd_ray_precompute(r->org, r->dir, &p);
+    const double sx = (double)r->dir[p.kx] / r->dir[p.kz];
+    const double sy = (double)r->dir[p.ky] / r->dir[p.kz];
+    double x[3], y[3], mx[3], my[3];
+    for (int i = 0; i < 3; i++) {
+        const double ax = (double)tri[3 * i + p.kx] - r->org[p.kx];
+        const double ay = (double)tri[3 * i + p.ky] - r->org[p.ky];
+        const double az = (double)tri[3 * i + p.kz] - r->org[p.kz];
+        x[i] = ax - sx * az;
+        y[i] = ay - sy * az;
+        mx[i] = fabs(ax) + fabs(sx * az);
+        my[i] = fabs(ay) + fabs(sy * az);
+    }
+    /* edge function opposite vertex i uses the other two vertices */
+    double e[3], m = 0.0;
+    for (int i = 0; i < 3; i++) {
+        const int b = (i + 1) % 3, c = (i + 2) % 3;
+        e[i] = x[c] * y[b] - y[c] * x[b];
+        m += mx[c] * my[b] + my[c] * mx[b];
+    }
+    const double det = e[0] + e[1] + e[2];
+    const double tol = EDGE_ULPS * FLT_EPSILON * m;
+    out->parallel = fabs(det) <= tol;
+    const double s = det < 0 ? -1.0 : 1.0;
+    double lo = INFINITY;
+    for (int i = 0; i < 3; i++)
+        lo = fmin(lo, s * e[i]);
+    out->margin = m > 0 ? lo / m : 0.0;
+}
+
+static int on_boundary(const kdr_ray *r, const float *tri) {
+    tri_view v;
+    view_triangle(r, tri, &v);
+    return v.parallel || fabs(v.margin) <= EDGE_ULPS * FLT_EPSILON;
+}
+
+static double scale_of(const kdr_ray *r, const float *a, const float *b) {
+    double s = 0.0;
+    for (int k = 0; k < 3; k++)
+        s = fmax(s, fabs(r->org[k]));
+    for (int k = 0; k < 9; k++) {
+        if (a)
+            s = fmax(s, fabs(a[k]));
+        if (b)
+            s = fmax(s, fabs(b[k]));
+    }
+    return s;
+}
+
+static double t_floor(const kdr_ray *r, double scale) {
+    const double len = sqrt((double)r->dir[0] * r->dir[0] +
+                            (double)r->dir[1] * r->dir[1] +
+                            (double)r->dir[2] * r->dir[2]);
+    return T_FLOOR_ULPS * FLT_EPSILON * scale / (CMP_T_REL_TOL * len);
+}
+
+/* Relative t difference on the scale CMP_T_REL_TOL is compared with. */
+static double t_diff(double a, double b, double floor) {
+    const double den = fmax(fmax(fabs(a), fabs(b)), floor);
+    return den > 0 ? fabs(a - b) / den : 0.0;
+}
+
+static const float *tri_at(const float *tris, size_t ntris, int32_t prim) {
+    return (prim >= 0 && (size_t)prim < ntris) ? tris + 9 * (size_t)prim : NULL;
+}
+
+/* Our own test on one triangle, over [lo, hi]. */
+static int our_test(const kdr_ray *r, const float *tri, float lo, float hi,
+                    float *t) {
+    kd_ray_pre p;
+    float u, v;
+    kd_ray_precompute(r->org, r->dir, &p);
+    return kd_tri_intersect(&p, tri, lo, hi, t, &u, &v);
+}
+
+/* A hit at t that is within tolerance of the ray's interval ends. */
+static int near_interval_end(const kdr_ray *r, double t, double floor) {
+    return t_diff(t, r->tmin, floor) <= CMP_T_REL_TOL ||
+           (isfinite(r->tmax) && t_diff(t, r->tmax, floor) <= CMP_T_REL_TOL);
+}
+
+/* Embree hits tri, kd (and, to be sure, brute force) does not. */
+static int explain_embree_only(const float *tris, size_t ntris,
+                               const kdr_ray *r, const kdr_hit *em,
+                               const kdr_hit *kd) {
+    const float *p = tri_at(tris, ntris, em->prim);
+    if (!p)
+        return 0;
+    float t;
+    if (!ref_tri_degenerate(p) && our_test(r, p, r->tmin, r->tmax, &t) &&
+        (kd->prim < 0 || kd_hit_better(t, em->prim, kd->t, kd->prim)))
+        return 0; /* kd's own test would have found a better hit */
+    const double fl = t_floor(r, scale_of(r, p, NULL));
+    const int boundary = ref_tri_degenerate(p) || on_boundary(r, p) ||
+                         near_interval_end(r, em->t, fl);
+    if (!boundary)
+        return 0;
+    kdr_hit ref;
+    ref_intersect1(tris, ntris, r, &ref);
+    return ref.prim == kd->prim;
+}
+
+/* kd hits tri, Embree does not see it (or sees something farther). */
+static int explain_kd_only(const float *tris, size_t ntris, const kdr_ray *r,
+                           const kdr_hit *kd) {
+    const float *q = tri_at(tris, ntris, kd->prim);
+    float t;
+    if (!q || !our_test(r, q, r->tmin, r->tmax, &t) || t != kd->t)
+        return 0; /* kd reports a hit its own triangle test does not give */
+    const double fl = t_floor(r, scale_of(r, q, NULL));
+    return on_boundary(r, q) || near_interval_end(r, kd->t, fl);
+}
+
+/* Different prims at (about) the same t. */
+static cmp_class classify_tie(const float *tris, size_t ntris,
+                              const kdr_ray *r, const kdr_hit *kd,
+                              const kdr_hit *em) {
+    const float *p = tri_at(tris, ntris, em->prim);
+    float t;
+    if (!p)
+        return CMP_WRONG_PRIM;
+    if (!ref_tri_degenerate(p) && our_test(r, p, r->tmin, r->tmax, &t))
+        return kd_hit_better(t, em->prim, kd->t, kd->prim) ? CMP_WRONG_PRIM
+                                                          : CMP_TIE;
+    return on_boundary(r, p) ? CMP_TIE : CMP_WRONG_PRIM;
+}
+
+cmp_class cmp_closest(const float *tris, size_t ntris, const kdr_ray *ray,
+                      const kdr_hit *kd, const kdr_hit *em, double *t_err) {
+    *t_err = 0.0;
+    if (kd->prim < 0 && em->prim < 0)
+        return CMP_AGREE;
+    if (kd->prim < 0)
+        return explain_embree_only(tris, ntris, ray, em, kd) ? CMP_BOUNDARY
+                                                             : CMP_KD_MISS;
+    if (em->prim < 0)
+        return explain_kd_only(tris, ntris, ray, kd) ? CMP_BOUNDARY
+                                                     : CMP_KD_EXTRA;
+    const float *a = tri_at(tris, ntris, kd->prim);
+    const float *b = tri_at(tris, ntris, em->prim);
+    const double fl = t_floor(ray, scale_of(ray, a, b));
+    const double d = t_diff(kd->t, em->t, fl);
+    if (kd->prim == em->prim) {
+        *t_err = d;
+        return d <= CMP_T_REL_TOL ? CMP_AGREE : CMP_T_ERROR;
+    }
+    if (d <= CMP_T_REL_TOL) {
+        cmp_class c = classify_tie(tris, ntris, ray, kd, em);
+        if (c == CMP_TIE)
+            *t_err = d;
+        return c;
+    }
+    if (kd->t < em->t)
+        return explain_kd_only(tris, ntris, ray, kd) ? CMP_BOUNDARY
+                                                     : CMP_WRONG_PRIM;
+    return explain_embree_only(tris, ntris, ray, em, kd) ? CMP_BOUNDARY
+                                                         : CMP_WRONG_PRIM;
+}
+
+cmp_class cmp_occluded(const float *tris, size_t ntris, const kdr_ray *ray,
+                       int kd_hit, int em_hit, const kdr_hit *kd_closest,
+                       const kdr_hit *em_closest) {
+    if (!kd_hit != !em_hit) {
+        double e;
+        /* kd's two answers must be consistent before anything is explained */
+        if (!kd_hit != (kd_closest->prim < 0))
+            return kd_hit ? CMP_KD_EXTRA : CMP_KD_MISS;
+        cmp_class c = cmp_closest(tris, ntris, ray, kd_closest, em_closest, &e);
+        if (c == CMP_BOUNDARY)
+            return c;
+        return kd_hit ? CMP_KD_EXTRA : CMP_KD_MISS;
+    }
+    return CMP_AGREE;
+}
+
+/* ---- tallies ------------------------------------------------------------- */
+
+void cmp_tally_init(cmp_tally *t) { memset(t, 0, sizeof *t); }
+
+void cmp_tally_add(cmp_tally *t, const kdr_ray *ray, cmp_class c,
+                   double t_err, int em_hit) {
+    t->rays++;
+    t->n[c]++;
+    t->hits += em_hit != 0;
+    if ((c == CMP_AGREE || c == CMP_TIE) && t_err > t->max_t_err)
+        t->max_t_err = t_err;
+    if (cmp_is_unexplained(c) && !t->has_bad) {
+        t->first_bad = *ray;
+        t->has_bad = 1;
+    }
+}
+
+void cmp_tally_merge(cmp_tally *into, const cmp_tally *from) {
+    into->rays += from->rays;
+    into->hits += from->hits;
+    for (int c = 0; c < CMP_NCLASSES; c++)
+        into->n[c] += from->n[c];
+    if (from->max_t_err > into->max_t_err)
+        into->max_t_err = from->max_t_err;
+    if (from->has_bad && !into->has_bad) {
+        into->first_bad = from->first_bad;
+        into->has_bad = 1;
+    }
+}
+
+uint64_t cmp_tally_unexplained(const cmp_tally *t) {
+    uint64_t n = 0;
+    for (int c = 0; c < CMP_NCLASSES; c++)
+        if (cmp_is_unexplained((cmp_class)c))
+            n += t->n[c];
+    return n;
+}
+
+void cmp_tally_print(FILE *f, const char *label, const cmp_tally *t) {
+    fprintf(f, "%-34s rays %8llu hits %8llu", label,
+            (unsigned long long)t->rays, (unsigned long long)t->hits);
+    for (int c = 1; c < CMP_NCLASSES; c++)
+        fprintf(f, " %s %llu", class_names[c], (unsigned long long)t->n[c]);
+    fprintf(f, " max_t_err %.2e\n", t->max_t_err);
+}
+
+void cmp_tally_print_bad(FILE *f, const char *label, const cmp_tally *t) {
+    if (!t->has_bad)
+        return;
+    const kdr_ray *r = &t->first_bad;
+    fprintf(f, "  %s first unexplained ray: org %a %a %a dir %a %a %a "
+               "tmin %a tmax %a\n",
+            label, r->org[0], r->org[1], r->org[2], r->dir[0], r->dir[1],
+            r->dir[2], r->tmin, r->tmax);
+}

@@ -1,0 +1,188 @@
+/*
+ * oracle.c — builds one Embree device + scene per oracle and converts rays
+ * and hits between kdray's structs and Embree's. The vertex and index
+ * buffers come from rtcSetNewGeometryBuffer, which over-allocates so that
+ * Embree's 16-byte vector loads past the last vertex stay inside the buffer
+ * (the padding DEPS-NOTES asks for with shared buffers).
+ */
+#define _POSIX_C_SOURCE 200809L
+#include "oracle.h"
+
+#include <math.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+struct oracle {
+    RTCDevice device;
+    RTCScene scene;
+    double build_ms;
+    _Atomic int64_t bytes; /* updated by Embree's memory monitor */
+};
+
+void oracle_opts_default(oracle_opts *opts) {
+    opts->robust = 1;
+    opts->quality = RTC_BUILD_QUALITY_HIGH;
+    opts->device_config = NULL;
+}
+
+static double now_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static void on_error(void *user, enum RTCError code, const char *msg) {
+    (void)user;
+    fprintf(stderr, "embree error %d: %s\n", (int)code, msg ? msg : "");
+}
+
+static bool on_memory(void *user, ssize_t bytes, bool post) {
+    oracle *o = user;
+    (void)post;
+    atomic_fetch_add(&o->bytes, (int64_t)bytes);
+    return true;
+}
+
+/* One triangle geometry with its own 3 vertices per triangle, so that
+ * primID i is exactly triangle i of the caller's array. */
+static int attach_triangles(oracle *o, const float *tris, size_t ntris,
+                            enum RTCBuildQuality quality) {
+    RTCGeometry g = rtcNewGeometry(o->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    if (!g)
+        return -1;
+    rtcSetGeometryBuildQuality(g, quality);
+    float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0,
+                                       RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                       3 * ntris);
+    unsigned *idx = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
+                                            RTC_FORMAT_UINT3,
+                                            3 * sizeof(unsigned), ntris);
+    if (!v || !idx) {
+        rtcReleaseGeometry(g);
+        return -1;
+    }
+    if (ntris)
+        memcpy(v, tris, 9 * ntris * sizeof(float));
+    for (size_t i = 0; i < 3 * ntris; i++)
+        idx[i] = (unsigned)i;
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(o->scene, g, 0);
+    rtcReleaseGeometry(g);
+    return 0;
+}
+
+oracle *oracle_create(const float *tris, size_t ntris, const oracle_opts *opts) {
+    oracle_opts def;
+    if (!opts) {
+        oracle_opts_default(&def);
+        opts = &def;
+    }
+    oracle *o = calloc(1, sizeof *o);
+    if (!o)
+        return NULL;
+    atomic_init(&o->bytes, 0);
+    o->device = rtcNewDevice(opts->device_config);
+    if (!o->device) {
+        fprintf(stderr, "oracle: rtcNewDevice failed\n");
+        free(o);
+        return NULL;
+    }
+    rtcSetDeviceErrorFunction(o->device, on_error, NULL);
+    rtcSetDeviceMemoryMonitorFunction(o->device, on_memory, o);
+    o->scene = rtcNewScene(o->device);
+    rtcSetSceneFlags(o->scene, opts->robust ? RTC_SCENE_FLAG_ROBUST
+                                            : RTC_SCENE_FLAG_NONE);
+    rtcSetSceneBuildQuality(o->scene, opts->quality);
+    if (ntris > 0 && attach_triangles(o, tris, ntris, opts->quality) != 0) {
+        oracle_free(o);
+        return NULL;
+    }
+    double t0 = now_ms();
+    rtcCommitScene(o->scene);
+    o->build_ms = now_ms() - t0;
+    if (rtcGetDeviceError(o->device) != RTC_ERROR_NONE) {
+        oracle_free(o);
+        return NULL;
+    }
+    return o;
+}
+
+void oracle_free(oracle *o) {
+    if (!o)
+        return;
+    if (o->scene)
+        rtcReleaseScene(o->scene);
+    if (o->device)
+        rtcReleaseDevice(o->device);
+    free(o);
+}
+
+double oracle_build_ms(const oracle *o) { return o->build_ms; }
+int64_t oracle_bytes(const oracle *o) {
+    return atomic_load(&((oracle *)o)->bytes);
+}
+RTCScene oracle_rtc_scene(const oracle *o) { return o->scene; }
+
+/* Rays Embree must not see: its behaviour on NaN, a zero direction or an
+ * empty interval is unspecified, while kdray defines all three as misses. */
+static int ray_is_valid(const kdr_ray *r) {
+    for (int k = 0; k < 3; k++)
+        if (isnan(r->org[k]) || isnan(r->dir[k]))
+            return 0;
+    if (isnan(r->tmin) || isnan(r->tmax) || r->tmax < r->tmin)
+        return 0;
+    return r->dir[0] != 0.0f || r->dir[1] != 0.0f || r->dir[2] != 0.0f;
+}
+
+static void to_rtc_ray(const kdr_ray *r, struct RTCRay *out) {
+    out->org_x = r->org[0];
+    out->org_y = r->org[1];
+    out->org_z = r->org[2];
+    out->dir_x = r->dir[0];
+    out->dir_y = r->dir[1];
+    out->dir_z = r->dir[2];
+    out->tnear = r->tmin;
+    out->tfar = r->tmax;
+    out->time = 0.0f;
+    out->mask = 0xFFFFFFFFu;
+    out->id = 0;
+    out->flags = 0;
+}
+
+int oracle_intersect1(const oracle *o, const kdr_ray *ray, kdr_hit *hit) {
+    hit->t = -1.0f;
+    hit->u = hit->v = 0.0f;
+    hit->prim = -1;
+    if (!ray_is_valid(ray))
+        return 0;
+    struct RTCRayHit rh;
+    to_rtc_ray(ray, &rh.ray);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    rtcIntersect1(o->scene, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID)
+        return 0;
+    hit->t = rh.ray.tfar;
+    hit->u = rh.hit.u;
+    hit->v = rh.hit.v;
+    hit->prim = (int32_t)rh.hit.primID;
+    return 1;
+}
+
+int oracle_occluded1(const oracle *o, const kdr_ray *ray) {
+    if (!ray_is_valid(ray))
+        return 0;
+    struct RTCRay r;
+    to_rtc_ray(ray, &r);
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    rtcOccluded1(o->scene, &ctx, &r);
+    /* Embree marks an occluded ray by setting tfar to -inf */
+    return r.tfar == -INFINITY;
+}

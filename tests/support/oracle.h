@@ -1,0 +1,54 @@
+/*
+ * oracle.h — Intel Embree 3 as the reference answer for kdray's tests and
+ * benchmarks. An oracle is one Embree device and scene built from the same
+ * flat triangle array the kd-tree gets (geomID 0, primID == our prim), and
+ * answers single rays with kdray's conventions: a miss is prim -1, t -1,
+ * u = v = 0; the interval [tmin, tmax] is closed (Embree's Pluecker test
+ * accepts tnear <= t <= tfar, the same closed interval).
+ *
+ * Tests use the default options: RTC_SCENE_FLAG_ROBUST (watertight-ish edge
+ * tests; without it about 1 ray in 100K slips through a closed sphere) and
+ * RTC_BUILD_QUALITY_HIGH. FTZ/DAZ is left off, as for kdray. Embree is never
+ * linked into the daemon; this file is tests/ and bench/ only.
+ */
+#ifndef KDRAY_TEST_ORACLE_H
+#define KDRAY_TEST_ORACLE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include <embree3/rtcore.h>
+
+#include "kdray.h"
+
+typedef struct oracle_opts {
+    int robust;               /* RTC_SCENE_FLAG_ROBUST */
+    enum RTCBuildQuality quality;
+    const char *device_config; /* rtcNewDevice config, e.g. "threads=1" */
+} oracle_opts;
+
+/* robust = 1, quality = HIGH, device_config = NULL (Embree's default). */
+void oracle_opts_default(oracle_opts *opts);
+
+typedef struct oracle oracle;
+
+/* Builds Embree's BVH over ntris triangles (9*ntris floats; copied). NULL on
+ * failure (a message goes to stderr). opts may be NULL for the defaults. */
+oracle *oracle_create(const float *tris, size_t ntris, const oracle_opts *opts);
+void oracle_free(oracle *o);
+
+/* Wall-clock milliseconds of rtcCommitScene (the BVH build alone). */
+double oracle_build_ms(const oracle *o);
+/* Bytes Embree allocated for the scene (buffers + BVH), from its device
+ * memory monitor; includes the copy of the triangles. */
+int64_t oracle_bytes(const oracle *o);
+
+RTCScene oracle_rtc_scene(const oracle *o);
+
+/* Closest hit with kdray's conventions; returns 1 on hit. A ray with a NaN,
+ * a zero direction or tmax < tmin misses without asking Embree. */
+int oracle_intersect1(const oracle *o, const kdr_ray *ray, kdr_hit *hit);
+/* Any hit in [tmin, tmax]. */
+int oracle_occluded1(const oracle *o, const kdr_ray *ray);
+
+#endif /* KDRAY_TEST_ORACLE_H */
