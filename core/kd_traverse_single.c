@@ -1,0 +1,144 @@
+/*
+ * kd_traverse_single.c — one ray at a time through the kd-tree, closest hit
+ * and any hit: pbrt's front-to-back walk with a fixed to-do stack of
+ * {node, tnear, tfar}, using the split convention of kd_traverse.h.
+ *
+ * Leaves test every reference over [tmin, best_t], not over the leaf's own
+ * interval: a triangle hit just outside the leaf (rounding, or a triangle
+ * that spans several leaves) is still accepted, and the tie rule (smaller t,
+ * then smaller prim) then makes the answer independent of visiting order.
+ * The walk ends when no pending subtree starts at or before
+ * kd_term_bound(best_t).
+ */
+#include <math.h>
+
+#include "kd_internal.h"
+#include "kd_traverse.h"
+#include "kd_tri.h"
+
+typedef struct kd_todo {
+    const kd_node *node;
+    float tn, tf;
+} kd_todo;
+
+typedef struct walk_out {
+    float t, u, v;
+    int32_t prim;
+    uint64_t nodes, tests;
+} walk_out;
+
+/* Descends from n to a leaf, pushing far children; returns the leaf. */
+static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
+                                     const float org[3], const float inv[3],
+                                     const float dt[3], const unsigned neg[3],
+                                     kd_todo *stack,
+                                     int *sp, float *tn, float *tf,
+                                     uint64_t *visited) {
+    while (!kd_is_leaf(n)) {
+        ++*visited;
+        const int axis = kd_axis(n);
+        const float t = (n->u.split - org[axis]) * inv[axis];
+        const float t_lo = t - dt[axis], t_hi = t + dt[axis];
+        const kd_node *below = n + 1, *above = nodes + kd_above(n);
+        const kd_node *nearc = neg[axis] ? above : below;
+        const kd_node *farc = neg[axis] ? below : above;
+        if (t_lo > *tf) {
+            n = nearc;
+        } else if (t_hi < *tn) {
+            n = farc;
+        } else { /* both, and also a NaN (ray in the plane) */
+            stack[*sp].node = farc;
+            stack[*sp].tn = t_lo > *tn ? t_lo : *tn;
+            stack[*sp].tf = *tf;
+            ++*sp;
+            n = nearc;
+            *tf = t_hi < *tf ? t_hi : *tf;
+        }
+    }
+    ++*visited;
+    return n;
+}
+
+/* The walk shared by both queries; any != 0 stops at the first hit. */
+static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
+                       walk_out *o) {
+    float inv[3], dt[3], tn, tf;
+    unsigned neg[3];
+    if (!s || !s->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax))
+        return 0;
+    for (int k = 0; k < 3; k++) {
+        inv[k] = 1.0f / r->dir[k];
+        neg[k] = signbit(r->dir[k]) ? 1u : 0u;
+    }
+    kd_ray_slack_dt(s, r->org, r->dir, inv, dt);
+    if (!kd_clip_root(s, r->org, r->dir, inv, dt, r->tmin, r->tmax, &tn, &tf))
+        return 0;
+    kd_ray_pre pre;
+    kd_ray_precompute(r->org, r->dir, &pre);
+    const kd_node *nodes = s->nodes;
+    const uint32_t *refs = s->refs;
+    const float *tris = s->tris;
+    kd_todo stack[KD_MAX_DEPTH];
+    int sp = 0;
+    const kd_node *n = nodes;
+    for (;;) {
+        n = descend(nodes, n, r->org, inv, dt, neg, stack, &sp, &tn, &tf, &o->nodes);
+        const uint32_t *ref = refs + n->u.first;
+        const uint32_t count = kd_count(n);
+        o->tests += count;
+        for (uint32_t i = 0; i < count; i++) {
+            float t, u, v;
+            const int32_t prim = (int32_t)ref[i];
+            if (!kd_tri_intersect(&pre, tris + 9 * (size_t)prim, r->tmin, o->t,
+                                  &t, &u, &v))
+                continue;
+            if (any)
+                return 1;
+            if (kd_hit_better(t, prim, o->t, o->prim)) {
+                o->t = t;
+                o->u = u;
+                o->v = v;
+                o->prim = prim;
+            }
+        }
+        const float bound = kd_term_bound(o->t);
+        do {
+            if (sp == 0)
+                return o->prim >= 0;
+            --sp;
+        } while (!(stack[sp].tn <= bound));
+        n = stack[sp].node;
+        tn = stack[sp].tn;
+        tf = stack[sp].tf;
+    }
+}
+
+static void add_stats(kdr_trav_stats *st, const walk_out *o) {
+    if (!st)
+        return;
+    st->rays++;
+    st->nodes_visited += o->nodes;
+    st->tri_tests += o->tests;
+}
+
+int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
+                   kdr_trav_stats *stats) {
+    walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
+    const int found = ray ? walk(scene, ray, 0, &o) : 0;
+    add_stats(stats, &o);
+    if (hit) {
+        hit->t = found ? o.t : -1.0f;
+        hit->u = found ? o.u : 0.0f;
+        hit->v = found ? o.v : 0.0f;
+        hit->prim = found ? o.prim : -1;
+    }
+    return found;
+}
+
+int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
+                  kdr_trav_stats *stats) {
+    walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
+    const int found = ray ? walk(scene, ray, 1, &o) : 0;
+    add_stats(stats, &o);
+    return found;
+}

@@ -1,0 +1,361 @@
+/*
+ * test_core.c — the kd-tree build and single-ray traversal against a brute
+ * force loop over every triangle with the same triangle test and tie rule:
+ * answers must agree bit for bit (t, prim, u, v). Scenes are chosen to
+ * stress the build's corner cases (triangles in and touching split planes,
+ * shared faces, coincident triangles, huge offsets) and rays to stress the
+ * walk's (zero and -0.0 direction components, origins on split planes, rays
+ * lying in planes, odd intervals). Also checks tree invariants and the
+ * error paths of kdr_scene_build.
+ */
+#include "test_core_util.h"
+
+/* ---- scenes ------------------------------------------------------------------ */
+
+typedef struct soup {
+    float *t;
+    size_t n, cap;
+} soup;
+
+static void soup_add(soup *s, const float v[9]) {
+    if (s->n == s->cap) {
+        s->cap = s->cap ? 2 * s->cap : 256;
+        s->t = realloc(s->t, s->cap * 9 * sizeof(float));
+        if (!s->t)
+            abort();
+    }
+    memcpy(s->t + 9 * s->n++, v, 9 * sizeof(float));
+}
+
+static void soup_random(soup *s, size_t n, float size, float quantum) {
+    for (size_t i = 0; i < n; i++) {
+        float c[3] = {rng_f(0, 1), rng_f(0, 1), rng_f(0, 1)}, v[9];
+        for (int j = 0; j < 9; j++) {
+            v[j] = c[j % 3] + rng_f(-size, size);
+            if (quantum > 0)
+                v[j] = roundf(v[j] / quantum) * quantum;
+        }
+        soup_add(s, v);
+    }
+}
+
+/* A unit cube at (x, y, z) as 12 triangles; neighbours share faces. */
+static void soup_cube(soup *s, float x, float y, float z) {
+    static const int quads[6][4][3] = {
+        {{0, 0, 0}, {0, 1, 0}, {0, 1, 1}, {0, 0, 1}}, {{1, 0, 0}, {1, 1, 0}, {1, 1, 1}, {1, 0, 1}},
+        {{0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}}, {{0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}},
+        {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}}, {{0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}}};
+    const float o[3] = {x, y, z};
+    for (int f = 0; f < 6; f++) {
+        float p[4][3];
+        for (int i = 0; i < 4; i++)
+            for (int k = 0; k < 3; k++)
+                p[i][k] = o[k] + (float)quads[f][i][k];
+        float a[9] = {p[0][0], p[0][1], p[0][2], p[1][0], p[1][1], p[1][2], p[2][0], p[2][1], p[2][2]};
+        float b[9] = {p[0][0], p[0][1], p[0][2], p[2][0], p[2][1], p[2][2], p[3][0], p[3][1], p[3][2]};
+        soup_add(s, a);
+        soup_add(s, b);
+    }
+}
+
+/* ---- tree invariants ------------------------------------------------------------ */
+
+static size_t check_node(const kdr_scene *s, uint32_t idx, kdr_bounds box,
+                         int depth, uint8_t *seen) {
+    CHECK(idx < s->nnodes);
+    CHECK(depth <= KD_MAX_DEPTH);
+    if (idx >= s->nnodes || depth > KD_MAX_DEPTH)
+        return 0;
+    const kd_node *n = &s->nodes[idx];
+    if (kd_is_leaf(n)) {
+        CHECK((size_t)n->u.first + kd_count(n) <= s->nrefs);
+        for (uint32_t i = 0; i < kd_count(n) && n->u.first + i < s->nrefs; i++) {
+            uint32_t p = s->refs[n->u.first + i];
+            CHECK(p < s->ntris);
+            if (p < s->ntris) {
+                CHECK(!kd_tri_degenerate(s->tris + 9 * p));
+                seen[p] = 1;
+            }
+        }
+        return 1;
+    }
+    const int k = kd_axis(n);
+    CHECK(n->u.split > box.min[k] && n->u.split < box.max[k]);
+    CHECK(kd_above(n) > idx + 1);
+    kdr_bounds lb = box, rb = box;
+    lb.max[k] = rb.min[k] = n->u.split;
+    return 1 + check_node(s, idx + 1, lb, depth + 1, seen) +
+           check_node(s, kd_above(n), rb, depth + 1, seen);
+}
+
+static void check_tree(const kdr_scene *s) {
+    kdr_tree_stats st;
+    kdr_scene_tree_stats(s, &st);
+    CHECK(st.nodes == s->nnodes);
+    CHECK(st.refs == s->nrefs);
+    if (!s->nodes)
+        return;
+    uint8_t *seen = calloc(s->ntris + 1, 1);
+    CHECK(check_node(s, 0, s->bounds, 0, seen) == s->nnodes);
+    for (size_t i = 0; i < s->ntris; i++)
+        CHECK(seen[i] || kd_tri_degenerate(s->tris + 9 * i));
+    free(seen);
+    CHECK(st.leaves >= st.empty_leaves);
+    CHECK(st.max_depth <= KD_MAX_DEPTH);
+}
+
+/* ---- rays ------------------------------------------------------------------------ */
+
+/* A random component, sometimes exactly 0 or -0.0. */
+static float ray_dir_comp(void) {
+    switch (rng_u32() % 8) {
+    case 0:
+        return 0.0f;
+    case 1:
+        return -0.0f;
+    default:
+        return rng_f(-1, 1);
+    }
+}
+
+/* Random rays, a quarter with grid-aligned origins (on split planes when
+ * the scene is quantised to `quantum`), many with zero components. */
+static void random_ray(kdr_ray *r, float lo, float hi, float quantum) {
+    for (int k = 0; k < 3; k++) {
+        r->org[k] = rng_f(lo, hi);
+        if (quantum > 0 && rng_u32() % 4 == 0)
+            r->org[k] = roundf(r->org[k] / quantum) * quantum;
+        r->dir[k] = ray_dir_comp();
+    }
+    if (r->dir[0] == 0 && r->dir[1] == 0 && r->dir[2] == 0)
+        r->dir[rng_u32() % 3] = 1.0f;
+    r->tmin = 0.0f;
+    r->tmax = INFINITY;
+    switch (rng_u32() % 8) {
+    case 0:
+        r->tmin = rng_f(0, 1);
+        break;
+    case 1:
+        r->tmax = rng_f(0, 2);
+        break;
+    case 2:
+        r->tmin = -INFINITY;
+        break;
+    }
+}
+
+/* A ray aimed at a vertex or edge point of a random triangle. */
+static void aimed_ray(kdr_ray *r, const soup *s, float lo, float hi) {
+    const float *t = s->t + 9 * (rng_u32() % s->n);
+    int a = rng_u32() % 3, b = rng_u32() % 3;
+    float w = (rng_u32() % 2) ? 0.5f : 0.0f;
+    for (int k = 0; k < 3; k++) {
+        r->org[k] = rng_f(lo, hi);
+        float target = t[3 * a + k] + w * (t[3 * b + k] - t[3 * a + k]);
+        r->dir[k] = target - r->org[k];
+    }
+    r->tmin = 0.0f;
+    r->tmax = INFINITY;
+}
+
+static size_t compare_many(const soup *sp, const kdr_scene *s, size_t nrays,
+                           float lo, float hi, float quantum) {
+    size_t bad = 0;
+    for (size_t i = 0; i < nrays; i++) {
+        kdr_ray r;
+        if (i % 4 == 3)
+            aimed_ray(&r, sp, lo, hi);
+        else
+            random_ray(&r, lo, hi, quantum);
+        bad += !compare_ray(s, &r);
+    }
+    return bad;
+}
+
+static kdr_scene *build_or_die(const soup *sp) {
+    kdr_scene *s = NULL;
+    int err = kdr_scene_build(sp->t, sp->n, NULL, NULL, NULL, &s);
+    CHECK(err == KDR_OK);
+    if (err != KDR_OK) {
+        fprintf(stderr, "build failed: %s\n", kdr_strerror(err));
+        exit(1);
+    }
+    check_tree(s);
+    return s;
+}
+
+/* ---- test cases -------------------------------------------------------------------- */
+
+static void test_random_soups(void) {
+    static const struct { size_t n; float size, quantum; } cases[] = {
+        {1, 0.3f, 0}, {2000, 0.05f, 0}, {3000, 0.2f, 0}, {2000, 0.1f, 0.125f},
+        {1500, 0.25f, 0.25f}};
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        soup sp = {0};
+        soup_random(&sp, cases[c].n, cases[c].size, cases[c].quantum);
+        kdr_scene *s = build_or_die(&sp);
+        size_t bad = compare_many(&sp, s, 4000, -0.5f, 1.5f, cases[c].quantum);
+        if (bad)
+            fprintf(stderr, "random soup %zu: %zu mismatches\n", c, bad);
+        CHECK(bad == 0);
+        kdr_scene_free(s);
+        free(sp.t);
+    }
+}
+
+/* Cubes on an integer grid: every face lies in a candidate split plane and
+ * neighbouring cubes give coincident triangles (ties broken by prim). */
+static void test_box_grid(void) {
+    soup sp = {0};
+    for (int x = 0; x < 6; x++)
+        for (int y = 0; y < 5; y++)
+            for (int z = 0; z < 4; z++)
+                if (rng_u32() % 3)
+                    soup_cube(&sp, (float)x, (float)y, (float)z);
+    kdr_scene *s = build_or_die(&sp);
+    size_t bad = compare_many(&sp, s, 12000, -1.0f, 7.0f, 1.0f);
+    /* rays inside the planes: integer origin coordinate, zero component */
+    for (int i = 0; i < 3000; i++) {
+        kdr_ray r;
+        random_ray(&r, -1.0f, 7.0f, 0.0f);
+        int k = rng_u32() % 3;
+        r.org[k] = (float)(rng_u32() % 7);
+        r.dir[k] = (rng_u32() % 2) ? 0.0f : -0.0f;
+        if (r.dir[(k + 1) % 3] == 0 && r.dir[(k + 2) % 3] == 0)
+            r.dir[(k + 1) % 3] = 0.5f;
+        bad += !compare_ray(s, &r);
+    }
+    if (bad)
+        fprintf(stderr, "box grid: %zu mismatches\n", bad);
+    CHECK(bad == 0);
+    kdr_scene_free(s);
+    free(sp.t);
+}
+
+/* Small triangles far from the origin: relative precision matters. */
+static void test_huge_offsets(void) {
+    soup sp = {0};
+    soup_random(&sp, 2000, 0.02f, 0);
+    for (size_t i = 0; i < 9 * sp.n; i++)
+        sp.t[i] = sp.t[i] * 10.0f + 1e5f;
+    kdr_scene *s = build_or_die(&sp);
+    size_t bad = 0;
+    for (int i = 0; i < 4000; i++) {
+        kdr_ray r;
+        if (i % 2)
+            aimed_ray(&r, &sp, 1e5f - 5.0f, 1e5f + 15.0f);
+        else
+            random_ray(&r, 1e5f - 5.0f, 1e5f + 15.0f, 0.0f);
+        bad += !compare_ray(s, &r);
+    }
+    CHECK(bad == 0);
+    kdr_scene_free(s);
+    free(sp.t);
+}
+
+static void expect_miss(const kdr_scene *s, const kdr_ray *r) {
+    kdr_hit h;
+    CHECK(kdr_intersect1(s, r, &h, NULL) == 0);
+    CHECK(h.prim == -1 && h.t == -1.0f && h.u == 0.0f && h.v == 0.0f);
+    CHECK(kdr_occluded1(s, r, NULL) == 0);
+}
+
+static void test_small_scenes(void) {
+    kdr_scene *s = NULL;
+    kdr_ray r = {{0.2f, 0.2f, -1}, {0, 0, 1}, 0, INFINITY};
+    CHECK(kdr_scene_build(NULL, 0, NULL, NULL, NULL, &s) == KDR_OK);
+    CHECK(s && kdr_scene_triangle_count(s) == 0 && kdr_scene_diagonal(s) == 0);
+    expect_miss(s, &r);
+    kdr_scene_free(s);
+
+    const float one[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    CHECK(kdr_scene_build(one, 1, NULL, NULL, NULL, &s) == KDR_OK);
+    kdr_hit h;
+    CHECK(kdr_intersect1(s, &r, &h, NULL) == 1);
+    CHECK(h.prim == 0 && h.t == 1.0f && fabsf(h.u - 0.2f) < 1e-6f &&
+          fabsf(h.v - 0.2f) < 1e-6f);
+    CHECK(kdr_occluded1(s, &r, NULL) == 1);
+    CHECK(kdr_scene_triangle(s, 0) && kdr_scene_triangle(s, 0)[3] == 1.0f);
+    CHECK(kdr_scene_triangle(s, 1) == NULL);
+    kdr_ray bad = r;
+    bad.tmax = -1; /* tmax < tmin */
+    expect_miss(s, &bad);
+    bad = r;
+    bad.dir[2] = 0; /* zero direction */
+    expect_miss(s, &bad);
+    bad = r;
+    bad.org[0] = NAN;
+    expect_miss(s, &bad);
+    bad = r;
+    bad.tmin = NAN;
+    expect_miss(s, &bad);
+    bad = r;
+    bad.tmax = 0.5f; /* interval ends before the hit */
+    expect_miss(s, &bad);
+    bad = r;
+    bad.tmin = bad.tmax = 1.0f; /* closed interval: t == 1 hits */
+    CHECK(kdr_occluded1(s, &bad, NULL) == 1);
+    kdr_scene_free(s);
+
+    /* degenerate only: repeated vertex, collinear, all equal */
+    const float degen[27] = {0, 0, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0, 1, 1, 1, 2, 2, 2,
+                             3, 3, 3, 3, 3, 3, 3, 3, 3};
+    CHECK(kdr_scene_build(degen, 3, NULL, NULL, NULL, &s) == KDR_OK);
+    CHECK(kdr_scene_triangle_count(s) == 3);
+    kdr_ray d = {{0.5f, 0.5f, 0.5f}, {1, -1, 0.3f}, -INFINITY, INFINITY};
+    expect_miss(s, &d);
+    kdr_scene_free(s);
+}
+
+static void test_build_errors(void) {
+    kdr_scene *s = (kdr_scene *)1;
+    float t[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    CHECK(kdr_scene_build(t, 1, NULL, NULL, NULL, NULL) == KDR_EINVAL);
+    CHECK(kdr_scene_build(NULL, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
+    t[4] = NAN;
+    CHECK(kdr_scene_build(t, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
+    t[4] = INFINITY;
+    CHECK(kdr_scene_build(t, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
+    CHECK(kdr_scene_build(t, ((size_t)1 << 30) + 1, NULL, NULL, NULL, &s) ==
+          KDR_ERANGE);
+    t[4] = 1;
+    kdr_build_opts o;
+    kdr_build_opts_default(&o);
+    o.empty_bonus = 1.0f;
+    CHECK(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
+    CHECK(strcmp(kdr_strerror(KDR_ENOMEM), kdr_strerror(KDR_OK)) != 0);
+}
+
+/* Options change the tree but never an answer. */
+static void test_build_options(void) {
+    soup sp = {0};
+    soup_random(&sp, 1500, 0.1f, 0.125f);
+    kdr_build_opts o;
+    kdr_build_opts_default(&o);
+    o.max_depth = 3;
+    o.leaf_size = 4;
+    o.isect_cost = 5.0f;
+    kdr_scene *s = NULL;
+    CHECK(kdr_scene_build(sp.t, sp.n, &o, NULL, NULL, &s) == KDR_OK);
+    check_tree(s);
+    kdr_tree_stats st;
+    kdr_scene_tree_stats(s, &st);
+    CHECK(st.max_depth <= 3);
+    CHECK(compare_many(&sp, s, 2000, -0.5f, 1.5f, 0.125f) == 0);
+    kdr_scene_free(s);
+    free(sp.t);
+}
+
+int main(void) {
+    test_build_errors();
+    test_small_scenes();
+    test_build_options();
+    test_random_soups();
+    test_box_grid();
+    test_huge_offsets();
+    if (g_failures)
+        fprintf(stderr, "test_core: %d failures\n", g_failures);
+    else
+        printf("test_core: ok\n");
+    return g_failures != 0;
+}
