@@ -10,6 +10,7 @@
 #ifndef KD_FRUSTUM_H
 #define KD_FRUSTUM_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "kdray.h"
@@ -37,5 +38,15 @@ static inline void kd_camera_dir(const kd_camera_basis *b, uint32_t px,
     for (int i = 0; i < 3; i++)
         d[i] = (b->f[i] + sx * b->r[i]) + sy * b->u[i];
 }
+
+/*
+ * Traces tiles [first, first+count) with interval frusta, `lanes` tiles
+ * per traversal (1 or 4) (kd_frustum_trav.c). Arguments are checked by the
+ * caller; returns KDR_OK or KDR_ENOMEM.
+ */
+int kd_frustum_trace_tiles(const kdr_scene *s, const kdr_camera *cam,
+                           const kd_camera_basis *b, uint32_t tile, size_t first,
+                           size_t count, kdr_query q, int lanes, kdr_hits *out,
+                           kdr_trav_stats *stats);
 
 #endif /* KD_FRUSTUM_H */
