@@ -1,0 +1,344 @@
+/*
+ * kd_traverse_bundle.h — omni-directional ray bundle traversal (technique 1
+ * of Tsakok, Bishop and Kennings), written once for any lane count.
+ *
+ * The first part declares the per-width entry points that kd_batch.c
+ * dispatches to. The second part is a template: kd_traverse_bundle4.c and
+ * kd_traverse_bundle8.c define KB_W, VF, V(op), KB(x) and KB_FN (see
+ * kd_tri_simd.h) and include this file once more to instantiate it.
+ *
+ * The paper's two changes to packet traversal are what let rays of any
+ * direction signs share a bundle:
+ *  1. each lane visits the child on its ORIGIN's side of the split plane
+ *     first (front) and the other second (back), whatever its direction;
+ *  2. a negative plane distance (the ray moves away from the plane; -0.0
+ *     from an underflow counts as negative) becomes +infinity, so the back
+ *     child's interval is empty and the front child keeps the whole one.
+ * d = (split - org) * inv_dir, the single-ray formula of kd_traverse.h.
+ * A lane whose origin is ON the plane (split - org == 0) has d = +-0 and no
+ * side of its own: its front is the child its direction points away from,
+ * which it sees over the point interval [t_near, 0] (exactly as the
+ * single-ray walk does, so a triangle lying in the plane at t = 0 is found
+ * whichever child holds it), and its back child gets the rest. A lane lying
+ * in the plane (dist == 0, dir == +-0) gets d = NaN, and the min/max operand
+ * order (NaN yields the second operand) gives it both children over its
+ * whole interval.
+ *
+ * Origins: lanes may have different origins. Every lane computes the
+ * intervals of the below and above children from its own origin side, so
+ * each lane's intervals are always exact; the bundle then enters first the
+ * child that is front for most active lanes and stacks the other. With a
+ * shared origin (or all origins on the same side) this is exactly the
+ * paper's order; with origins on both sides of a plane the minority lanes
+ * see their back child first, which costs pruning but not correctness.
+ *
+ * Lanes are active while t_near <= t_far and t_near <= kd_term_bound(best_t)
+ * (any-hit lanes leave once they hit); a bundle pops when no lane is active.
+ */
+#ifndef KD_TRAVERSE_BUNDLE_DECL
+#define KD_TRAVERSE_BUNDLE_DECL
+
+#include "kd_internal.h"
+#include "kd_traverse.h"
+
+/* Batch drivers: same contract as kdr_trace_batch (arguments checked by the
+ * caller). With adaptive == 0 every bundle is traced as a bundle (tests use
+ * this to exercise the SIMD path on incoherent rays). kd_bundle8_trace needs
+ * AVX2. */
+void kd_bundle4_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                      size_t count, kdr_query q, int adaptive, kdr_hits *out,
+                      kdr_trav_stats *stats);
+void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                      size_t count, kdr_query q, int adaptive, kdr_hits *out,
+                      kdr_trav_stats *stats);
+
+/* Loads ray i of a batch; 0 if it must be traced alone (NaN or infinite
+ * input, zero direction, negative tmin, tmax < tmin). Defined in
+ * kd_batch.c. */
+int kd_batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r);
+/* Traces ray i alone and writes its result (kd_batch.c). */
+void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
+                     kdr_query q, kdr_hits *out, kdr_trav_stats *stats);
+
+/* Tuning: a bundle whose average lane occupancy (active lanes per node
+ * step / width) falls under KB_OCC_MIN is incoherent; the next
+ * KB_FALLBACK_RUN bundles of the batch are then traced ray by ray, after
+ * which one bundle probes again. */
+#define KB_OCC_MIN 0.45
+#define KB_FALLBACK_RUN 8
+
+#endif /* KD_TRAVERSE_BUNDLE_DECL */
+
+#ifdef KB_W
+#include "kd_tri_simd.h"
+
+/* One bundle: the lanes' rays in SoA and their best hits. */
+typedef struct KB(bundle) {
+    _Alignas(32) float org[3][KB_W], inv_dir[3][KB_W];
+    _Alignas(32) float tmin[KB_W], t_near[KB_W], t_far[KB_W];
+    _Alignas(32) float best_t[KB_W], best_u[KB_W], best_v[KB_W];
+    _Alignas(32) int32_t best_prim[KB_W];
+    kd_ray_pre pre[KB_W];
+    int lanes;        /* lanes traced by the bundle */
+    int hit;          /* any-hit: lanes that hit */
+    uint64_t steps;   /* node steps of the bundle */
+    uint64_t lane_steps;
+    uint64_t tri_tests;
+} KB(bundle);
+
+typedef struct KB(entry) {
+    VF t_near, t_far;
+    uint32_t node;
+} KB(entry);
+
+/* Live traversal state of one bundle. */
+typedef struct KB(state) {
+    KB(tri_pre) tp;
+    VF org[3], inv_dir[3], tmin;
+    VF best_t, best_u, best_v, best_prim;
+    VF live;   /* lanes still searching (any-hit lanes leave on a hit) */
+    VF limit;  /* kd_term_bound(best_t) on live lanes, -inf elsewhere */
+    int any;
+} KB(state);
+
+/* kd_term_bound, per lane, exactly as the scalar inline computes it. */
+KB_FN void KB(update_limit)(KB(state) *st) {
+    const VF absmask = V(seti)(0x7fffffff);
+    VF slack = V(mul)(V(and)(st->best_t, absmask), V(set1)(0x1p-18f));
+    VF bound = V(add)(V(add)(st->best_t, slack), V(set1)(FLT_MIN));
+    st->limit = V(sel)(st->live, bound, V(set1)(-INFINITY));
+}
+
+/* Lanes of an interval that still need visiting. */
+KB_FN VF KB(active)(const KB(state) *st, VF t_near, VF t_far) {
+    return V(and)(V(le)(t_near, t_far), V(le)(t_near, st->limit));
+}
+
+/* Smallest-prim tie rule for lanes whose hit t equals best_t exactly. */
+KB_FN VF KB(ties)(const KB(state) *st, VF eq, int32_t prim) {
+    _Alignas(32) int32_t best[KB_W];
+    V(store)((float *)best, st->best_prim);
+    int bits = V(bits)(eq), win = 0;
+    for (int j = 0; j < KB_W; j++)
+        if (((bits >> j) & 1) && (uint32_t)prim < (uint32_t)best[j])
+            win |= 1 << j;
+    return V(bitmask)(win);
+}
+
+/* Tests the leaf's triangles against the active lanes. */
+KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
+                    KB(bundle) *b) {
+    const uint32_t *refs = s->refs + n->u.first;
+    const uint32_t cnt = kd_count(n);
+    const int nact = __builtin_popcount((unsigned)V(bits)(act));
+    for (uint32_t r = 0; r < cnt; r++) {
+        const int32_t prim = (int32_t)refs[r];
+        VF t, u, v;
+        b->tri_tests += (uint64_t)nact;
+        VF hit = KB(tri_test)(&st->tp, s->tris + 9 * (size_t)prim, act,
+                              st->tmin, st->best_t, &t, &u, &v);
+        if (!V(bits)(hit))
+            continue;
+        if (st->any) {
+            st->live = V(andnot)(hit, st->live);
+            act = V(andnot)(hit, act);
+            continue;
+        }
+        VF better = V(lt)(t, st->best_t);
+        VF eq = V(and)(hit, V(eq)(t, st->best_t));
+        if (V(bits)(eq))
+            better = V(or)(better, KB(ties)(st, eq, prim));
+        better = V(and)(better, hit);
+        st->best_t = V(sel)(better, t, st->best_t);
+        st->best_u = V(sel)(better, u, st->best_u);
+        st->best_v = V(sel)(better, v, st->best_v);
+        st->best_prim = V(sel)(better, V(seti)(prim), st->best_prim);
+    }
+    KB(update_limit)(st);
+}
+
+/* Plane distance per lane: the paper's d, negative (and -0.0) as +inf,
+ * except for origins on the plane (see the top of this file). */
+KB_FN VF KB(plane_dist)(VF dist, VF inv_dir, VF on_plane) {
+    VF d = V(mul)(dist, inv_dir);
+    VF neg = V(andnot)(on_plane, V(and)(V(ord)(d, d), V(signmask)(d)));
+    return V(sel)(neg, V(set1)(INFINITY), d);
+}
+
+/* The node loop: from the root interval to an empty stack. */
+KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
+                    KB(bundle) *b) {
+    KB(entry) stack[KD_MAX_DEPTH + 1];
+    int sp = 0;
+    uint32_t node = 0;
+    VF act = KB(active)(st, t_near, t_far);
+    const VF zero = V(set1)(0.0f);
+    for (;;) {
+        const kd_node *n = &s->nodes[node];
+        b->steps++;
+        b->lane_steps += (uint64_t)__builtin_popcount((unsigned)V(bits)(act));
+        if (!kd_is_leaf(n)) {
+            const int axis = kd_axis(n);
+            VF dist = V(sub)(V(set1)(n->u.split), st->org[axis]);
+            VF on_plane = V(eq)(dist, zero);
+            VF d = KB(plane_dist)(dist, st->inv_dir[axis], on_plane);
+            VF above_front = V(or)(V(lt)(dist, zero),
+                                   V(and)(on_plane, V(lt)(st->inv_dir[axis], zero)));
+            /* operand order: a NaN d yields t_far / t_near */
+            VF f_far = V(min)(d, t_far), b_near = V(max)(d, t_near);
+            VF lo_near = V(sel)(above_front, b_near, t_near);
+            VF lo_far = V(sel)(above_front, t_far, f_far);
+            VF hi_near = V(sel)(above_front, t_near, b_near);
+            VF hi_far = V(sel)(above_front, f_far, t_far);
+            VF lo_act = V(and)(act, KB(active)(st, lo_near, lo_far));
+            VF hi_act = V(and)(act, KB(active)(st, hi_near, hi_far));
+            const int lo = V(bits)(lo_act), hi = V(bits)(hi_act);
+            int go_above = !lo;
+            if (lo && hi) {
+                /* the child that is front for most active lanes goes first */
+                int votes = __builtin_popcount((unsigned)V(bits)(V(and)(act, above_front)));
+                go_above = 2 * votes > __builtin_popcount((unsigned)V(bits)(act));
+                KB(entry) *e = &stack[sp++];
+                e->node = go_above ? node + 1 : kd_above(n);
+                e->t_near = go_above ? lo_near : hi_near;
+                e->t_far = go_above ? lo_far : hi_far;
+            }
+            if (lo || hi) {
+                node = go_above ? kd_above(n) : node + 1;
+                t_near = go_above ? hi_near : lo_near;
+                t_far = go_above ? hi_far : lo_far;
+                act = go_above ? hi_act : lo_act;
+                continue;
+            }
+        } else {
+            KB(leaf)(s, n, st, act, b);
+        }
+        /* pop the nearest entry that still has an active lane */
+        for (;;) {
+            if (sp == 0)
+                return;
+            KB(entry) *e = &stack[--sp];
+            act = KB(active)(st, e->t_near, e->t_far);
+            if (V(bits)(act)) {
+                node = e->node, t_near = e->t_near, t_far = e->t_far;
+                break;
+            }
+        }
+    }
+}
+
+/* Loads rays [base, base+n) into the bundle; lanes that must be traced
+ * alone are returned in *alone, rays that miss the root box get a miss. */
+KB_FN void KB(load)(const kdr_scene *s, const kdr_ray_batch *rb, size_t base,
+                    int n, KB(bundle) *b, int *alone) {
+    b->lanes = 0;
+    *alone = 0;
+    for (int j = 0; j < KB_W; j++) {
+        kdr_ray r = {{0, 0, 0}, {1, 1, 1}, 0.0f, 0.0f};
+        float tn = INFINITY, tf = -INFINITY;
+        if (j < n && !kd_batch_ray(rb, base + (size_t)j, &r))
+            *alone |= 1 << j;
+        float inv[3] = {1.0f / r.dir[0], 1.0f / r.dir[1], 1.0f / r.dir[2]};
+        if (j < n && !((*alone >> j) & 1) &&
+            kd_clip_root(s, r.org, r.dir, inv, r.tmin, r.tmax, &tn, &tf))
+            b->lanes |= 1 << j;
+        for (int k = 0; k < 3; k++) {
+            b->org[k][j] = r.org[k];
+            b->inv_dir[k][j] = inv[k];
+        }
+        b->tmin[j] = r.tmin;
+        b->t_near[j] = (b->lanes >> j) & 1 ? tn : INFINITY;
+        b->t_far[j] = (b->lanes >> j) & 1 ? tf : -INFINITY;
+        b->best_t[j] = r.tmax;
+        b->best_u[j] = b->best_v[j] = 0.0f;
+        b->best_prim[j] = -1;
+        kd_ray_precompute(r.org, r.dir, &b->pre[j]);
+    }
+}
+
+/* Traces the loaded lanes of a bundle. */
+KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
+    KB(state) st;
+    b->hit = 0;
+    b->steps = b->lane_steps = b->tri_tests = 0;
+    if (!b->lanes)
+        return;
+    KB(tri_pre_init)(&st.tp, b->pre, b->lanes, __builtin_ctz((unsigned)b->lanes));
+    for (int k = 0; k < 3; k++) {
+        st.org[k] = V(load)(b->org[k]);
+        st.inv_dir[k] = V(load)(b->inv_dir[k]);
+    }
+    st.tmin = V(load)(b->tmin);
+    st.best_t = V(load)(b->best_t);
+    st.best_u = st.best_v = V(set1)(0.0f);
+    st.best_prim = V(seti)(-1);
+    st.live = V(bitmask)(b->lanes);
+    st.any = any;
+    KB(update_limit)(&st);
+    KB(walk)(s, &st, V(load)(b->t_near), V(load)(b->t_far), b);
+    V(store)(b->best_t, st.best_t);
+    V(store)(b->best_u, st.best_u);
+    V(store)(b->best_v, st.best_v);
+    V(store)((float *)b->best_prim, st.best_prim);
+    b->hit = b->lanes & ~V(bits)(st.live);
+}
+
+/* Writes the results of rays [base, base+n) except the `alone` lanes. */
+KB_FN void KB(store)(const KB(bundle) *b, size_t base, int n, int alone,
+                     kdr_query q, kdr_hits *out) {
+    for (int j = 0; j < n; j++) {
+        const size_t i = base + (size_t)j;
+        if ((alone >> j) & 1)
+            continue;
+        if (q == KDR_ANY) {
+            out->hit[i] = (uint8_t)((b->hit >> j) & 1);
+            continue;
+        }
+        const int found = ((b->lanes >> j) & 1) && b->best_prim[j] >= 0;
+        out->t[i] = found ? b->best_t[j] : -1.0f;
+        out->prim[i] = found ? b->best_prim[j] : -1;
+        out->u[i] = found ? b->best_u[j] : 0.0f;
+        out->v[i] = found ? b->best_v[j] : 0.0f;
+    }
+}
+
+KB_FN void KB(stats_add)(kdr_trav_stats *stats, const KB(bundle) *b, int n,
+                         int alone) {
+    if (!stats)
+        return;
+    stats->rays += (uint64_t)(n - __builtin_popcount((unsigned)alone));
+    stats->nodes_visited += b->lane_steps;
+    stats->tri_tests += b->tri_tests;
+}
+
+/* The batch driver: consecutive rays in bundles of KB_W, incoherent
+ * stretches ray by ray (see KB_OCC_MIN). */
+KB_FN void KB(run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
+                   size_t count, kdr_query q, int adaptive, kdr_hits *out,
+                   kdr_trav_stats *stats) {
+    KB(bundle) b;
+    int skip = 0;
+    for (size_t base = first; base < first + count; base += KB_W) {
+        const size_t left = first + count - base;
+        const int n = left < KB_W ? (int)left : KB_W;
+        if (skip > 0) {
+            skip--;
+            for (int j = 0; j < n; j++)
+                kd_batch_single(s, rb, base + (size_t)j, q, out, stats);
+            if (stats)
+                stats->fallbacks++;
+            continue;
+        }
+        int alone;
+        KB(load)(s, rb, base, n, &b, &alone);
+        KB(trace)(s, &b, q == KDR_ANY);
+        KB(store)(&b, base, n, alone, q, out);
+        KB(stats_add)(stats, &b, n, alone);
+        for (int j = 0; j < n; j++)
+            if ((alone >> j) & 1)
+                kd_batch_single(s, rb, base + (size_t)j, q, out, stats);
+        if (adaptive && b.steps && (double)b.lane_steps < KB_OCC_MIN * KB_W * (double)b.steps)
+            skip = KB_FALLBACK_RUN;
+    }
+}
+#endif /* KB_W */

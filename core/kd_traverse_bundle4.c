@@ -1,0 +1,19 @@
+/*
+ * kd_traverse_bundle4.c — the 4-wide (SSE2, the paper's 2x2) instance of the
+ * omni-directional bundle traversal in kd_traverse_bundle.h.
+ */
+#include "kd_traverse_bundle.h"
+#include "simd.h"
+
+#define KB_W 4
+#define VF f4
+#define V(op) f4_##op
+#define KB(x) kb4_##x
+#define KB_FN static inline
+#include "kd_traverse_bundle.h"
+
+void kd_bundle4_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                      size_t count, kdr_query q, int adaptive, kdr_hits *out,
+                      kdr_trav_stats *stats) {
+    kb4_run(s, b, first, count, q, adaptive, out, stats);
+}

@@ -1,0 +1,22 @@
+/*
+ * kd_traverse_bundle8.c — the 8-wide (AVX2) instance of the omni-directional
+ * bundle traversal in kd_traverse_bundle.h. Every function here carries the
+ * avx2 target attribute (the build has no -mavx2); kd_batch.c calls
+ * kd_bundle8_trace only when the CPU supports AVX2.
+ */
+#include "kd_traverse_bundle.h"
+#include "simd.h"
+
+#define KB_W 8
+#define VF f8
+#define V(op) f8_##op
+#define KB(x) kb8_##x
+#define KB_FN KD_AVX2 static inline
+#include "kd_traverse_bundle.h"
+
+KD_AVX2 void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b,
+                              size_t first, size_t count, kdr_query q,
+                              int adaptive, kdr_hits *out,
+                              kdr_trav_stats *stats) {
+    kb8_run(s, b, first, count, q, adaptive, out, stats);
+}

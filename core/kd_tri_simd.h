@@ -1,0 +1,146 @@
+/*
+ * kd_tri_simd.h — the watertight ray-triangle test of core/kd_tri.h for a
+ * bundle of rays against one triangle, one ray per lane.
+ *
+ * This is a template: include it after defining the lane layer
+ *   KB_W      lanes (4 or 8)        VF     the vector type (f4 or f8)
+ *   V(op)     the helper f4_op/f8_op KB(x)  a width-suffixed name
+ *   KB_FN     the qualifiers of every function (static, maybe KD_AVX2)
+ * (core/kd_traverse_bundle.h does this for the bundle traversals).
+ *
+ * Bit-identity with kd_tri_intersect is the whole point: each lane performs
+ * exactly the scalar float operations in the scalar order. Lanes may shear
+ * along different axes (a hemisphere of directions has several dominant
+ * axes), so each lane picks its own vertex components with masks; picking
+ * is exact, so only the arithmetic that follows has to match. The rare
+ * double-precision fallback (an edge function exactly 0) runs per lane in
+ * scalar code, as in kd_tri.h.
+ */
+#include "kd_tri.h"
+#include "simd.h"
+
+/* Per-lane shear of a bundle (kd_ray_pre, transposed). */
+typedef struct KB(tri_pre) {
+    VF ox, oy, oz;                    /* org[kx], org[ky], org[kz] */
+    VF sx, sy, sz;
+    VF kx0, kx1, ky0, ky1, kz0, kz1;  /* lane masks: kx == 0, kx == 1, ... */
+    int uniform;                      /* every used lane shears alike */
+    int kx, ky, kz;                   /* the shared axes when uniform */
+} KB(tri_pre);
+
+/* Transposes the scalar precomputations of the lanes in `used`; unused
+ * lanes copy lane `ref` so they compute harmless numbers. */
+KB_FN void KB(tri_pre_init)(KB(tri_pre) *p, const kd_ray_pre *pre, int used,
+                            int ref) {
+    _Alignas(32) float f[12][KB_W];
+    int uniform = 1;
+    for (int j = 0; j < KB_W; j++) {
+        const kd_ray_pre *r = &pre[(used >> j) & 1 ? j : ref];
+        uniform &= r->kz == pre[ref].kz && r->kx == pre[ref].kx;
+        f[0][j] = r->org[r->kx];
+        f[1][j] = r->org[r->ky];
+        f[2][j] = r->org[r->kz];
+        f[3][j] = r->sx;
+        f[4][j] = r->sy;
+        f[5][j] = r->sz;
+        for (int a = 0; a < 2; a++) {
+            f[6 + a][j] = r->kx == a ? -1.0f : 0.0f;
+            f[8 + a][j] = r->ky == a ? -1.0f : 0.0f;
+            f[10 + a][j] = r->kz == a ? -1.0f : 0.0f;
+        }
+    }
+    VF *dst[12] = {&p->ox, &p->oy, &p->oz, &p->sx,  &p->sy,  &p->sz,
+                   &p->kx0, &p->kx1, &p->ky0, &p->ky1, &p->kz0, &p->kz1};
+    for (int k = 0; k < 12; k++)
+        *dst[k] = V(load)(f[k]);
+    for (int k = 6; k < 12; k++) /* -1.0f has the sign bit: make full masks */
+        *dst[k] = V(signmask)(*dst[k]);
+    p->uniform = uniform;
+    p->kx = pre[ref].kx;
+    p->ky = pre[ref].ky;
+    p->kz = pre[ref].kz;
+}
+
+/* Component k of vertex v, per lane, where m0/m1 flag k == 0 / k == 1. */
+KB_FN VF KB(tri_pick)(VF m0, VF m1, const float *v) {
+    return V(sel)(m0, V(set1)(v[0]), V(sel)(m1, V(set1)(v[1]), V(set1)(v[2])));
+}
+
+/* The scalar double-precision recomputation, for the lanes in `lanes`. */
+KB_FN void KB(tri_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
+                         VF *U, VF *Vv, VF *W) {
+    _Alignas(32) float s[9][KB_W];
+    const VF in[9] = {ax, ay, bx, by, cx, cy, *U, *Vv, *W};
+    for (int k = 0; k < 9; k++)
+        V(store)(s[k], in[k]);
+    for (int j = 0; j < KB_W; j++) {
+        if (!((lanes >> j) & 1))
+            continue;
+        const double dax = s[0][j], day = s[1][j], dbx = s[2][j],
+                     dby = s[3][j], dcx = s[4][j], dcy = s[5][j];
+        s[6][j] = (float)(dcx * dby - dcy * dbx);
+        s[7][j] = (float)(dax * dcy - day * dcx);
+        s[8][j] = (float)(dbx * day - dby * dax);
+    }
+    *U = V(load)(s[6]);
+    *Vv = V(load)(s[7]);
+    *W = V(load)(s[8]);
+}
+
+/*
+ * Tests triangle tri against the lanes in mask act; returns the mask of
+ * lanes that hit with tmin <= t <= tmax, and their t, u, v.
+ */
+KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
+                      VF tmax, VF *t_out, VF *u_out, VF *v_out) {
+    VF Ax, Ay, Az0, Bx, By, Bz0, Cx, Cy, Cz0;
+    if (p->uniform) {
+        Ax = V(sub)(V(set1)(tri[0 + p->kx]), p->ox);
+        Ay = V(sub)(V(set1)(tri[0 + p->ky]), p->oy);
+        Az0 = V(sub)(V(set1)(tri[0 + p->kz]), p->oz);
+        Bx = V(sub)(V(set1)(tri[3 + p->kx]), p->ox);
+        By = V(sub)(V(set1)(tri[3 + p->ky]), p->oy);
+        Bz0 = V(sub)(V(set1)(tri[3 + p->kz]), p->oz);
+        Cx = V(sub)(V(set1)(tri[6 + p->kx]), p->ox);
+        Cy = V(sub)(V(set1)(tri[6 + p->ky]), p->oy);
+        Cz0 = V(sub)(V(set1)(tri[6 + p->kz]), p->oz);
+    } else {
+        Ax = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 0), p->ox);
+        Ay = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 0), p->oy);
+        Az0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 0), p->oz);
+        Bx = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 3), p->ox);
+        By = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 3), p->oy);
+        Bz0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 3), p->oz);
+        Cx = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 6), p->ox);
+        Cy = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 6), p->oy);
+        Cz0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 6), p->oz);
+    }
+    /* shear into ray space */
+    const VF ax = V(sub)(Ax, V(mul)(p->sx, Az0)), ay = V(sub)(Ay, V(mul)(p->sy, Az0));
+    const VF bx = V(sub)(Bx, V(mul)(p->sx, Bz0)), by = V(sub)(By, V(mul)(p->sy, Bz0));
+    const VF cx = V(sub)(Cx, V(mul)(p->sx, Cz0)), cy = V(sub)(Cy, V(mul)(p->sy, Cz0));
+    /* scaled barycentrics */
+    VF U = V(sub)(V(mul)(cx, by), V(mul)(cy, bx));
+    VF Vv = V(sub)(V(mul)(ax, cy), V(mul)(ay, cx));
+    VF W = V(sub)(V(mul)(bx, ay), V(mul)(by, ax));
+    const VF zero = V(set1)(0.0f);
+    VF z = V(or)(V(or)(V(eq)(U, zero), V(eq)(Vv, zero)), V(eq)(W, zero));
+    int zl = V(bits)(V(and)(z, act));
+    if (zl)
+        KB(tri_exact)(zl, ax, ay, bx, by, cx, cy, &U, &Vv, &W);
+    VF neg = V(or)(V(or)(V(lt)(U, zero), V(lt)(Vv, zero)), V(lt)(W, zero));
+    VF pos = V(or)(V(or)(V(gt)(U, zero), V(gt)(Vv, zero)), V(gt)(W, zero));
+    VF ok = V(andnot)(V(and)(neg, pos), act);
+    const VF det = V(add)(V(add)(U, Vv), W);
+    ok = V(andnot)(V(eq)(det, zero), ok);
+    if (!V(bits)(ok))
+        return ok;
+    const VF az = V(mul)(p->sz, Az0), bz = V(mul)(p->sz, Bz0), cz = V(mul)(p->sz, Cz0);
+    const VF T = V(add)(V(add)(V(mul)(U, az), V(mul)(Vv, bz)), V(mul)(W, cz));
+    const VF t = V(div)(T, det);
+    ok = V(and)(ok, V(and)(V(le)(tmin, t), V(le)(t, tmax)));
+    *t_out = t;
+    *u_out = V(div)(Vv, det);
+    *v_out = V(div)(W, det);
+    return ok;
+}

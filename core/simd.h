@@ -1,0 +1,97 @@
+/*
+ * simd.h — the lane layer shared by bundle, cone and frustum traversal:
+ * 4-wide helpers (f4_*, SSE2, the x86-64 baseline) and 8-wide helpers
+ * (f8_*, AVX2). The build has no -mavx2 flag, so every 8-wide helper carries
+ * KD_AVX2 (a target attribute); call them only from functions that carry
+ * KD_AVX2 too, and only after kdr_cpu_has_avx2() said yes.
+ *
+ * Masks are float vectors whose lanes are all-ones or all-zeros, as the
+ * compare instructions produce them; f*_sel(m, a, b) picks a where m is set.
+ * min/max keep the hardware rule that matters to traversal: when either
+ * operand is NaN the SECOND operand is returned, so f4_min(d, t_far) with a
+ * NaN d yields t_far.
+ *
+ * Only plain IEEE operations here (no FMA, no approximate reciprocals), so
+ * that SIMD code can reproduce scalar results bit for bit.
+ */
+#ifndef KD_SIMD_H
+#define KD_SIMD_H
+
+#include <immintrin.h>
+#include <stdint.h>
+
+#define KD_AVX2 __attribute__((target("avx2")))
+
+/* ---- 4 lanes (SSE2) ------------------------------------------------------ */
+
+typedef __m128 f4;
+
+static inline f4 f4_set1(float x) { return _mm_set1_ps(x); }
+static inline f4 f4_load(const float *p) { return _mm_load_ps(p); }
+static inline void f4_store(float *p, f4 a) { _mm_store_ps(p, a); }
+static inline f4 f4_add(f4 a, f4 b) { return _mm_add_ps(a, b); }
+static inline f4 f4_sub(f4 a, f4 b) { return _mm_sub_ps(a, b); }
+static inline f4 f4_mul(f4 a, f4 b) { return _mm_mul_ps(a, b); }
+static inline f4 f4_div(f4 a, f4 b) { return _mm_div_ps(a, b); }
+static inline f4 f4_min(f4 a, f4 b) { return _mm_min_ps(a, b); }
+static inline f4 f4_max(f4 a, f4 b) { return _mm_max_ps(a, b); }
+static inline f4 f4_lt(f4 a, f4 b) { return _mm_cmplt_ps(a, b); }
+static inline f4 f4_le(f4 a, f4 b) { return _mm_cmple_ps(a, b); }
+static inline f4 f4_gt(f4 a, f4 b) { return _mm_cmpgt_ps(a, b); }
+static inline f4 f4_eq(f4 a, f4 b) { return _mm_cmpeq_ps(a, b); }
+static inline f4 f4_ord(f4 a, f4 b) { return _mm_cmpord_ps(a, b); }
+static inline f4 f4_and(f4 a, f4 b) { return _mm_and_ps(a, b); }
+static inline f4 f4_or(f4 a, f4 b) { return _mm_or_ps(a, b); }
+static inline f4 f4_andnot(f4 m, f4 a) { return _mm_andnot_ps(m, a); }
+static inline f4 f4_sel(f4 m, f4 a, f4 b) {
+    return _mm_or_ps(_mm_and_ps(m, a), _mm_andnot_ps(m, b));
+}
+static inline int f4_bits(f4 m) { return _mm_movemask_ps(m); }
+/* all-ones in lanes whose sign bit is set (including -0.0 and -NaN) */
+static inline f4 f4_signmask(f4 a) {
+    return _mm_castsi128_ps(_mm_srai_epi32(_mm_castps_si128(a), 31));
+}
+static inline f4 f4_bitmask(int bits) {
+    const __m128i lane = _mm_setr_epi32(1, 2, 4, 8);
+    __m128i b = _mm_and_si128(_mm_set1_epi32(bits), lane);
+    return _mm_castsi128_ps(_mm_cmpeq_epi32(b, lane));
+}
+/* int32 lanes carried in a float vector (selects are bitwise) */
+static inline f4 f4_seti(int32_t x) { return _mm_castsi128_ps(_mm_set1_epi32(x)); }
+
+/* ---- 8 lanes (AVX2) ------------------------------------------------------ */
+
+typedef __m256 f8;
+
+KD_AVX2 static inline f8 f8_set1(float x) { return _mm256_set1_ps(x); }
+KD_AVX2 static inline f8 f8_load(const float *p) { return _mm256_load_ps(p); }
+KD_AVX2 static inline void f8_store(float *p, f8 a) { _mm256_store_ps(p, a); }
+KD_AVX2 static inline f8 f8_add(f8 a, f8 b) { return _mm256_add_ps(a, b); }
+KD_AVX2 static inline f8 f8_sub(f8 a, f8 b) { return _mm256_sub_ps(a, b); }
+KD_AVX2 static inline f8 f8_mul(f8 a, f8 b) { return _mm256_mul_ps(a, b); }
+KD_AVX2 static inline f8 f8_div(f8 a, f8 b) { return _mm256_div_ps(a, b); }
+KD_AVX2 static inline f8 f8_min(f8 a, f8 b) { return _mm256_min_ps(a, b); }
+KD_AVX2 static inline f8 f8_max(f8 a, f8 b) { return _mm256_max_ps(a, b); }
+KD_AVX2 static inline f8 f8_lt(f8 a, f8 b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
+KD_AVX2 static inline f8 f8_le(f8 a, f8 b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
+KD_AVX2 static inline f8 f8_gt(f8 a, f8 b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
+KD_AVX2 static inline f8 f8_eq(f8 a, f8 b) { return _mm256_cmp_ps(a, b, _CMP_EQ_OQ); }
+KD_AVX2 static inline f8 f8_ord(f8 a, f8 b) { return _mm256_cmp_ps(a, b, _CMP_ORD_Q); }
+KD_AVX2 static inline f8 f8_and(f8 a, f8 b) { return _mm256_and_ps(a, b); }
+KD_AVX2 static inline f8 f8_or(f8 a, f8 b) { return _mm256_or_ps(a, b); }
+KD_AVX2 static inline f8 f8_andnot(f8 m, f8 a) { return _mm256_andnot_ps(m, a); }
+KD_AVX2 static inline f8 f8_sel(f8 m, f8 a, f8 b) { return _mm256_blendv_ps(b, a, m); }
+KD_AVX2 static inline int f8_bits(f8 m) { return _mm256_movemask_ps(m); }
+KD_AVX2 static inline f8 f8_signmask(f8 a) {
+    return _mm256_castsi256_ps(_mm256_srai_epi32(_mm256_castps_si256(a), 31));
+}
+KD_AVX2 static inline f8 f8_bitmask(int bits) {
+    const __m256i lane = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    __m256i b = _mm256_and_si256(_mm256_set1_epi32(bits), lane);
+    return _mm256_castsi256_ps(_mm256_cmpeq_epi32(b, lane));
+}
+KD_AVX2 static inline f8 f8_seti(int32_t x) {
+    return _mm256_castsi256_ps(_mm256_set1_epi32(x));
+}
+
+#endif /* KD_SIMD_H */
