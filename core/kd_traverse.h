@@ -67,10 +67,10 @@ static inline int kd_ray_valid(const float org[3], const float dir[3],
  * direction component constrains nothing when the origin is inside the slab
  * and rejects the ray otherwise (no 0 * inf). Returns 0 when the ray misses.
  */
-static inline int kd_clip_root(const struct kdr_scene *s, const float org[3],
-                               const float dir[3], const float inv_dir[3],
-                               const float dt[3], float tmin, float tmax,
-                               float *tnear, float *tfar) {
+static inline int kd_clip_root_dt(const struct kdr_scene *s, const float org[3],
+                                  const float dir[3], const float inv_dir[3],
+                                  const float dt[3], float tmin, float tmax,
+                                  float *tnear, float *tfar) {
     float tn = tmin, tf = tmax;
     for (int k = 0; k < 3; k++) {
         if (dir[k] == 0.0f) {
@@ -93,6 +93,16 @@ static inline int kd_clip_root(const struct kdr_scene *s, const float org[3],
     *tnear = tn;
     *tfar = tf;
     return tn <= tf;
+}
+
+/* The same, computing the ray's slack itself. */
+static inline int kd_clip_root(const struct kdr_scene *s, const float org[3],
+                               const float dir[3], const float inv_dir[3],
+                               float tmin, float tmax, float *tnear,
+                               float *tfar) {
+    float dt[3];
+    kd_ray_slack_dt(s, org, dir, inv_dir, dt);
+    return kd_clip_root_dt(s, org, dir, inv_dir, dt, tmin, tmax, tnear, tfar);
 }
 
 /*

@@ -71,7 +71,7 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
         neg[k] = signbit(r->dir[k]) ? 1u : 0u;
     }
     kd_ray_slack_dt(s, r->org, r->dir, inv, dt);
-    if (!kd_clip_root(s, r->org, r->dir, inv, dt, r->tmin, r->tmax, &tn, &tf))
+    if (!kd_clip_root_dt(s, r->org, r->dir, inv, dt, r->tmin, r->tmax, &tn, &tf))
         return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
