@@ -65,7 +65,8 @@ static void cone_setup(const kd_shadow_frame *f, cone *c) {
     c->t_far = (float)f->dist * (1.0f + 0x1p-16f) + f->along;
 }
 
-/* The t >= 0 with t*m <= e, as [*lo, *hi] padded outward; 0 if none. This
+/* The t >= 0 with t*m <= e, as [*lo, *hi] padded outward; 0 (and *lo, *hi
+ * untouched) if none. This
  * one case analysis covers the hard cases: an axis parallel to the plane
  * (both slopes non-zero thanks to the slack), wide cones whose slopes have
  * opposite signs (one side is reached from the apex on, the other never ends),
@@ -89,11 +90,11 @@ static int cone_side(const cone *c, int k, float split, int below, float tn,
                      float tf, float *t0, float *t1) {
     const float delta = split - c->apex[k];
     const float band = c->band + fabsf(split) * CONE_REL_PAD;
-    float lo, hi;
-    int any = below ? halfline(c->lo[k], delta + band, &lo, &hi)
-                    : halfline(-c->hi[k], band - delta, &lo, &hi);
-    if (!any)
-        return 0;
+    float lo = INFINITY, hi = 0.0f; /* empty unless halfline says otherwise */
+    if (below)
+        halfline(c->lo[k], delta + band, &lo, &hi);
+    else
+        halfline(-c->hi[k], band - delta, &lo, &hi);
     *t0 = fmaxf(lo, tn);
     *t1 = fminf(hi, tf);
     return *t0 <= *t1;
@@ -205,7 +206,7 @@ static int cone_collect(const kdr_scene *scene, const cone *c, cand_list *cl,
 /* The cone again, in double, for the per-triangle bounding-sphere test. */
 typedef struct cull_cone {
     double apex[3], axis[3];
-    double cos_p, sin_p; /* of the half-angle widened by CULL_ANGLE_SLACK */
+    double cos_p, sin_p, tan_p; /* half-angle widened by CULL_ANGLE_SLACK */
     double reach;        /* axial extent of the sample segments */
     double band;         /* sample origins' distance from the apex line */
 } cull_cone;
@@ -221,14 +222,44 @@ static void cull_setup(const kd_shadow_frame *f, const cone *c, cull_cone *cc) {
     }
     cc->cos_p = cos(a);
     cc->sin_p = sin(a);
+    cc->tan_p = cc->sin_p / cc->cos_p;
     cc->reach = c->t_far;
     cc->band = c->band;
 }
 
-/* 0 only if the triangle's bounding sphere provably misses every sample
- * segment: it lies beyond the segments' axial reach, or farther from the
- * cone's surface than its radius. */
+/* 1 if the triangle's plane has the whole truncated cone strictly on one
+ * side. The truncated cone is the convex hull of the apex and its disc at
+ * axial distance reach, so the plane's signed distance over it ranges over
+ * the apex's value and the disc's centre value +- the disc's extent. */
+static int plane_misses(const cull_cone *cc, const float *tri) {
+    double e1[3], e2[3], w[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = (double)tri[3 + k] - tri[k];
+        e2[k] = (double)tri[6 + k] - tri[k];
+        w[k] = cc->apex[k] - tri[k];
+    }
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    const double nn = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(nn > 0.0))
+        return 0;
+    const double d_apex = (n[0] * w[0] + n[1] * w[1] + n[2] * w[2]) / nn;
+    const double nv = (n[0] * cc->axis[0] + n[1] * cc->axis[1] + n[2] * cc->axis[2]) / nn;
+    const double d_disc = d_apex + cc->reach * nv;
+    const double spread = cc->reach * cc->tan_p * sqrt(fmax(0.0, 1.0 - nv * nv));
+    const double wlen = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    const double slack = cc->band + CULL_REL_SLACK * (wlen + cc->reach);
+    const double lo = fmin(d_apex, d_disc - spread);
+    const double hi = fmax(d_apex, d_disc + spread);
+    return lo > slack || hi < -slack;
+}
+
+/* 0 only if the triangle provably misses every sample segment: its plane
+ * leaves the truncated cone on one side, or its bounding sphere lies beyond
+ * the segments' axial reach or farther from the cone than its radius. */
 static int tri_may_block(const cull_cone *cc, const float *tri) {
+    if (plane_misses(cc, tri))
+        return 0;
     double m[3], w[3], r2 = 0.0;
     for (int k = 0; k < 3; k++) {
         const double lo = fmin(tri[k], fmin(tri[3 + k], tri[6 + k]));

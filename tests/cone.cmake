@@ -1,0 +1,6 @@
+# Cone-shadow queries (owner: cone): sample rays, analytic visibilities,
+# KDR_SHADOW_CONE == KDR_SHADOW_RAYS == brute force sample by sample, Embree
+# on the same rays, and cones placed on the tree's own split planes.
+add_executable(test_cone ${CMAKE_CURRENT_SOURCE_DIR}/test_cone.c)
+target_link_libraries(test_cone PRIVATE kdray_testsupport kdray_core m)
+add_test(NAME cone COMMAND test_cone)

@@ -1,0 +1,502 @@
+/*
+ * test_cone.c — cone-shadow queries (core/kd_cone*.c): the sample rays'
+ * definition, analytic visibilities, KDR_SHADOW_CONE == KDR_SHADOW_RAYS ==
+ * brute force sample by sample, Embree on the same rays, and adversarial
+ * cones placed on the tree's actual split planes.
+ *
+ * The brute-force reference tests every triangle with core/kd_tri.h, so a
+ * cone traversal that skips a leaf some sample enters shows up as a count
+ * mismatch; the scenes are many small triangles so that most blocked
+ * samples are blocked by one triangle only.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "compare.h"
+#include "kd_internal.h"
+#include "kdray.h"
+#include "oracle.h"
+
+static int failures;
+
+#define CHECK(cond, ...)                                                     \
+    do {                                                                     \
+        if (!(cond)) {                                                       \
+            failures++;                                                      \
+            fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond); \
+            fprintf(stderr, __VA_ARGS__);                                    \
+            fputc('\n', stderr);                                             \
+        }                                                                    \
+    } while (0)
+
+/* ---- scenes ---------------------------------------------------------------- */
+
+typedef struct tri_buf {
+    float *v;
+    size_t n, cap;
+} tri_buf;
+
+static void tb_add(tri_buf *b, const float t[9]) {
+    if (b->n == b->cap) {
+        b->cap = b->cap ? 2 * b->cap : 64;
+        b->v = realloc(b->v, b->cap * 9 * sizeof(float));
+        if (!b->v)
+            abort();
+    }
+    memcpy(b->v + 9 * b->n++, t, 9 * sizeof(float));
+}
+
+/* Axis-aligned rectangle in the plane x_axis = c over [a0,a1] x [b0,b1]. */
+static void tb_rect(tri_buf *b, int axis, float c, float a0, float a1, float b0,
+                    float b1) {
+    const int i = (axis + 1) % 3, j = (axis + 2) % 3;
+    float p[4][3];
+    const float ua[4] = {a0, a1, a1, a0}, ub[4] = {b0, b0, b1, b1};
+    for (int q = 0; q < 4; q++) {
+        p[q][axis] = c;
+        p[q][i] = ua[q];
+        p[q][j] = ub[q];
+    }
+    const float t0[9] = {p[0][0], p[0][1], p[0][2], p[1][0], p[1][1],
+                         p[1][2], p[2][0], p[2][1], p[2][2]};
+    const float t1[9] = {p[0][0], p[0][1], p[0][2], p[2][0], p[2][1],
+                         p[2][2], p[3][0], p[3][1], p[3][2]};
+    tb_add(b, t0);
+    tb_add(b, t1);
+}
+
+static uint64_t rng_state;
+static double rnd(void) {
+    rng_state = rng_state * 6364136223846793005ull + 1442695040888963407ull;
+    return (double)(rng_state >> 11) * 0x1p-53;
+}
+
+/* n small random triangles (edge ~size) inside [0, extent]^3. */
+static void tb_soup(tri_buf *b, size_t n, float extent, float size) {
+    for (size_t t = 0; t < n; t++) {
+        float c[3], tri[9];
+        for (int k = 0; k < 3; k++)
+            c[k] = (float)(rnd() * extent);
+        for (int j = 0; j < 9; j++)
+            tri[j] = c[j % 3] + (float)((rnd() - 0.5) * size);
+        tb_add(b, tri);
+    }
+}
+
+static kdr_scene *build(const tri_buf *b) {
+    kdr_build_opts o;
+    kdr_scene *s = NULL;
+    kdr_build_opts_default(&o);
+    if (kdr_scene_build(b->v, b->n, &o, NULL, NULL, &s) != KDR_OK || !s) {
+        fprintf(stderr, "scene build failed\n");
+        exit(1);
+    }
+    return s;
+}
+
+static kdr_shadow_query make_query(const float *pts, size_t n,
+                                   const kdr_sphere_light *lights, size_t nl,
+                                   uint32_t samples) {
+    kdr_shadow_query q = {0};
+    q.n = n;
+    q.points = pts;
+    q.lights = lights;
+    q.nlights = nl;
+    q.samples = samples;
+    q.seed = 7;
+    q.epsilon = 1e-5f;
+    return q;
+}
+
+/* ---- the checks ------------------------------------------------------------ */
+
+/* Lit-sample counts of (point, light) pairs by brute force over all
+ * triangles with the core's triangle test. */
+static uint32_t brute_lit(const kdr_scene *s, const tri_buf *b,
+                          const kdr_shadow_query *q, size_t i, size_t l) {
+    uint32_t lit = 0;
+    (void)s;
+    for (uint32_t k = 0; k < q->samples; k++) {
+        kdr_ray r;
+        if (kdr_shadow_ray(s, q, i, l, k, &r) != KDR_OK)
+            return UINT32_MAX;
+        lit += ref_occluded1(b->v, b->n, &r) ? 0u : 1u;
+    }
+    return lit;
+}
+
+/* Both modes against brute force, pair by pair; returns cones decided. */
+static uint64_t check_modes(const char *label, const kdr_scene *s,
+                            const tri_buf *b, const kdr_shadow_query *q) {
+    const size_t m = q->n * q->nlights;
+    float *vc = malloc(m * sizeof *vc), *vr = malloc(m * sizeof *vr);
+    kdr_shadow_stats sc = {0}, sr = {0};
+    CHECK(kdr_shadow_trace(s, q, 0, q->n, KDR_SHADOW_CONE, vc, &sc) == KDR_OK,
+          "%s cone", label);
+    CHECK(kdr_shadow_trace(s, q, 0, q->n, KDR_SHADOW_RAYS, vr, &sr) == KDR_OK,
+          "%s rays", label);
+    int bad = 0;
+    for (size_t i = 0; i < q->n && bad < 5; i++) {
+        for (size_t l = 0; l < q->nlights; l++) {
+            const uint32_t lit = brute_lit(s, b, q, i, l);
+            const float want = (float)lit / (float)q->samples;
+            const float c = vc[i * q->nlights + l], r = vr[i * q->nlights + l];
+            if (c != want || r != want) {
+                bad++;
+                CHECK(0, "%s point %zu light %zu: cone %.6f rays %.6f brute %.6f",
+                      label, i, l, c, r, want);
+            }
+        }
+    }
+    CHECK(sr.cones_decided == 0 && sr.rays_traced == (uint64_t)m * q->samples,
+          "%s rays-mode stats", label);
+    printf("%-28s pairs %5zu decided %5llu rays cone %8llu rays %8llu\n", label,
+           m, (unsigned long long)sc.cones_decided,
+           (unsigned long long)sc.rays_traced, (unsigned long long)sr.rays_traced);
+    free(vc);
+    free(vr);
+    return sc.cones_decided;
+}
+
+static void test_invalid(void) {
+    tri_buf b = {0};
+    tb_rect(&b, 2, 1.0f, -1, 1, -1, 1);
+    kdr_scene *s = build(&b);
+    const float pts[6] = {0, 0, 0, 0, 0, 5};
+    kdr_sphere_light li = {{0, 0, 5}, 1.0f};
+    kdr_shadow_query q = make_query(pts, 2, &li, 1, 4);
+    float vis[2];
+    kdr_ray r;
+    CHECK(kdr_shadow_trace(s, &q, 0, 2, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
+          "point inside the light");
+    CHECK(kdr_shadow_ray(s, &q, 1, 0, 0, &r) == KDR_EINVAL, "ray inside light");
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 4, &r) == KDR_EINVAL, "sample >= samples");
+    CHECK(kdr_shadow_trace(s, &q, 1, 2, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
+          "range past n");
+    q.samples = 0;
+    CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
+          "0 samples");
+    q.samples = 4097;
+    CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_RAYS, vis, NULL) == KDR_EINVAL,
+          "4097 samples");
+    q.samples = 4;
+    li.radius = 0.0f;
+    CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
+          "radius 0");
+    li.radius = NAN;
+    CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
+          "radius NaN");
+    li.radius = 1.0f;
+    q.epsilon = -1.0f;
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "negative epsilon");
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+/* Every sample ray: unit direction inside the cone, end point on the sphere,
+ * the same ray for the same (seed, i, l, s) and a different one for another
+ * seed; the samples' mean direction is the cone axis. */
+static void test_ray_definition(void) {
+    tri_buf b = {0};
+    tb_rect(&b, 2, 100.0f, -1, 1, -1, 1);
+    kdr_scene *s = build(&b);
+    const float pts[3] = {0.5f, -0.25f, 0.0f};
+    const kdr_sphere_light lights[3] = {
+        {{3, 4, 12}, 1.0f}, {{0.5f, -0.25f, 2.0f}, 1.9f}, {{-7, 0, 0}, 1e-3f}};
+    kdr_shadow_query q = make_query(pts, 1, lights, 3, 256);
+    for (size_t l = 0; l < 3; l++) {
+        const float *c = lights[l].center;
+        double ax[3], D = 0, mean[3] = {0, 0, 0};
+        for (int k = 0; k < 3; k++) {
+            ax[k] = c[k] - pts[k];
+            D += ax[k] * ax[k];
+        }
+        D = sqrt(D);
+        const double cos_a = sqrt(1.0 - (lights[l].radius / D) * (lights[l].radius / D));
+        for (uint32_t k = 0; k < q.samples; k++) {
+            kdr_ray r, r2;
+            CHECK(kdr_shadow_ray(s, &q, 0, l, k, &r) == KDR_OK, "ray");
+            kdr_shadow_ray(s, &q, 0, l, k, &r2);
+            CHECK(memcmp(&r, &r2, sizeof r) == 0, "reproducible");
+            double len = 0, ct = 0, e2 = 0;
+            for (int j = 0; j < 3; j++) {
+                len += (double)r.dir[j] * r.dir[j];
+                ct += r.dir[j] * ax[j] / D;
+                mean[j] += r.dir[j];
+            }
+            CHECK(fabs(len - 1.0) < 1e-6, "unit dir %g", len);
+            CHECK(ct >= cos_a - 1e-6, "inside cone: cos %.9f < %.9f", ct, cos_a);
+            for (int j = 0; j < 3; j++) {
+                const double e = r.org[j] + (double)r.tmax * r.dir[j] - c[j];
+                e2 += e * e;
+            }
+            CHECK(fabs(sqrt(e2) - lights[l].radius) <= 1e-4 * D,
+                  "end on sphere: %g vs %g", sqrt(e2), lights[l].radius);
+            CHECK(r.tmin == 0.0f && r.tmax > 0.0f, "interval");
+        }
+        double mlen = sqrt(mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
+        double mc = (mean[0] * ax[0] + mean[1] * ax[1] + mean[2] * ax[2]) / (mlen * D);
+        /* the sample mean lies within a small angle of the axis */
+        CHECK(1.0 - mc < 0.02 * (1.0 - cos_a) + 1e-9, "mean direction %g", 1.0 - mc);
+    }
+    kdr_ray r1, r2;
+    kdr_shadow_ray(s, &q, 0, 0, 3, &r1);
+    q.seed = 8;
+    kdr_shadow_ray(s, &q, 0, 0, 3, &r2);
+    CHECK(memcmp(r1.dir, r2.dir, sizeof r1.dir) != 0, "seed changes the rays");
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+/* Analytic cases: a big blocker (0), an unoccluded light (1 with no rays)
+ * and a half-plane blocker whose blocked solid-angle fraction is integrated
+ * numerically (uniform in cos theta: a sampler uniform in theta fails). */
+static double half_plane_blocked(double h, double x0, double sin_a) {
+    const double cos_a = sqrt(1 - sin_a * sin_a);
+    const int steps = 200000;
+    double acc = 0;
+    for (int j = 0; j < steps; j++) {
+        const double ct = cos_a + (1 - cos_a) * (j + 0.5) / steps;
+        const double tt = sqrt(1 - ct * ct) / ct;
+        const double x = tt > 0 ? x0 / (h * tt) : (x0 > 0 ? 2.0 : -2.0);
+        acc += acos(fmax(-1.0, fmin(1.0, x))) / 3.14159265358979323846;
+    }
+    return acc / steps;
+}
+
+static void test_analytic(void) {
+    tri_buf b = {0};
+    tb_rect(&b, 2, 1.0f, -50, 50, -50, 50);      /* roof at z = 1 */
+    tb_rect(&b, 2, -3.0f, -50, 50, -50, 50);     /* floor below the points */
+    tb_rect(&b, 0, 20.0f, -50, 50, 5, 50);       /* wall far to the side */
+    kdr_scene *s = build(&b);
+    float pts[3 * 16];
+    for (int i = 0; i < 16; i++) {
+        pts[3 * i] = (float)(i % 4) - 1.5f;
+        pts[3 * i + 1] = (float)(i / 4) - 1.5f;
+        pts[3 * i + 2] = 0.0f;
+    }
+    /* light 0 above the roof, light 1 below the roof beside the points */
+    const kdr_sphere_light lights[2] = {{{0, 0, 6}, 2.0f}, {{0, 0, -1}, 0.5f}};
+    kdr_shadow_query q = make_query(pts, 16, lights, 2, 64);
+    float vis[32];
+    kdr_shadow_stats st = {0};
+    CHECK(kdr_shadow_trace(s, &q, 0, 16, KDR_SHADOW_CONE, vis, &st) == KDR_OK, "ok");
+    for (int i = 0; i < 16; i++) {
+        CHECK(vis[2 * i] == 0.0f, "under the roof: %g", vis[2 * i]);
+        CHECK(vis[2 * i + 1] == 1.0f, "open light: %g", vis[2 * i + 1]);
+    }
+    CHECK(st.cones_decided == 16, "open cones decided: %llu",
+          (unsigned long long)st.cones_decided);
+    check_modes("analytic roof", s, &b, &q);
+    kdr_scene_free(s);
+    free(b.v);
+
+    /* half-plane x >= x0 at z = h between the point and a close light */
+    const float h = 0.25f, D = 2.0f, r = 1.6f; /* sphere starts at z = 0.4 */
+    const double sin_a = r / D, tan_a = sin_a / sqrt(1 - sin_a * sin_a);
+    const float x0s[3] = {0.0f, (float)(0.4 * h * tan_a), (float)(-0.7 * h * tan_a)};
+    for (int c = 0; c < 3; c++) {
+        tri_buf hb = {0};
+        tb_rect(&hb, 2, h, x0s[c], 30, -30, 30);
+        kdr_scene *hs = build(&hb);
+        const float p[3] = {0, 0, 0};
+        const kdr_sphere_light hl = {{0, 0, D}, r};
+        kdr_shadow_query hq = make_query(p, 1, &hl, 1, 4096);
+        const double want = 1.0 - half_plane_blocked(h, x0s[c], sin_a);
+        for (int seed = 0; seed < 3; seed++) {
+            float v;
+            hq.seed = (uint64_t)seed;
+            kdr_shadow_trace(hs, &hq, 0, 1, KDR_SHADOW_CONE, &v, NULL);
+            CHECK(fabs(v - want) < 0.02, "half-plane x0=%g: %g want %g", x0s[c], v, want);
+        }
+        kdr_scene_free(hs);
+        free(hb.v);
+    }
+}
+
+/* Normals: the start moves off the surface toward the light's side, so a
+ * single-sided floor whose normal points away from the light does not
+ * shadow its own points. */
+static void test_normals(void) {
+    tri_buf b = {0};
+    tb_rect(&b, 1, 0.0f, -10, 10, -10, 10); /* floor y = 0 */
+    kdr_scene *s = build(&b);
+    const float pts[6] = {0, 0, 0, 2.5f, 0, 1.0f};
+    const float down[6] = {0, -1, 0, 0, -3, 0};
+    const float up[6] = {0, 1, 0, 0, 1, 0};
+    const kdr_sphere_light li = {{1, 5, 1}, 1.0f};
+    kdr_shadow_query q = make_query(pts, 2, &li, 1, 32);
+    q.epsilon = 1e-4f;
+    float vis[2];
+    const float *nrm[3] = {down, up, NULL};
+    for (int c = 0; c < 3; c++) {
+        q.normals = nrm[c];
+        for (int m = 0; m < 2; m++) {
+            kdr_shadow_trace(s, &q, 0, 2, (kdr_shadow_mode)m, vis, NULL);
+            CHECK(vis[0] == 1.0f && vis[1] == 1.0f, "floor self-shadow c=%d m=%d: %g %g",
+                  c, m, vis[0], vis[1]);
+        }
+        check_modes("normals on floor", s, &b, &q);
+    }
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+/* Random soup: modes vs brute force, and Embree on the same sample rays. */
+static void test_soup_vs_embree(void) {
+    rng_state = 12345;
+    tri_buf b = {0};
+    tb_soup(&b, 3000, 10.0f, 0.6f);
+    kdr_scene *s = build(&b);
+    enum { NP = 48, NL = 3 };
+    float pts[3 * NP], nrm[3 * NP];
+    kdr_sphere_light lights[NL] = {
+        {{5, 5, 14}, 2.0f}, {{5, 5, 5}, 0.8f}, {{-2, 11, 3}, 0.3f}};
+    for (int i = 0; i < 3 * NP; i++) {
+        pts[i] = (float)(rnd() * 10.0);
+        nrm[i] = (float)(rnd() - 0.5);
+    }
+    for (int i = 0; i < NP; i++) { /* keep points out of the lights */
+        for (int l = 0; l < NL; l++) {
+            double d2 = 0;
+            for (int k = 0; k < 3; k++)
+                d2 += (pts[3 * i + k] - lights[l].center[k]) *
+                      (pts[3 * i + k] - lights[l].center[k]);
+            if (d2 <= 1.1 * lights[l].radius * lights[l].radius)
+                pts[3 * i + 2] = -1.0f;
+        }
+    }
+    kdr_shadow_query q = make_query(pts, NP, lights, NL, 16);
+    check_modes("soup", s, &b, &q);
+    q.normals = nrm;
+    q.samples = 5;
+    check_modes("soup with normals", s, &b, &q);
+
+    oracle *o = oracle_create(b.v, b.n, NULL);
+    CHECK(o != NULL, "embree oracle");
+    cmp_tally tally;
+    cmp_tally_init(&tally);
+    for (size_t i = 0; o && i < NP; i++) {
+        for (size_t l = 0; l < NL; l++) {
+            for (uint32_t k = 0; k < q.samples; k++) {
+                kdr_ray r;
+                kdr_hit kh, eh;
+                kdr_shadow_ray(s, &q, i, l, k, &r);
+                const int kd = kdr_occluded1(s, &r, NULL);
+                const int em = oracle_occluded1(o, &r);
+                kdr_intersect1(s, &r, &kh, NULL);
+                oracle_intersect1(o, &r, &eh);
+                cmp_tally_add(&tally, &r,
+                              cmp_occluded(b.v, b.n, &r, kd, em, &kh, &eh), 0.0, em);
+            }
+        }
+    }
+    cmp_tally_print(stdout, "cone samples vs embree", &tally);
+    cmp_tally_print_bad(stderr, "cone samples vs embree", &tally);
+    CHECK(cmp_tally_unexplained(&tally) == 0, "embree disagreements");
+    CHECK(tally.hits > 0 && tally.hits < tally.rays, "mixed shadow");
+    if (o)
+        oracle_free(o);
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+/* Split planes (axis, position) of interior nodes spread over the node
+ * array: the root's big planes and deep ones between small cells. */
+static size_t tree_splits(const kdr_scene *s, int *axis, float *pos, size_t max) {
+    size_t n = 0;
+    const size_t step = s->nnodes / (2 * max) + 1;
+    for (size_t j = 0; j < s->nnodes && n < max; j += step) {
+        while (j < s->nnodes && kd_is_leaf(&s->nodes[j]))
+            j++;
+        if (j < s->nnodes) {
+            axis[n] = kd_axis(&s->nodes[j]);
+            pos[n++] = s->nodes[j].u.split;
+        }
+    }
+    return n;
+}
+
+/* Cones placed on the tree's own split planes: apex on a plane, axis
+ * parallel to it or along a coordinate axis, tiny and near-90-degree
+ * half-angles, light straddling the plane. */
+static void test_adversarial(void) {
+    rng_state = 999;
+    tri_buf b = {0};
+    tb_soup(&b, 2500, 8.0f, 0.35f);
+    for (int k = 1; k < 8; k += 3) /* triangles lying in likely split planes */
+        tb_rect(&b, k % 3, (float)k, 2.0f, 2.5f, 3.0f, 3.75f);
+    kdr_scene *s = build(&b);
+    int axis[10];
+    float pos[10];
+    const size_t ns = tree_splits(s, axis, pos, 10);
+    CHECK(ns > 4, "tree has splits");
+    enum { NP = 16 };
+    for (size_t c = 0; c < ns; c++) {
+        const int k = axis[c], i1 = (k + 1) % 3, i2 = (k + 2) % 3;
+        float pts[3 * NP];
+        kdr_sphere_light lights[5];
+        for (int i = 0; i < NP; i++) {
+            pts[3 * i + k] = pos[c];
+            pts[3 * i + i1] = (float)(rnd() * 8.0);
+            pts[3 * i + i2] = (float)(rnd() * 8.0);
+        }
+        /* 0: in the plane (axis parallel to it), tiny cone; 1: in the plane,
+         * close and wide; 2: straddling, axis along k; 3: near 90 degrees;
+         * 4: tiny and far along axis i1 */
+        float cen[5][3];
+        const float rad[5] = {1e-4f, 2.0f, 1.5f, 0.0f, 2e-3f};
+        for (int j = 0; j < 5; j++) {
+            cen[j][k] = pos[c];
+            cen[j][i1] = 4.0f;
+            cen[j][i2] = 4.0f;
+        }
+        cen[1][i1] = 9.0f;
+        cen[2][k] = pos[c] + 6.0f;
+        cen[4][i1] = 40.0f;
+        cen[4][k] = pos[c] + 0.01f;
+        for (int j = 0; j < 5; j++) {
+            for (int m = 0; m < 3; m++)
+                lights[j].center[m] = cen[j][m];
+            lights[j].radius = rad[j];
+        }
+        /* light 3 sits just beyond point 0 */
+        lights[3].radius = 1.0f;
+        for (int m = 0; m < 3; m++)
+            lights[3].center[m] = pts[m] + (m == i1 ? 1.002f : 0.0f);
+        for (int i = 0; i < NP; i++) { /* keep points out of the lights */
+            for (int l = 0; l < 5; l++) {
+                double d2 = 0;
+                for (int m = 0; m < 3; m++)
+                    d2 += (pts[3 * i + m] - lights[l].center[m]) *
+                          (pts[3 * i + m] - lights[l].center[m]);
+                if (d2 <= 1.01 * lights[l].radius * lights[l].radius)
+                    pts[3 * i + i1] = -3.0f - (float)i;
+            }
+        }
+        kdr_shadow_query q = make_query(pts, NP, lights, 5, 24);
+        char label[64];
+        snprintf(label, sizeof label, "split %zu axis %d at %g", c, k, pos[c]);
+        check_modes(label, s, &b, &q);
+    }
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+int main(void) {
+    test_invalid();
+    test_ray_definition();
+    test_analytic();
+    test_normals();
+    test_soup_vs_embree();
+    test_adversarial();
+    if (failures) {
+        fprintf(stderr, "test_cone: %d failures\n", failures);
+        return 1;
+    }
+    printf("test_cone: all passed\n");
+    return 0;
+}
