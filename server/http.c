@@ -226,13 +226,17 @@ kdr_http *kdr_http_start(kdr_server *srv, const char *addr) {
     h->srv = srv;
     unsigned flags = MHD_USE_AUTO | MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_ITC |
                      MHD_USE_ERROR_LOG | (v6 ? MHD_USE_IPv6 : 0);
-    h->d = MHD_start_daemon(flags, 0, NULL, NULL, on_request, h, MHD_OPTION_SOCK_ADDR,
-                            (const struct sockaddr *)&ss, MHD_OPTION_THREAD_POOL_SIZE,
-                            (unsigned)srv->threads, MHD_OPTION_NOTIFY_COMPLETED,
-                            on_completed, (void *)h, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
-                            CONNECTION_MEMORY, MHD_OPTION_CONNECTION_TIMEOUT,
-                            CONNECTION_TIMEOUT_S, MHD_OPTION_EXTERNAL_LOGGER, log_mhd,
-                            (void *)NULL, MHD_OPTION_END);
+    /* The logger goes first so that MHD reports option errors through it. */
+    /* clang-format off */
+    h->d = MHD_start_daemon(flags, 0, NULL, NULL, on_request, h,
+        MHD_OPTION_EXTERNAL_LOGGER, log_mhd, (void *)NULL,
+        MHD_OPTION_SOCK_ADDR, (const struct sockaddr *)&ss,
+        MHD_OPTION_THREAD_POOL_SIZE, (unsigned)srv->threads,
+        MHD_OPTION_NOTIFY_COMPLETED, on_completed, (void *)h,
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, CONNECTION_MEMORY,
+        MHD_OPTION_CONNECTION_TIMEOUT, CONNECTION_TIMEOUT_S,
+        MHD_OPTION_END);
+    /* clang-format on */
     if (!h->d) {
         kdr_log("error: cannot listen on %s: %s", addr, strerror(errno));
         free(h);

@@ -209,8 +209,15 @@ static int build_scenes(kdr_server *srv) {
 
 static int serve(kdr_server *srv, const options *o) {
     sig_waiter sw;
+    /* Signals first: every thread created later inherits the blocked mask. */
     if (start_signals(&sw, srv) != 0) {
         kdr_log("error: cannot set up signal handling");
+        return 1;
+    }
+    srv->pool = kdr_pool_create(srv->threads - 1);
+    if (!srv->pool) {
+        kdr_log("error: cannot start %u worker threads", srv->threads - 1);
+        wait_signal(&sw, 1);
         return 1;
     }
     kdr_log("kdrayd %s starting: %zu scene%s, %u threads, max body %zu MiB, max "
@@ -249,8 +256,7 @@ int main(int argc, char **argv) {
         srv.threads = o.threads;
         srv.max_body = o.max_body_mb << 20;
         srv.max_rays = o.max_rays;
-        srv.pool = kdr_pool_create(o.threads - 1);
-        rc = srv.pool ? serve(&srv, &o) : 1;
+        rc = serve(&srv, &o);
     }
     kdr_pool_destroy(srv.pool);
     kdr_registry_free(srv.registry);

@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# curl-examples.sh — one curl call per kdray endpoint, runnable against a live
+# daemon:  clients/curl-examples.sh [BASE_URL] [SCENE]
+# (defaults http://127.0.0.1:8080 and "default"). Every call uses curl -fsS,
+# so the script exits non-zero on the first failed request; the error example
+# checks that the daemon answers a bad request with 400 problem+json.
+set -euo pipefail
+URL=${1:-http://127.0.0.1:8080}
+SCENE=${2:-default}
+J='Content-Type: application/json'
+TMP=$(mktemp)
+trap 'rm -f "$TMP"' EXIT
+say() { printf '\n== %s\n' "$*"; }
+# show CURL-ARGS...: the request must succeed; prints the answer's start.
+show() { curl -fsS -o "$TMP" "$@"; head -c 600 "$TMP"; echo; }
+
+say "health"
+curl -fsS "$URL/v1/health"
+
+say "metrics (first lines)"
+curl -fsS -o "$TMP" "$URL/metrics"
+head -n 5 "$TMP"
+
+say "scenes"
+show "$URL/v1/scenes"
+
+say "one scene"
+show "$URL/v1/scenes/$SCENE"
+
+say "bundle, JSON: two rays from one origin, closest hit"
+curl -fsS -H "$J" "$URL/v1/scenes/$SCENE/bundle" -d '{
+  "origins": [0, 0, 10],
+  "directions": [0, 0, -1,  0.1, 0.1, -1],
+  "tmin": 0, "tmax": 1e30, "query": "closest"}'
+
+# The same rays as base64 float32 (little-endian): origin (0,0,10) and the
+# directions (0,0,-1), (0.1,0.1,-1); the answer comes back in base64 too.
+say "bundle, base64 in and out"
+curl -fsS -H "$J" "$URL/v1/scenes/$SCENE/bundle" -d '{
+  "origins": {"f32": "AAAAAAAAAAAAACBB"},
+  "directions": {"f32": "AAAAAAAAAAAAAIC/zczMPc3MzD0AAIC/"},
+  "encoding": "base64"}'
+
+say "bundle, any-hit (occlusion) with per-ray tmax"
+curl -fsS -H "$J" "$URL/v1/scenes/$SCENE/bundle" -d '{
+  "origins": [0, 0, 10,  0, 0, 10],
+  "directions": [0, 0, -1,  0, 0, -1],
+  "tmax": [0.5, 1e30], "query": "any"}'
+
+say "cone-shadow: two points, one spherical light, with statistics"
+curl -fsS -H "$J" "$URL/v1/scenes/$SCENE/cone-shadow" -d '{
+  "points": [0, 0, 0,  0.5, 0, 0],
+  "lights": [{"center": [100, 100, 100], "radius": 5}],
+  "samples": 16, "seed": 1, "stats": true}'
+
+say "frustum: a 16x8 image in 4x4 tiles"
+show -H "$J" "$URL/v1/scenes/$SCENE/frustum" -d '{
+  "camera": {"eye": [0, 0, 10], "target": [0, 0, 0], "up": [0, 1, 0],
+             "fov_y_deg": 60, "width": 16, "height": 8},
+  "tile": 4, "query": "closest", "encoding": "base64"}'
+
+say "an error: a direction that is not a number is 400 problem+json"
+code=$(curl -sS -o "$TMP" -w '%{http_code} %{content_type}' -H "$J" \
+  "$URL/v1/scenes/$SCENE/bundle" -d '{"origins": [0,0,0], "directions": [0, 0, "x"]}')
+cat "$TMP"; echo
+echo "$code"
+case "$code" in
+  "400 application/problem+json"*) ;;
+  *) echo "curl-examples: expected 400 problem+json, got $code" >&2; exit 1 ;;
+esac
+say "all examples answered"

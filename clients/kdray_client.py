@@ -1,0 +1,306 @@
+#!/usr/bin/env python3
+"""kdray_client.py - a dependency-free client for the kdray HTTP API.
+
+Only the standard library (urllib, struct, base64, json) is used, so the
+file can be copied anywhere next to a running kdrayd. As a module:
+
+    from kdray_client import Client
+    c = Client("http://127.0.0.1:8080")
+    r = c.bundle("default", origins=[0, 0, 0], directions=[0, 0, -1, 1, 0, 0])
+    print(r["t"], r["prim"])
+
+Answers come back with every array decoded to a Python list, whatever the
+wire encoding was. HTTP errors raise KdrayError carrying the status and the
+problem+json body.
+
+As a command (see --help):
+
+    kdray_client.py --url http://127.0.0.1:8080 scenes
+    kdray_client.py bundle --origin 0,0,5 --random 1000 --encoding base64
+    kdray_client.py shadow --point 0,0,0 --light 10,10,10,1 --samples 64
+    kdray_client.py frustum --eye 0,0,5 --target 0,0,0 --width 320 --height 240 \\
+        --pgm depth.pgm
+"""
+
+import argparse
+import base64
+import json
+import math
+import random
+import struct
+import sys
+import urllib.error
+import urllib.request
+
+DEFAULT_URL = "http://127.0.0.1:8080"
+DEFAULT_TIMEOUT_S = 120.0
+
+
+class KdrayError(Exception):
+    """An HTTP error answer; .status is the code, .problem the parsed body."""
+
+    def __init__(self, status, problem):
+        self.status = status
+        self.problem = problem if isinstance(problem, dict) else {"detail": problem}
+        super().__init__("HTTP %d: %s" % (status, self.problem.get("detail", "")))
+
+
+def f32_b64(values):
+    """The {"f32": base64} form of a float array (little-endian float32)."""
+    data = struct.pack("<%df" % len(values), *values)
+    return {"f32": base64.b64encode(data).decode("ascii")}
+
+
+def _decode(value, code):
+    raw = base64.b64decode(value, validate=True)
+    return list(struct.unpack("<%d%s" % (len(raw) // 4, code), raw))
+
+
+def decode_array(value):
+    """A response array in either encoding, as a list of numbers."""
+    if isinstance(value, dict):
+        if "f32" in value:
+            return _decode(value["f32"], "f")
+        if "i32" in value:
+            return _decode(value["i32"], "i")
+        raise ValueError("unknown array encoding: %r" % list(value))
+    return list(value)
+
+
+def decode_answer(answer):
+    """Decodes every base64 array of a query answer in place."""
+    for key, value in list(answer.items()):
+        if isinstance(value, dict) and ("f32" in value or "i32" in value):
+            answer[key] = decode_array(value)
+    return answer
+
+
+def _floats(values, send):
+    values = [float(x) for x in values]
+    return f32_b64(values) if send == "base64" else values
+
+
+class Client:
+    """One kdrayd; every method is one HTTP request (thread-safe)."""
+
+    def __init__(self, url=DEFAULT_URL, timeout=DEFAULT_TIMEOUT_S):
+        self.url = url.rstrip("/")
+        self.timeout = timeout
+
+    def request(self, method, path, body=None, content_type="application/json",
+                headers=None):
+        """Raw request: returns (status, headers dict, body bytes); never raises
+        for HTTP error statuses."""
+        hdrs = dict(headers or {})
+        if body is not None and content_type is not None:
+            hdrs["Content-Type"] = content_type
+        req = urllib.request.Request(self.url + path, data=body, method=method,
+                                     headers=hdrs)
+        try:
+            with urllib.request.urlopen(req, timeout=self.timeout) as resp:
+                return resp.status, dict(resp.headers.items()), resp.read()
+        except urllib.error.HTTPError as err:
+            with err:
+                return err.code, dict(err.headers.items()), err.read()
+
+    def call(self, method, path, payload=None):
+        """JSON in, JSON out; raises KdrayError on an error status."""
+        body = None if payload is None else json.dumps(payload).encode("utf-8")
+        status, _, data = self.request(method, path, body)
+        try:
+            parsed = json.loads(data) if data else None
+        except ValueError:
+            parsed = data.decode("utf-8", "replace")
+        if status >= 400:
+            raise KdrayError(status, parsed)
+        return parsed
+
+    def health(self):
+        return self.call("GET", "/v1/health")
+
+    def metrics(self):
+        status, _, data = self.request("GET", "/metrics")
+        if status != 200:
+            raise KdrayError(status, data.decode("utf-8", "replace"))
+        return data.decode("utf-8")
+
+    def scenes(self):
+        return self.call("GET", "/v1/scenes")["scenes"]
+
+    def scene(self, name):
+        return self.call("GET", "/v1/scenes/" + name)
+
+    def bundle(self, scene, origins, directions, tmin=None, tmax=None,
+               query="closest", encoding="json", send="json"):
+        """Traces rays; origins is 3 floats (shared) or 3*N; send picks the
+        request's float encoding, encoding the answer's."""
+        payload = {"origins": _floats(origins, send),
+                   "directions": _floats(directions, send),
+                   "query": query, "encoding": encoding}
+        for key, value in (("tmin", tmin), ("tmax", tmax)):
+            if value is not None:
+                payload[key] = (value if isinstance(value, (int, float))
+                                else _floats(value, send))
+        path = "/v1/scenes/%s/bundle" % scene
+        return decode_answer(self.call("POST", path, payload))
+
+    def shadow(self, scene, points, lights, normals=None, samples=None,
+               seed=None, epsilon=None, stats=False, encoding="json", send="json"):
+        """Cone-shadow visibility; lights are (x, y, z, radius) tuples or
+        {"center": ..., "radius": ...} dicts."""
+        payload = {"points": _floats(points, send), "encoding": encoding,
+                   "lights": [l if isinstance(l, dict) else
+                              {"center": list(l[:3]), "radius": l[3]}
+                              for l in lights]}
+        if normals is not None:
+            payload["normals"] = _floats(normals, send)
+        for key, value in (("samples", samples), ("seed", seed),
+                           ("epsilon", epsilon)):
+            if value is not None:
+                payload[key] = value
+        if stats:
+            payload["stats"] = True
+        path = "/v1/scenes/%s/cone-shadow" % scene
+        return decode_answer(self.call("POST", path, payload))
+
+    def frustum(self, scene, eye, target, width, height, up=(0, 1, 0),
+                fov_y_deg=60.0, tile=8, query="closest", encoding="base64"):
+        camera = {"eye": list(eye), "target": list(target), "up": list(up),
+                  "fov_y_deg": fov_y_deg, "width": width, "height": height}
+        payload = {"camera": camera, "tile": tile, "query": query,
+                   "encoding": encoding}
+        path = "/v1/scenes/%s/frustum" % scene
+        return decode_answer(self.call("POST", path, payload))
+
+
+def random_directions(n, seed=1):
+    """n directions uniform on the unit sphere (flat list of 3n floats)."""
+    rng = random.Random(seed)
+    out = []
+    for _ in range(n):
+        z = rng.uniform(-1.0, 1.0)
+        phi = rng.uniform(0.0, 2.0 * math.pi)
+        r = math.sqrt(max(0.0, 1.0 - z * z))
+        out += [r * math.cos(phi), r * math.sin(phi), z]
+    return out
+
+
+def write_pgm(path, t, width, height):
+    """A binary PGM depth image: near hits bright, far dark, misses black."""
+    hits = [x for x in t if x >= 0]
+    near, far = (min(hits), max(hits)) if hits else (0.0, 1.0)
+    span = far - near if far > near else 1.0
+    pixels = bytearray(0 if x < 0 else 255 - int(200 * (x - near) / span)
+                       for x in t)
+    with open(path, "wb") as f:
+        f.write(b"P5\n%d %d\n255\n" % (width, height))
+        f.write(bytes(pixels))
+
+
+def _vec(text, n=3):
+    parts = [float(x) for x in text.split(",")]
+    if len(parts) != n:
+        raise argparse.ArgumentTypeError("expected %d comma-separated numbers" % n)
+    return parts
+
+
+def _summary(answer, keys):
+    out = {}
+    for key, value in answer.items():
+        if isinstance(value, list) and key not in keys:
+            out[key] = value[:8] + (["..."] if len(value) > 8 else [])
+        else:
+            out[key] = value
+    return out
+
+
+def _cmd_bundle(client, args):
+    dirs = []
+    for d in args.dir or []:
+        dirs += d
+    dirs += random_directions(args.random, args.seed) if args.random else []
+    if not dirs:
+        raise SystemExit("bundle: give --dir x,y,z and/or --random N")
+    return client.bundle(args.scene, args.origin, dirs, tmin=args.tmin,
+                         tmax=args.tmax, query="any" if args.any else "closest",
+                         encoding=args.encoding, send=args.send)
+
+
+def _cmd_shadow(client, args):
+    points = [x for p in args.point for x in p]
+    return client.shadow(args.scene, points, args.light, samples=args.samples,
+                         seed=args.seed, stats=True, encoding=args.encoding)
+
+
+def _cmd_frustum(client, args):
+    answer = client.frustum(args.scene, args.eye, args.target, args.width,
+                            args.height, up=args.up, fov_y_deg=args.fov,
+                            tile=args.tile, encoding=args.encoding)
+    if args.pgm:
+        write_pgm(args.pgm, answer["t"], args.width, args.height)
+        print("wrote %s" % args.pgm, file=sys.stderr)
+    return answer
+
+
+def _parser():
+    p = argparse.ArgumentParser(description="kdray HTTP client")
+    p.add_argument("--url", default=DEFAULT_URL)
+    p.add_argument("--full", action="store_true", help="print whole arrays")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    for name in ("health", "metrics", "scenes"):
+        sub.add_parser(name)
+    b = sub.add_parser("bundle", help="trace rays from one origin")
+    b.add_argument("--origin", type=_vec, default=[0.0, 0.0, 0.0])
+    b.add_argument("--dir", type=_vec, action="append")
+    b.add_argument("--random", type=int, default=0, help="N random directions")
+    b.add_argument("--tmin", type=float)
+    b.add_argument("--tmax", type=float)
+    b.add_argument("--any", action="store_true", help="occlusion query")
+    b.add_argument("--send", choices=("json", "base64"), default="json")
+    s = sub.add_parser("shadow", help="cone-shadow visibility")
+    s.add_argument("--point", type=_vec, action="append", required=True)
+    s.add_argument("--light", type=lambda t: _vec(t, 4), action="append",
+                   required=True, help="x,y,z,radius")
+    s.add_argument("--samples", type=int, default=64)
+    f = sub.add_parser("frustum", help="primary rays of a camera")
+    f.add_argument("--eye", type=_vec, required=True)
+    f.add_argument("--target", type=_vec, required=True)
+    f.add_argument("--up", type=_vec, default=[0.0, 1.0, 0.0])
+    f.add_argument("--fov", type=float, default=60.0)
+    f.add_argument("--width", type=int, default=320)
+    f.add_argument("--height", type=int, default=240)
+    f.add_argument("--tile", type=int, default=8)
+    f.add_argument("--pgm", help="write a PGM depth image")
+    for q in (b, s, f):
+        q.add_argument("--scene", default="default")
+        q.add_argument("--seed", type=int, default=1)
+        q.add_argument("--encoding", choices=("json", "base64"), default="json")
+    return p
+
+
+def main(argv=None):
+    args = _parser().parse_args(argv)
+    client = Client(args.url)
+    try:
+        if args.cmd == "metrics":
+            sys.stdout.write(client.metrics())
+            return 0
+        handlers = {"health": lambda c, a: c.health(),
+                    "scenes": lambda c, a: {"scenes": c.scenes()},
+                    "bundle": _cmd_bundle, "shadow": _cmd_shadow,
+                    "frustum": _cmd_frustum}
+        answer = handlers[args.cmd](client, args)
+    except KdrayError as err:
+        print(json.dumps(err.problem), file=sys.stderr)
+        return 1
+    except (urllib.error.URLError, OSError) as err:
+        print("kdray_client: %s: %s" % (args.url, err), file=sys.stderr)
+        return 1
+    if not args.full and isinstance(answer, dict):
+        answer = _summary(answer, ())
+    print(json.dumps(answer, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
