@@ -37,6 +37,9 @@ namespace {
  * the recursion of the tree walk). */
 constexpr int kMaxNodeDepth = 1024;
 
+/* tinygltf takes 32-bit lengths, and GLB caps files at 4 GiB. */
+constexpr size_t kMaxFileBytes = 0xFFFFFFF0u;
+
 /* Extensions that change where positions live; if a file requires one of
  * them, the plain accessors are not the geometry. */
 const char *const kUnsupportedExtensions[] = {
@@ -275,6 +278,9 @@ bool plan_primitive(const tinygltf::Model &m, const tinygltf::Primitive &p, Job 
         nverts = j.idx.count;
     }
     j.mode = mode;
+    if (mode == TINYGLTF_MODE_TRIANGLES && nverts % 3 != 0)
+        fail("node %d mesh %d primitive %d: %zu %s is not a multiple of 3 (TRIANGLES)",
+             w.node, w.mesh, w.prim, nverts, j.indexed ? "indices" : "vertices");
     if (mode == TINYGLTF_MODE_TRIANGLES) j.ntris = nverts / 3;
     else j.ntris = nverts >= 3 ? nverts - 2 : 0;
     return true;
@@ -376,13 +382,220 @@ std::string one_line(std::string s) {
     return s;
 }
 
-bool is_glb(const char *path) {
+/* ---- schema check --------------------------------------------------------
+ * tinygltf silently skips a property of the wrong JSON type, which would
+ * turn a broken file into a quietly different scene. So the JSON is first
+ * checked against the types of the glTF 2.0 schema for every property we or
+ * tinygltf read; unknown properties are allowed, as the spec says. */
+
+enum Kind { K_STR, K_NUM, K_UINT, K_BOOL, K_OBJ, K_ARR_NUM, K_ARR_UINT, K_ARR_STR, K_ARR_OBJ,
+            K_MAP_UINT };
+
+struct Field {
+    const char *name;
+    Kind kind;
+    const Field *sub; /* element schema of K_OBJ / K_ARR_OBJ (may be null) */
+};
+
+const Field kNone[] = {{nullptr, K_STR, nullptr}};
+const Field kAsset[] = {{"version", K_STR, nullptr}, {"generator", K_STR, nullptr},
+                        {"minVersion", K_STR, nullptr}, {"copyright", K_STR, nullptr},
+                        {nullptr, K_STR, nullptr}};
+const Field kScene[] = {{"nodes", K_ARR_UINT, nullptr}, {nullptr, K_STR, nullptr}};
+const Field kNode[] = {{"children", K_ARR_UINT, nullptr}, {"mesh", K_UINT, nullptr},
+                       {"camera", K_UINT, nullptr},       {"skin", K_UINT, nullptr},
+                       {"matrix", K_ARR_NUM, nullptr},    {"rotation", K_ARR_NUM, nullptr},
+                       {"scale", K_ARR_NUM, nullptr},     {"translation", K_ARR_NUM, nullptr},
+                       {"weights", K_ARR_NUM, nullptr},   {nullptr, K_STR, nullptr}};
+const Field kTarget[] = {{nullptr, K_STR, nullptr}};
+const Field kPrimitive[] = {{"attributes", K_MAP_UINT, nullptr}, {"indices", K_UINT, nullptr},
+                            {"material", K_UINT, nullptr},      {"mode", K_UINT, nullptr},
+                            {"targets", K_ARR_OBJ, kTarget},    {nullptr, K_STR, nullptr}};
+const Field kMesh[] = {{"primitives", K_ARR_OBJ, kPrimitive}, {"weights", K_ARR_NUM, nullptr},
+                       {nullptr, K_STR, nullptr}};
+const Field kSparsePart[] = {{"bufferView", K_UINT, nullptr}, {"byteOffset", K_UINT, nullptr},
+                             {"componentType", K_UINT, nullptr}, {nullptr, K_STR, nullptr}};
+const Field kSparse[] = {{"count", K_UINT, nullptr}, {"indices", K_OBJ, kSparsePart},
+                         {"values", K_OBJ, kSparsePart}, {nullptr, K_STR, nullptr}};
+const Field kAccessor[] = {
+    {"bufferView", K_UINT, nullptr}, {"byteOffset", K_UINT, nullptr},
+    {"componentType", K_UINT, nullptr}, {"normalized", K_BOOL, nullptr},
+    {"count", K_UINT, nullptr}, {"type", K_STR, nullptr}, {"max", K_ARR_NUM, nullptr},
+    {"min", K_ARR_NUM, nullptr}, {"sparse", K_OBJ, kSparse}, {nullptr, K_STR, nullptr}};
+const Field kBufferView[] = {{"buffer", K_UINT, nullptr},     {"byteOffset", K_UINT, nullptr},
+                             {"byteLength", K_UINT, nullptr}, {"byteStride", K_UINT, nullptr},
+                             {"target", K_UINT, nullptr},     {nullptr, K_STR, nullptr}};
+const Field kBuffer[] = {{"uri", K_STR, nullptr}, {"byteLength", K_UINT, nullptr},
+                         {nullptr, K_STR, nullptr}};
+const Field kTexInfo[] = {{"index", K_UINT, nullptr}, {"texCoord", K_UINT, nullptr},
+                          {"scale", K_NUM, nullptr},  {"strength", K_NUM, nullptr},
+                          {nullptr, K_STR, nullptr}};
+const Field kPbr[] = {{"baseColorFactor", K_ARR_NUM, nullptr},
+                      {"baseColorTexture", K_OBJ, kTexInfo},
+                      {"metallicFactor", K_NUM, nullptr},
+                      {"roughnessFactor", K_NUM, nullptr},
+                      {"metallicRoughnessTexture", K_OBJ, kTexInfo},
+                      {nullptr, K_STR, nullptr}};
+const Field kMaterial[] = {
+    {"pbrMetallicRoughness", K_OBJ, kPbr}, {"normalTexture", K_OBJ, kTexInfo},
+    {"occlusionTexture", K_OBJ, kTexInfo}, {"emissiveTexture", K_OBJ, kTexInfo},
+    {"emissiveFactor", K_ARR_NUM, nullptr}, {"alphaMode", K_STR, nullptr},
+    {"alphaCutoff", K_NUM, nullptr},       {"doubleSided", K_BOOL, nullptr},
+    {nullptr, K_STR, nullptr}};
+const Field kTexture[] = {{"sampler", K_UINT, nullptr}, {"source", K_UINT, nullptr},
+                          {nullptr, K_STR, nullptr}};
+const Field kImage[] = {{"uri", K_STR, nullptr}, {"mimeType", K_STR, nullptr},
+                        {"bufferView", K_UINT, nullptr}, {nullptr, K_STR, nullptr}};
+const Field kSampler[] = {{"magFilter", K_UINT, nullptr}, {"minFilter", K_UINT, nullptr},
+                          {"wrapS", K_UINT, nullptr},     {"wrapT", K_UINT, nullptr},
+                          {nullptr, K_STR, nullptr}};
+const Field kSkin[] = {{"inverseBindMatrices", K_UINT, nullptr},
+                       {"skeleton", K_UINT, nullptr},
+                       {"joints", K_ARR_UINT, nullptr},
+                       {nullptr, K_STR, nullptr}};
+const Field kCamera[] = {{"type", K_STR, nullptr}, {"perspective", K_OBJ, kNone},
+                         {"orthographic", K_OBJ, kNone}, {nullptr, K_STR, nullptr}};
+const Field kAnimation[] = {{"channels", K_ARR_OBJ, kNone}, {"samplers", K_ARR_OBJ, kNone},
+                            {nullptr, K_STR, nullptr}};
+const Field kRoot[] = {
+    {"asset", K_OBJ, kAsset},           {"scene", K_UINT, nullptr},
+    {"scenes", K_ARR_OBJ, kScene},      {"nodes", K_ARR_OBJ, kNode},
+    {"meshes", K_ARR_OBJ, kMesh},       {"accessors", K_ARR_OBJ, kAccessor},
+    {"bufferViews", K_ARR_OBJ, kBufferView}, {"buffers", K_ARR_OBJ, kBuffer},
+    {"materials", K_ARR_OBJ, kMaterial}, {"textures", K_ARR_OBJ, kTexture},
+    {"images", K_ARR_OBJ, kImage},      {"samplers", K_ARR_OBJ, kSampler},
+    {"skins", K_ARR_OBJ, kSkin},        {"cameras", K_ARR_OBJ, kCamera},
+    {"animations", K_ARR_OBJ, kAnimation}, {"extensionsUsed", K_ARR_STR, nullptr},
+    {"extensionsRequired", K_ARR_STR, nullptr}, {nullptr, K_STR, nullptr}};
+
+using nlohmann::json;
+
+bool is_uint(const json &v) {
+    if (v.is_number_unsigned()) return true;
+    if (v.is_number_integer()) return v.get<int64_t>() >= 0;
+    if (!v.is_number_float()) return false;
+    double d = v.get<double>();
+    return d >= 0 && d <= 4294967295.0 && d == std::floor(d);
+}
+
+bool all_of(const json &v, bool (*ok)(const json &)) {
+    if (!v.is_array()) return false;
+    for (const json &e : v)
+        if (!ok(e)) return false;
+    return true;
+}
+
+bool is_num(const json &v) { return v.is_number(); }
+bool is_str(const json &v) { return v.is_string(); }
+bool is_obj(const json &v) { return v.is_object(); }
+
+void check_object(const json &o, const Field *schema, const std::string &path);
+
+void check_field(const json &v, const Field &f, const std::string &path) {
+    static const char *const expect[] = {
+        "a string", "a number", "a non-negative integer", "a boolean", "an object",
+        "an array of numbers", "an array of non-negative integers", "an array of strings",
+        "an array of objects", "an object of non-negative integers"};
+    bool ok = true;
+    switch (f.kind) {
+    case K_STR: ok = v.is_string(); break;
+    case K_NUM: ok = v.is_number(); break;
+    case K_UINT: ok = is_uint(v); break;
+    case K_BOOL: ok = v.is_boolean(); break;
+    case K_OBJ: ok = v.is_object(); break;
+    case K_ARR_NUM: ok = all_of(v, is_num); break;
+    case K_ARR_UINT: ok = all_of(v, is_uint); break;
+    case K_ARR_STR: ok = all_of(v, is_str); break;
+    case K_ARR_OBJ: ok = all_of(v, is_obj); break;
+    case K_MAP_UINT:
+        ok = v.is_object();
+        for (auto it = v.begin(); ok && it != v.end(); ++it) ok = is_uint(*it);
+        break;
+    }
+    if (!ok) fail("schema: %s is not %s", path.c_str(), expect[f.kind]);
+    if (f.kind == K_OBJ && f.sub) check_object(v, f.sub, path);
+    if (f.kind == K_ARR_OBJ && f.sub)
+        for (size_t i = 0; i < v.size(); i++)
+            check_object(v[i], f.sub, path + "[" + std::to_string(i) + "]");
+}
+
+void check_object(const json &o, const Field *schema, const std::string &path) {
+    for (auto it = o.begin(); it != o.end(); ++it) {
+        const std::string &key = it.key();
+        std::string sub = path.empty() ? key : path + "." + key;
+        if (key == "name") {
+            check_field(*it, Field{"name", K_STR, nullptr}, sub);
+        } else if (key == "extensions") {
+            check_field(*it, Field{"extensions", K_OBJ, nullptr}, sub);
+            for (auto e = it->begin(); e != it->end(); ++e)
+                if (!e->is_object()) fail("schema: %s.%s is not an object", sub.c_str(),
+                                          e.key().c_str());
+        } else {
+            for (const Field *f = schema; f->name; f++)
+                if (key == f->name) check_field(*it, *f, sub);
+        }
+    }
+}
+
+void check_schema(const std::string &text) {
+    json root;
+    try {
+        root = json::parse(text);
+    } catch (const json::exception &e) {
+        fail("invalid JSON: %s", e.what());
+    }
+    if (!root.is_object()) fail("schema: the top level is not an object");
+    auto asset = root.find("asset");
+    if (asset == root.end() || !asset->is_object()) fail("schema: no \"asset\" object");
+    auto ver = asset->find("version");
+    if (ver != asset->end() && ver->is_string() &&
+        ver->get<std::string>().compare(0, 2, "2.") != 0)
+        fail("glTF version \"%s\" is not supported (need 2.x)",
+             ver->get<std::string>().c_str());
+    check_object(root, kRoot, "");
+    auto req = root.find("extensionsRequired");
+    if (req != root.end())
+        for (const json &e : *req)
+            for (const char *u : kUnsupportedExtensions)
+                if (e.get<std::string>() == u) fail("requires extension %s (unsupported)", u);
+}
+
+/* The whole file: tinygltf parses from memory so the file is read once and
+ * the JSON can be schema-checked first. */
+std::vector<unsigned char> read_file(const char *path) {
     FILE *f = fopen(path, "rb");
     if (!f) fail("cannot open: %s", strerror(errno));
-    char magic[4] = {0, 0, 0, 0};
-    size_t n = fread(magic, 1, 4, f);
+    std::vector<unsigned char> bytes;
+    unsigned char buf[1 << 16];
+    size_t n;
+    while ((n = fread(buf, 1, sizeof buf, f)) > 0) {
+        if (bytes.size() + n > kMaxFileBytes) {
+            fclose(f);
+            fail("file larger than %zu bytes", kMaxFileBytes);
+        }
+        bytes.insert(bytes.end(), buf, buf + n);
+    }
+    bool bad = ferror(f) != 0;
     fclose(f);
-    return n == 4 && memcmp(magic, "glTF", 4) == 0;
+    if (bad) fail("read error: %s", strerror(errno));
+    if (bytes.empty()) fail("file is empty");
+    return bytes;
+}
+
+bool is_glb(const std::vector<unsigned char> &b) {
+    return b.size() >= 4 && memcmp(b.data(), "glTF", 4) == 0;
+}
+
+/* The JSON text of a .gltf, or of a .glb's first chunk (empty if the GLB
+ * header is inconsistent: tinygltf then reports the precise problem). */
+std::string json_text(const std::vector<unsigned char> &b) {
+    if (!is_glb(b)) return std::string(b.begin(), b.end());
+    if (b.size() < 20) return {};
+    uint32_t len, type;
+    memcpy(&len, b.data() + 12, 4);
+    memcpy(&type, b.data() + 16, 4);
+    if (type != 0x4E4F534Au || len > b.size() - 20) return {};
+    return std::string(b.begin() + 20, b.begin() + 20 + len);
 }
 
 /* A no-op image loader: tinygltf 2.7 refuses images without one, and
@@ -392,12 +605,24 @@ bool skip_image(tinygltf::Image *, const int, std::string *, std::string *, int,
     return true;
 }
 
+std::string base_dir(const char *path) {
+    std::string p(path);
+    size_t slash = p.find_last_of('/');
+    return slash == std::string::npos ? std::string() : p.substr(0, slash + 1);
+}
+
 void parse(const char *path, tinygltf::Model &m) {
+    std::vector<unsigned char> bytes = read_file(path);
+    std::string json = json_text(bytes);
+    if (!json.empty()) check_schema(json);
     tinygltf::TinyGLTF loader;
     loader.SetImageLoader(skip_image, nullptr);
-    std::string err, warn;
-    bool ok = is_glb(path) ? loader.LoadBinaryFromFile(&m, &err, &warn, path)
-                           : loader.LoadASCIIFromFile(&m, &err, &warn, path);
+    std::string err, warn, dir = base_dir(path);
+    bool ok = is_glb(bytes)
+                  ? loader.LoadBinaryFromMemory(&m, &err, &warn, bytes.data(),
+                                                (unsigned)bytes.size(), dir)
+                  : loader.LoadASCIIFromString(&m, &err, &warn, (const char *)bytes.data(),
+                                               (unsigned)bytes.size(), dir);
     if (!ok) fail("%s", err.empty() ? "not a valid glTF file" : one_line(err).c_str());
     if (m.asset.version.compare(0, 2, "2.") != 0)
         fail("glTF version \"%s\" is not supported (need 2.x)", m.asset.version.c_str());
