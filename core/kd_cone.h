@@ -36,4 +36,39 @@ int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
 void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
                          uint32_t nsamples, kdr_ray *out);
 
+/* ---- cone traversal (kd_cone_trav.c) ------------------------------------ */
+
+/*
+ * A traversal cone: apex, unit axis and half-angle, containing every sample
+ * segment it stands for (the whole light, or one group of samples). The
+ * float part drives the kd-tree walk, the double part the per-triangle cull.
+ */
+typedef struct kd_cone {
+    float apex[3];
+    float lo[3], hi[3]; /* slopes of the cone's extent along each world axis */
+    float band;         /* positional slack (apex rounding, triangle test) */
+    float t_far;        /* axial reach: every segment ends before it */
+    double dapex[3], axis[3];
+    double cos_p, sin_p, tan_p; /* half-angle widened for the cull */
+} kd_cone;
+
+/* The cone of the frame's whole light (axis NULL) or the cone around axis
+ * with half-angle asin(sin_a) from the frame's apex. */
+void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
+                  const double *axis, double sin_a);
+
+typedef struct kd_cand_list {
+    uint32_t *v;
+    size_t n, cap;
+} kd_cand_list;
+
+#define KD_CONE_OVER 1 /* kd_cone_collect gave up: over its budget */
+
+/* The sorted, distinct triangles of the leaves the cone reaches that may
+ * touch a segment inside it. Returns KDR_OK, KDR_ENOMEM, or KD_CONE_OVER
+ * once more than max_cands candidates or max_nodes nodes are reached (the
+ * list is then incomplete). Adds the nodes visited to *nodes. */
+int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
+                    size_t max_cands, uint64_t max_nodes, uint64_t *nodes);
+
 #endif /* KD_CONE_H */

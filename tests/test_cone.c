@@ -374,6 +374,10 @@ static void test_soup_vs_embree(void) {
     q.normals = nrm;
     q.samples = 5;
     check_modes("soup with normals", s, &b, &q);
+    /* wide cones over the busy soup: the grouped-sample path */
+    kdr_sphere_light wide[2] = {{{5, 5, 16}, 4.5f}, {{5, 17, 5}, 4.0f}};
+    kdr_shadow_query qw = make_query(pts, NP, wide, 2, 96);
+    check_modes("soup, wide cones, grouped", s, &b, &qw);
 
     oracle *o = oracle_create(b.v, b.n, NULL);
     CHECK(o != NULL, "embree oracle");

@@ -1,0 +1,302 @@
+/*
+ * kd_cone_trav.c — the cone traversal of technique 2 of Tsakok et al.: a
+ * cone from a shading point toward a sphere light (or toward one group of
+ * its samples) walks the kd-tree and returns the triangles that any sample
+ * segment inside it could touch.
+ *
+ * Conservative by construction (a leaf or triangle is dropped only when no
+ * sample segment can reach it):
+ *  - every sample segment starts on the ray from the apex (up to rounding,
+ *    covered by `band`), runs in a direction inside the cone (up to
+ *    rounding, covered by CONE_SLOPE_SLACK), and ends on the sphere's near
+ *    side, within the tangent length sqrt(D^2 - r^2) < D of the apex; its
+ *    axial distance therefore stays in [0, t_far];
+ *  - at axial distance t the cone is a disc; along world axis k the disc
+ *    spans apex_k + t * [v_k - tan(a) s_k, v_k + tan(a) s_k] with
+ *    s_k = sqrt(1 - v_k^2) (the paper's two denominators), so a child cell is
+ *    reachable only for the t where that span reaches its side of the split;
+ *  - `band` is the same positional slack (KD_SLACK_REL of the scene's and
+ *    the apex's magnitude) that single-ray traversal uses, because the
+ *    watertight test can accept a triangle a few ulps off its true place.
+ */
+#include <stdlib.h>
+
+#include "kd_cone.h"
+#include "kd_internal.h"
+#include "kd_traverse.h"
+
+/* Angular slack (radians, on the slopes) that keeps float sample directions
+ * inside the traversal cone; far above their ~1e-7 rounding. */
+#define CONE_SLOPE_SLACK 1e-5f
+/* Relative padding of plane distances (float division rounding). */
+#define CONE_REL_PAD 0x1p-20f
+/* The cull's half-angle slack and relative distance slack. */
+#define CULL_ANGLE_SLACK 1e-5
+#define CULL_REL_SLACK 1e-6
+/* Beyond this half-angle the cull's cone formulas are not trusted. */
+#define CULL_MAX_ANGLE 1.5707
+#define HALF_PI 1.5707963267948966
+
+/* ---- the cone ------------------------------------------------------------ */
+
+static float magnitude(const kdr_scene *scene, const float apex[3], float along) {
+    float m = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        m = fmaxf(m, fmaxf(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
+        m = fmaxf(m, fabsf(apex[k]) + along);
+    }
+    return m;
+}
+
+void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
+                  const double *axis, double sin_a) {
+    if (!axis) {
+        axis = f->axis;
+        sin_a = f->sin_a;
+    }
+    const double cos_a = sqrt((1.0 - sin_a) * (1.0 + sin_a));
+    const double tan_a = sin_a / cos_a;
+    for (int k = 0; k < 3; k++) {
+        const double s = sqrt(fmax(0.0, 1.0 - axis[k] * axis[k]));
+        const float spread = (float)(tan_a * s) + CONE_SLOPE_SLACK;
+        c->apex[k] = f->apex[k];
+        c->dapex[k] = f->apex[k];
+        c->axis[k] = axis[k];
+        c->lo[k] = (float)axis[k] - spread;
+        c->hi[k] = (float)axis[k] + spread;
+    }
+    c->band = magnitude(scene, f->apex, f->along) * KD_SLACK_REL + FLT_MIN;
+    c->t_far = (float)f->dist * (1.0f + 0x1p-16f) + f->along;
+    const double a = asin(sin_a) + CULL_ANGLE_SLACK;
+    c->cos_p = a < CULL_MAX_ANGLE ? cos(a) : 0.0; /* 0: cull disabled */
+    c->sin_p = sin(fmin(a, HALF_PI));
+    c->tan_p = a < CULL_MAX_ANGLE ? c->sin_p / c->cos_p : INFINITY;
+}
+
+/* The t >= 0 with t*m <= e, as [*lo, *hi] padded outward; 0 (and *lo, *hi
+ * untouched) if none. This
+ * one case analysis covers the hard cases: an axis parallel to the plane
+ * (both slopes non-zero thanks to the slack), wide cones whose slopes have
+ * opposite signs (one side is reached from the apex on, the other never ends),
+ * and an apex on the plane (e = band >= 0 on both sides). */
+static int halfline(float m, float e, float *lo, float *hi) {
+    if (e >= 0.0f) {
+        *lo = 0.0f;
+        *hi = m > 0.0f ? (e / m) * (1.0f + CONE_REL_PAD) : INFINITY;
+        return 1;
+    }
+    if (m >= 0.0f)
+        return 0;
+    *lo = (e / m) * (1.0f - CONE_REL_PAD);
+    *hi = INFINITY;
+    return 1;
+}
+
+/* Interval of t where the cone reaches the side x_k <= split (below != 0)
+ * or x_k >= split, clipped to [tn, tf]; 0 if empty. */
+static int cone_side(const kd_cone *c, int k, float split, int below, float tn,
+                     float tf, float *t0, float *t1) {
+    const float delta = split - c->apex[k];
+    const float band = c->band + fabsf(split) * CONE_REL_PAD;
+    float lo = INFINITY, hi = 0.0f; /* empty unless halfline says otherwise */
+    if (below)
+        halfline(c->lo[k], delta + band, &lo, &hi);
+    else
+        halfline(-c->hi[k], band - delta, &lo, &hi);
+    *t0 = fmaxf(lo, tn);
+    *t1 = fminf(hi, tf);
+    return *t0 <= *t1;
+}
+
+/* Clips [0, t_far] to the scene's padded root box. */
+static int cone_clip_root(const kdr_scene *scene, const kd_cone *c, float *tn,
+                          float *tf) {
+    *tn = 0.0f;
+    *tf = c->t_far;
+    for (int k = 0; k < 3; k++) {
+        if (!cone_side(c, k, scene->root.min[k], 0, *tn, *tf, tn, tf))
+            return 0;
+        if (!cone_side(c, k, scene->root.max[k], 1, *tn, *tf, tn, tf))
+            return 0;
+    }
+    return 1;
+}
+
+/* ---- candidate culling ---------------------------------------------------- */
+
+/* 1 if the triangle's plane has the whole truncated cone strictly on one
+ * side. The truncated cone is the convex hull of the apex and its disc at
+ * axial distance reach, so the plane's signed distance over it ranges over
+ * the apex's value and the disc's centre value +- the disc's extent. */
+static int plane_misses(const kd_cone *cc, const float *tri) {
+    double e1[3], e2[3], w[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = (double)tri[3 + k] - tri[k];
+        e2[k] = (double)tri[6 + k] - tri[k];
+        w[k] = cc->dapex[k] - tri[k];
+    }
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    const double nn = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (!(nn > 0.0))
+        return 0;
+    const double d_apex = (n[0] * w[0] + n[1] * w[1] + n[2] * w[2]) / nn;
+    const double nv = (n[0] * cc->axis[0] + n[1] * cc->axis[1] + n[2] * cc->axis[2]) / nn;
+    const double d_disc = d_apex + (double)cc->t_far * nv;
+    const double spread = (double)cc->t_far * cc->tan_p * sqrt(fmax(0.0, 1.0 - nv * nv));
+    const double wlen = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    const double slack = cc->band + CULL_REL_SLACK * (wlen + (double)cc->t_far);
+    const double lo = fmin(d_apex, d_disc - spread);
+    const double hi = fmax(d_apex, d_disc + spread);
+    return lo > slack || hi < -slack;
+}
+
+/* 0 only if the triangle provably misses every sample segment: its plane
+ * leaves the truncated cone on one side, or its bounding sphere lies beyond
+ * the segments' axial reach or farther from the cone than its radius. */
+static int tri_may_block(const kd_cone *cc, const float *tri) {
+    if (cc->cos_p == 0.0) /* near-hemisphere cone: keep everything */
+        return 1;
+    if (plane_misses(cc, tri))
+        return 0;
+    double m[3], w[3], r2 = 0.0;
+    for (int k = 0; k < 3; k++) {
+        const double lo = fmin(tri[k], fmin(tri[3 + k], tri[6 + k]));
+        const double hi = fmax(tri[k], fmax(tri[3 + k], tri[6 + k]));
+        m[k] = 0.5 * (lo + hi);
+        w[k] = m[k] - cc->dapex[k];
+    }
+    for (int j = 0; j < 3; j++) {
+        double d2 = 0.0;
+        for (int k = 0; k < 3; k++)
+            d2 += (tri[3 * j + k] - m[k]) * (tri[3 * j + k] - m[k]);
+        r2 = fmax(r2, d2);
+    }
+    const double proj = w[0] * cc->axis[0] + w[1] * cc->axis[1] + w[2] * cc->axis[2];
+    const double cx = w[1] * cc->axis[2] - w[2] * cc->axis[1];
+    const double cy = w[2] * cc->axis[0] - w[0] * cc->axis[2];
+    const double cz = w[0] * cc->axis[1] - w[1] * cc->axis[0];
+    const double perp = sqrt(cx * cx + cy * cy + cz * cz);
+    const double wlen = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    const double r = sqrt(r2);
+    const double rad = r + cc->band + CULL_REL_SLACK * (wlen + r);
+    if (proj - rad > (double)cc->t_far)
+        return 0;
+    if (proj * cc->cos_p + perp * cc->sin_p <= 0.0) /* nearest: the apex */
+        return wlen <= rad;
+    return perp * cc->cos_p - proj * cc->sin_p <= rad;
+}
+
+static int cmp_u32(const void *a, const void *b) {
+    const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* ---- the walk ------------------------------------------------------------------ */
+
+typedef struct cone_item {
+    uint32_t node;
+    float tn, tf;
+} cone_item;
+
+/* Walks from it.node down to a leaf, pushing the far child wherever the
+ * cone reaches both sides; NULL if the cone leaves the subtree. */
+static const kd_node *cone_descend(const kdr_scene *scene, const kd_cone *c,
+                                   cone_item it, cone_item *stack, int *top,
+                                   uint64_t *nodes_visited) {
+    const kd_node *node = &scene->nodes[it.node];
+    for (;;) {
+        ++*nodes_visited;
+        if (kd_is_leaf(node))
+            return node;
+        const int k = kd_axis(node);
+        const float split = node->u.split;
+        float b0, b1, a0, a1;
+        const int below = cone_side(c, k, split, 1, it.tn, it.tf, &b0, &b1);
+        const int above = cone_side(c, k, split, 0, it.tn, it.tf, &a0, &a1);
+        if (below && above)
+            stack[(*top)++] = (cone_item){kd_above(node), a0, a1};
+        if (below) {
+            node = node + 1;
+            it.tn = b0;
+            it.tf = b1;
+        } else if (above) {
+            node = &scene->nodes[kd_above(node)];
+            it.tn = a0;
+            it.tf = a1;
+        } else {
+            return NULL;
+        }
+    }
+}
+
+/* Appends the leaf's triangles that may touch a segment; 0 once the list
+ * is over max (or memory runs out: *rc = KDR_ENOMEM). */
+static int take_leaf(const kdr_scene *scene, const kd_cone *c,
+                     const kd_node *leaf, kd_cand_list *cl, size_t max, int *rc) {
+    const uint32_t *refs = scene->refs + leaf->u.first;
+    const uint32_t count = kd_count(leaf);
+    if (cl->n + count > cl->cap) {
+        size_t cap = cl->cap ? cl->cap : 256;
+        while (cap < cl->n + count)
+            cap *= 2;
+        uint32_t *v = realloc(cl->v, cap * sizeof *v);
+        if (!v) {
+            *rc = KDR_ENOMEM;
+            return 0;
+        }
+        cl->v = v;
+        cl->cap = cap;
+    }
+    for (uint32_t j = 0; j < count; j++) {
+        if (tri_may_block(c, scene->tris + 9 * (size_t)refs[j]))
+            cl->v[cl->n++] = refs[j];
+    }
+    if (cl->n > max) {
+        *rc = KD_CONE_OVER;
+        return 0;
+    }
+    return 1;
+}
+
+/* Sorts and drops duplicates (a triangle straddling splits sits in several
+ * leaves). */
+static void cand_unique(kd_cand_list *cl) {
+    qsort(cl->v, cl->n, sizeof *cl->v, cmp_u32);
+    size_t out = 0;
+    for (size_t j = 0; j < cl->n; j++) {
+        if (out == 0 || cl->v[j] != cl->v[out - 1])
+            cl->v[out++] = cl->v[j];
+    }
+    cl->n = out;
+}
+
+/*
+ * The paper's cone traversal with a stack: at each split, each child is
+ * entered over the part of [tn, tf] where the cone reaches its side of the
+ * plane (cone_side); see the file comment for why no reachable leaf is
+ * skipped.
+ */
+int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
+                    size_t max_cands, uint64_t max_nodes, uint64_t *nodes) {
+    cone_item stack[KD_MAX_DEPTH + 2]; /* one push per level at most */
+    int top = 0, rc = KDR_OK;
+    uint64_t visited = 0;
+    float tn, tf;
+    cl->n = 0;
+    if (!scene->nodes || !cone_clip_root(scene, c, &tn, &tf))
+        return KDR_OK;
+    stack[top++] = (cone_item){0, tn, tf};
+    while (top > 0 && rc == KDR_OK) {
+        const kd_node *leaf =
+            cone_descend(scene, c, stack[--top], stack, &top, &visited);
+        if (leaf && !take_leaf(scene, c, leaf, cl, max_cands, &rc))
+            break;
+        if (visited > max_nodes)
+            rc = KD_CONE_OVER;
+    }
+    *nodes += visited;
+    if (rc == KDR_OK)
+        cand_unique(cl);
+    return rc;
+}
