@@ -14,3 +14,19 @@ if(TARGET kdray_scenes)
   target_link_libraries(kdray_testsupport PUBLIC kdray_scenes)
   target_compile_definitions(kdray_testsupport PRIVATE KDRAY_HAVE_GLTF=1)
 endif()
+
+# The judge itself: brute force vs Embree on the stress corpus.
+add_executable(test_embree_ref ${CMAKE_CURRENT_SOURCE_DIR}/test_embree_ref.c)
+target_link_libraries(test_embree_ref PRIVATE kdray_testsupport)
+add_test(NAME embree_ref COMMAND test_embree_ref)
+
+# kdr_intersect1 / kdr_occluded1 vs Embree ray by ray.
+add_executable(test_embree ${CMAKE_CURRENT_SOURCE_DIR}/test_embree.c)
+target_link_libraries(test_embree PRIVATE kdray_testsupport)
+# Real scenes: the rungs up to 200K triangles always (5000 rays per kind),
+# every rung with 20000 rays per kind in the slow (non-sanitizer) pass.
+add_test(NAME embree_ladder COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 200000 5000)
+add_test(NAME embree_ladder_all COMMAND test_embree ladder ${KDRAY_SCENE_DIR})
+set_tests_properties(embree_ladder embree_ladder_all PROPERTIES
+                     FIXTURES_REQUIRED scenes_fetch SKIP_RETURN_CODE 77)
+set_tests_properties(embree_ladder_all PROPERTIES LABELS slow)

@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "kd_internal.h"
+#include "kd_traverse.h"
 #include "kd_tri.h"
 
 /* How many float roundings of the edge functions' magnitude count as "on
@@ -22,9 +23,12 @@
 /* t agrees when within CMP_T_REL_TOL relative, or within this many ulps of
  * the largest coordinate involved (the inputs' own rounding). */
 #define T_FLOOR_ULPS 8.0
+/* Roundings allowed in the float t of kd_tri.h (a first-order bound of its
+ * operation count) before an off t counts as an error. */
+#define T_COND_ULPS 16.0
 
 static const char *const class_names[CMP_NCLASSES] = {
-    "agree", "tie", "boundary", "kd_miss", "kd_extra", "wrong_prim", "t_error",
+    "agree", "tie", "boundary", "ill_cond", "kd_miss", "kd_extra", "wrong_prim", "t_error",
 };
 
 const char *cmp_class_name(cmp_class c) {
@@ -32,27 +36,16 @@ const char *cmp_class_name(cmp_class c) {
 }
 
 int cmp_is_unexplained(cmp_class c) {
-    return c != CMP_AGREE && c != CMP_TIE && c != CMP_BOUNDARY;
+    return c != CMP_AGREE && c != CMP_TIE && c != CMP_BOUNDARY &&
+           c != CMP_ILL_COND;
 }
 
 /* ---- brute-force reference ------------------------------------------------ */
 
-int ref_tri_degenerate(const float *tri) {
-    const float e1[3] = {tri[3] - tri[0], tri[4] - tri[1], tri[5] - tri[2]};
-    const float e2[3] = {tri[6] - tri[0], tri[7] - tri[1], tri[8] - tri[2]};
-    const float nx = e1[1] * e2[2] - e1[2] * e2[1];
-    const float ny = e1[2] * e2[0] - e1[0] * e2[2];
-    const float nz = e1[0] * e2[1] - e1[1] * e2[0];
-    return nx == 0.0f && ny == 0.0f && nz == 0.0f;
-}
+int ref_tri_degenerate(const float *tri) { return kd_tri_degenerate(tri); }
 
 static int ray_usable(const kdr_ray *r) {
-    for (int k = 0; k < 3; k++)
-        if (isnan(r->org[k]) || isnan(r->dir[k]))
-            return 0;
-    if (isnan(r->tmin) || isnan(r->tmax) || r->tmax < r->tmin)
-        return 0;
-    return r->dir[0] != 0.0f || r->dir[1] != 0.0f || r->dir[2] != 0.0f;
+    return kd_ray_valid(r->org, r->dir, r->tmin, r->tmax);
 }
 
 static void set_miss(kdr_hit *h) {
@@ -109,8 +102,11 @@ int ref_occluded1(const float *tris, size_t ntris, const kdr_ray *ray) {
  * edge functions; parallel means the projected area is itself within
  * rounding of zero (the ray lies in the triangle's plane). */
 typedef struct tri_view {
-    double margin;
+    double margin; /* smallest edge function, inside positive */
+    double tol;    /* rounding (and underflow) bound of an edge function */
     int parallel;
+    double t;       /* exact (double) hit distance on the triangle's plane */
+    double t_bound; /* error bound of kd_tri.h's float t */
 } tri_view;
 
 static void view_triangle(const kdr_ray *r, const float *tri, tri_view *out) {
@@ -118,37 +114,57 @@ static void view_triangle(const kdr_ray *r, const float *tri, tri_view *out) {
     kd_ray_precompute(r->org, r->dir, &p);
     const double sx = (double)r->dir[p.kx] / r->dir[p.kz];
     const double sy = (double)r->dir[p.ky] / r->dir[p.kz];
-    double x[3], y[3], mx[3], my[3];
+    double x[3], y[3], z[3], mx[3], my[3];
     for (int i = 0; i < 3; i++) {
         const double ax = (double)tri[3 * i + p.kx] - r->org[p.kx];
         const double ay = (double)tri[3 * i + p.ky] - r->org[p.ky];
         const double az = (double)tri[3 * i + p.kz] - r->org[p.kz];
         x[i] = ax - sx * az;
         y[i] = ay - sy * az;
+        z[i] = az / r->dir[p.kz];
         mx[i] = fabs(ax) + fabs(sx * az);
         my[i] = fabs(ay) + fabs(sy * az);
     }
     /* edge function opposite vertex i uses the other two vertices */
-    double e[3], m = 0.0;
+    /* m: rounding scale of the edge functions; under: what underflow of
+     * the sheared coordinates (denormal direction components) adds */
+    double e[3], me[3], m = 0.0, under = 0.0, T = 0.0, mT = 0.0, mz = 0.0;
     for (int i = 0; i < 3; i++) {
         const int b = (i + 1) % 3, c = (i + 2) % 3;
         e[i] = x[c] * y[b] - y[c] * x[b];
-        m += mx[c] * my[b] + my[c] * mx[b];
+        me[i] = mx[c] * my[b] + my[c] * mx[b];
+        m += me[i];
+        under += 2.0 * FLT_TRUE_MIN * (mx[i] + my[i]);
+        T += e[i] * z[i];
+        mT += (me[i] + fabs(e[i])) * fabs(z[i]);
+        mz += fabs(z[i]);
     }
     const double det = e[0] + e[1] + e[2];
-    const double tol = EDGE_ULPS * FLT_EPSILON * m;
-    out->parallel = fabs(det) <= tol;
+    out->t = det != 0.0 ? T / det : INFINITY;
+    out->t_bound = det != 0.0 ? T_COND_ULPS *
+                                    (FLT_EPSILON * (mT + fabs(out->t) * m) +
+                                     under * (mz + fabs(out->t))) /
+                                    fabs(det)
+                              : INFINITY;
+    out->tol = EDGE_ULPS * (FLT_EPSILON * m + under);
+    out->parallel = fabs(det) <= 3.0 * out->tol;
     const double s = det < 0 ? -1.0 : 1.0;
     double lo = INFINITY;
     for (int i = 0; i < 3; i++)
         lo = fmin(lo, s * e[i]);
-    out->margin = m > 0 ? lo / m : 0.0;
+    out->margin = lo;
 }
 
+/* The hit on tri is decided by rounding: the ray grazes an edge, lies in
+ * the triangle's plane, or the exact t sits within rounding of an end of
+ * [tmin, tmax]. */
 static int on_boundary(const kdr_ray *r, const float *tri) {
     tri_view v;
     view_triangle(r, tri, &v);
-    return v.parallel || fabs(v.margin) <= EDGE_ULPS * FLT_EPSILON;
+    if (v.parallel || fabs(v.margin) <= v.tol)
+        return 1;
+    return fabs(v.t - r->tmin) <= v.t_bound ||
+           (isfinite(r->tmax) && fabs(v.t - r->tmax) <= v.t_bound);
 }
 
 static double scale_of(const kdr_ray *r, const float *a, const float *b) {
@@ -228,6 +244,35 @@ static int explain_kd_only(const float *tris, size_t ntris, const kdr_ray *r,
     return on_boundary(r, q) || near_interval_end(r, kd->t, fl);
 }
 
+/* Same triangle, t compared with Embree's (d) and, when that is off, with
+ * the exact t: the worse of the two float evaluations may be Embree's. */
+static cmp_class classify_same_prim(const kdr_ray *r, const float *tri,
+                                    float t_kd, double d, double fl,
+                                    double *t_err) {
+    if (d <= CMP_T_REL_TOL) {
+        *t_err = d;
+        return CMP_AGREE;
+    }
+    tri_view v;
+    view_triangle(r, tri, &v);
+    const double dx = t_diff(t_kd, v.t, fl);
+    if (dx <= CMP_T_REL_TOL) {
+        *t_err = dx;
+        return CMP_AGREE;
+    }
+    return fabs(t_kd - v.t) <= v.t_bound ? CMP_ILL_COND : CMP_T_ERROR;
+}
+
+/* t_ours and t_other are two float evaluations of a hit on tri that both
+ * lie within rounding of the exact t (up to twice the error bound). */
+static int ill_conditioned(const kdr_ray *r, const float *tri, double t_ours,
+                           double t_other) {
+    tri_view v;
+    view_triangle(r, tri, &v);
+    return fabs(t_ours - v.t) <= v.t_bound &&
+           fabs(t_other - v.t) <= 2.0 * v.t_bound;
+}
+
 /* Different prims at (about) the same t. */
 static cmp_class classify_tie(const float *tris, size_t ntris,
                               const kdr_ray *r, const kdr_hit *kd,
@@ -257,21 +302,30 @@ cmp_class cmp_closest(const float *tris, size_t ntris, const kdr_ray *ray,
     const float *b = tri_at(tris, ntris, em->prim);
     const double fl = t_floor(ray, scale_of(ray, a, b));
     const double d = t_diff(kd->t, em->t, fl);
-    if (kd->prim == em->prim) {
-        *t_err = d;
-        return d <= CMP_T_REL_TOL ? CMP_AGREE : CMP_T_ERROR;
-    }
+    if (kd->prim == em->prim)
+        return classify_same_prim(ray, a, kd->t, d, fl, t_err);
     if (d <= CMP_T_REL_TOL) {
         cmp_class c = classify_tie(tris, ntris, ray, kd, em);
         if (c == CMP_TIE)
             *t_err = d;
         return c;
     }
-    if (kd->t < em->t)
-        return explain_kd_only(tris, ntris, ray, kd) ? CMP_BOUNDARY
+    if (kd->t < em->t) {
+        if (explain_kd_only(tris, ntris, ray, kd))
+            return CMP_BOUNDARY;
+        /* Embree ordered kd's triangle after its own: both t's of it are
+         * within twice its error bound of each other */
+        return ill_conditioned(ray, a, kd->t, em->t) ? CMP_ILL_COND
                                                      : CMP_WRONG_PRIM;
-    return explain_embree_only(tris, ntris, ray, em, kd) ? CMP_BOUNDARY
-                                                         : CMP_WRONG_PRIM;
+    }
+    if (explain_embree_only(tris, ntris, ray, em, kd))
+        return CMP_BOUNDARY;
+    float tp;
+    if (!ref_tri_degenerate(b) && our_test(ray, b, ray->tmin, ray->tmax, &tp) &&
+        !kd_hit_better(tp, em->prim, kd->t, kd->prim) &&
+        ill_conditioned(ray, b, tp, em->t))
+        return CMP_ILL_COND;
+    return CMP_WRONG_PRIM;
 }
 
 cmp_class cmp_occluded(const float *tris, size_t ntris, const kdr_ray *ray,

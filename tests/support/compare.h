@@ -13,6 +13,10 @@
  *              hit is within rounding of a triangle edge (silhouette graze),
  *              of the ray's interval end, or in a ray-parallel triangle, and
  *              the brute-force reference agrees with kd;
+ *   ILL_COND   same triangle (or a tie-rule-consistent one), t off by more
+ *              than the tolerance from Embree's, but kd's t is within the
+ *              float-evaluation error bound of the exact (double) t: a ray
+ *              grazing a sliver or nearly parallel to its plane;
  *   KD_MISS    Embree hits, kd misses (unexplained);
  *   KD_EXTRA   kd hits, Embree misses (unexplained);
  *   WRONG_PRIM different prim, not a tie, not explained;
@@ -35,6 +39,7 @@ typedef enum cmp_class {
     CMP_AGREE = 0,
     CMP_TIE,
     CMP_BOUNDARY,
+    CMP_ILL_COND,
     CMP_KD_MISS,
     CMP_KD_EXTRA,
     CMP_WRONG_PRIM,

@@ -11,6 +11,8 @@
 
 /* Fraction of the scene extent added around it for random origins. */
 #define ORIGIN_PAD 0.2f
+/* Denormal-direction rays keep one component at least this large. */
+#define DIR_MIN_NORMAL 0x1p-20f
 
 typedef struct ray_ctx {
     const stress_scene *s;
@@ -170,9 +172,12 @@ static void ray_denormal(ray_ctx *c, kdr_ray *r) {
     r->dir[k] = odd_component(c);
     if (pick(c, 2))
         r->dir[(k + 1) % 3] = odd_component(c);
-    if (fabsf(r->dir[0]) < FLT_MIN && fabsf(r->dir[1]) < FLT_MIN &&
-        fabsf(r->dir[2]) < FLT_MIN)
-        r->dir[(k + 2) % 3] = 1.0f; /* keep one normal component */
+    /* keep one ordinary component: a direction of FLT_MIN size
+     * underflows Embree's (and any renderer's) products */
+    const float big = fmaxf(fabsf(r->dir[0]), fmaxf(fabsf(r->dir[1]),
+                                                      fabsf(r->dir[2])));
+    if (big < DIR_MIN_NORMAL)
+        r->dir[(k + 2) % 3] = (stress_rng_next(&c->rng) & 1) ? -1.0f : 1.0f;
 }
 
 static void ray_interval(ray_ctx *c, kdr_ray *r) {
