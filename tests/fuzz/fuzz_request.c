@@ -1,0 +1,119 @@
+/*
+ * fuzz_request.c — libFuzzer entry point for protocol/: arbitrary bytes go
+ * to all three request parsers (as a body that is not NUL-terminated) and
+ * to the strict base64 decoder. Any accepted request must satisfy what the
+ * core relies on: the invariants are asserted here, so a parser that lets
+ * a bad query through is a crash, not a silent wrong answer.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kdr_protocol.h"
+
+/* Small limit so that huge batches exercise the 413 path cheaply. */
+#define FUZZ_MAX_RAYS 100000
+
+static void check(int ok) {
+    if (!ok)
+        abort();
+}
+
+static int finite_n(const float *v, size_t n) {
+    for (size_t i = 0; i < n; i++)
+        if (!isfinite(v[i]))
+            return 0;
+    return 1;
+}
+
+static void fuzz_bundle(const char *body, size_t len) {
+    kdr_bundle_request r;
+    kdr_proto_error err;
+    int st = kdr_proto_parse_bundle(body, len, FUZZ_MAX_RAYS, &r, &err);
+    check(st == err.status || st == 0);
+    if (st == 0) {
+        const kdr_ray_batch *b = &r.batch;
+        check(b->n >= 1 && b->n <= FUZZ_MAX_RAYS);
+        check(finite_n(b->org, b->org_stride ? 3 * b->n : 3) && finite_n(b->dir, 3 * b->n));
+        for (size_t i = 0; i < b->n; i++)
+            check(b->dir[3 * i] != 0 || b->dir[3 * i + 1] != 0 || b->dir[3 * i + 2] != 0);
+        for (size_t i = 0; i < (b->tmax_stride ? b->n : 1); i++)
+            check(!isnan(b->tmax[i]));
+        /* encode a fake result of the right size both ways */
+        kdr_buf out;
+        kdr_buf_init(&out);
+        float *t = calloc(b->n, 4);
+        int32_t *prim = calloc(b->n, 4);
+        uint8_t *hit = calloc(b->n, 1);
+        kdr_hits h = {.t = t, .prim = prim, .u = t, .v = t, .hit = hit};
+        check(t && prim && hit);
+        check(kdr_proto_encode_hits(&h, b->n, r.query, r.encoding, &out) == 0);
+        kdr_buf_free(&out);
+        free(t), free(prim), free(hit);
+    } else {
+        check(st == 400 || st == 413);
+        check(memchr(err.detail, '\0', sizeof err.detail) != NULL && err.detail[0]);
+    }
+    kdr_bundle_request_free(&r);
+}
+
+static void fuzz_shadow(const char *body, size_t len) {
+    kdr_shadow_request r;
+    kdr_proto_error err;
+    int st = kdr_proto_parse_shadow(body, len, FUZZ_MAX_RAYS, &r, &err);
+    if (st == 0) {
+        const kdr_shadow_query *q = &r.query;
+        check(q->n >= 1 && q->nlights >= 1 && q->nlights <= KDR_PROTO_MAX_LIGHTS);
+        check(q->samples >= 1 && q->samples <= KDR_PROTO_MAX_SAMPLES);
+        check((uint64_t)q->n * q->nlights * q->samples <= FUZZ_MAX_RAYS);
+        check(finite_n(q->points, 3 * q->n) && isfinite(q->epsilon) && q->epsilon >= 0);
+        check(!q->normals || finite_n(q->normals, 3 * q->n));
+        for (size_t l = 0; l < q->nlights; l++)
+            check(q->lights[l].radius > 0 && finite_n(q->lights[l].center, 3));
+    } else {
+        check(st == 400 || st == 413);
+    }
+    kdr_shadow_request_free(&r);
+}
+
+static void fuzz_frustum(const char *body, size_t len) {
+    kdr_frustum_request r;
+    kdr_proto_error err;
+    int st = kdr_proto_parse_frustum(body, len, FUZZ_MAX_RAYS, &r, &err);
+    if (st == 0) {
+        check(kdr_camera_validate(&r.camera) == KDR_OK);
+        check(r.tile >= 4 && r.tile <= 64 && r.rays <= FUZZ_MAX_RAYS);
+    } else {
+        check(st == 400 || st == 413);
+    }
+}
+
+static void fuzz_base64(const char *s, size_t len) {
+    unsigned char *dst = malloc(kdr_base64_decoded_max(len) + 1);
+    size_t got = 0, bad = 0;
+    check(dst != NULL);
+    if (kdr_base64_decode(s, len, dst, &got, &bad) == 0) {
+        /* a valid input is canonical: re-encoding gives it back */
+        char *enc = malloc(kdr_base64_encoded_len(got) + 1);
+        check(enc && kdr_base64_encode(dst, got, enc) == len && !memcmp(enc, s, len));
+        free(enc);
+    } else {
+        check(bad <= len);
+    }
+    free(dst);
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+    /* an exact-size copy, so ASan catches any read past the body */
+    char *body = malloc(size ? size : 1);
+    if (!body)
+        return 0;
+    memcpy(body, data, size);
+    fuzz_bundle(body, size);
+    fuzz_shadow(body, size);
+    fuzz_frustum(body, size);
+    fuzz_base64(body, size);
+    free(body);
+    return 0;
+}

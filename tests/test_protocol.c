@@ -1,0 +1,749 @@
+/*
+ * test_protocol.c — protocol/ unit tests: every request error path with
+ * its exact detail, both float-array forms, base64 against an independent
+ * bit-by-bit reference, the float formatter against strtof, and every
+ * response encoder parsed back with cJSON and compared bit for bit.
+ * A plain C program: exits nonzero when any check fails.
+ */
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cjson/cJSON.h>
+
+#include "kdr_protocol.h"
+
+static int failures;
+
+#define CHECK(cond, ...)                                                             \
+    do {                                                                             \
+        if (!(cond) && ++failures <= 50) {                                           \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond); \
+            fprintf(stderr, __VA_ARGS__);                                            \
+            fputc('\n', stderr);                                                     \
+        }                                                                            \
+    } while (0)
+
+static uint64_t rng_state = 0x243f6a8885a308d3ull;
+static uint64_t rng(void) {
+    rng_state ^= rng_state << 13;
+    rng_state ^= rng_state >> 7;
+    rng_state ^= rng_state << 17;
+    return rng_state;
+}
+
+static void *xmalloc(size_t n) {
+    void *p = malloc(n ? n : 1);
+    if (!p) {
+        fprintf(stderr, "test_protocol: out of memory\n");
+        exit(2);
+    }
+    return p;
+}
+
+static size_t put_str(char *dst, const char *s) {
+    size_t n = strlen(s);
+    memcpy(dst, s, n);
+    return n;
+}
+
+static int same_bits(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
+
+/* ---- base64: an independent reference, one bit at a time ------------------ */
+
+static size_t ref_b64(const unsigned char *s, size_t n, char *out) {
+    static const char a[] =
+        "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    size_t bits = 8 * n, k = 0;
+    for (size_t pos = 0; pos < bits; pos += 6) {
+        int v = 0;
+        for (size_t b = pos; b < pos + 6; b++)
+            v = v << 1 | (b < bits ? (s[b / 8] >> (7 - b % 8)) & 1 : 0);
+        out[k++] = a[v];
+    }
+    while (k % 4)
+        out[k++] = '=';
+    return k;
+}
+
+static char *b64_of(const void *p, size_t n) {
+    char *s = xmalloc(kdr_base64_encoded_len(n) + 1);
+    s[kdr_base64_encode(p, n, s)] = '\0';
+    return s;
+}
+
+static void test_base64(void) {
+    unsigned char src[300] = {0}, back[300];
+    char enc[512], ref[512];
+    for (size_t n = 0; n < 300; n++) {
+        for (size_t i = 0; i < n; i++)
+            src[i] = (unsigned char)rng();
+        size_t len = kdr_base64_encode(src, n, enc);
+        size_t rlen = ref_b64(src, n, ref);
+        CHECK(len == rlen && len == kdr_base64_encoded_len(n) && !memcmp(enc, ref, len),
+              "encode n=%zu", n);
+        size_t got = 99, bad = 99;
+        CHECK(kdr_base64_decode(enc, len, back, &got, &bad) == 0 && got == n &&
+                  !memcmp(src, back, n),
+              "decode n=%zu", n);
+    }
+    static const struct {
+        const char *in;
+        int ok;
+        size_t offset_or_len;
+    } cases[] = {
+        {"", 1, 0},        {"QQ==", 1, 1},    {"QUI=", 1, 2},     {"QUJD", 1, 3},
+        {"QR==", 0, 1},    {"QUJ=", 0, 2},    {"Q===", 0, 1},     {"QQ=A", 0, 3},
+        {"QQ", 0, 2},      {"QUJDR", 0, 5},   {"QU JD", 0, 5},    {"QUJD\nQUJD", 0, 9},
+        {"QU*D", 0, 2},    {"QQ==QUJD", 0, 2}, {"QUJDQUJ-", 0, 7}, {"QUJD QUJ", 0, 4},
+        {"=QUJ", 0, 0},
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        size_t got = 0, bad = 0;
+        int rc = kdr_base64_decode(cases[c].in, strlen(cases[c].in), back, &got, &bad);
+        if (cases[c].ok)
+            CHECK(rc == 0 && got == cases[c].offset_or_len, "'%s' -> %zu bytes",
+                  cases[c].in, got);
+        else
+            CHECK(rc == -1 && bad == cases[c].offset_or_len, "'%s' rc %d offset %zu",
+                  cases[c].in, rc, bad);
+    }
+}
+
+/* ---- float formatting ------------------------------------------------------------ */
+
+static int sig_digits(const char *s) {
+    char d[32];
+    int n = 0;
+    for (; *s && *s != 'e'; s++)
+        if (*s >= '0' && *s <= '9' && (n || *s != '0'))
+            d[n++] = *s;
+    while (n && d[n - 1] == '0')
+        n--;
+    return n;
+}
+
+/* Checks exact read-back; returns 1 when a shorter %.Ng would also do. */
+static int check_float_text(float f) {
+    char buf[KDR_FLOAT_CHARS + 1];
+    size_t n = kdr_format_float(f, buf);
+    buf[n] = '\0';
+    CHECK(n <= KDR_FLOAT_CHARS, "%a: %zu chars", (double)f, n);
+    CHECK(!strpbrk(buf, "ni"), "%a printed as %s", (double)f, buf);
+    CHECK(same_bits(strtof(buf, NULL), f), "%a -> %s", (double)f, buf);
+    CHECK(same_bits((float)strtod(buf, NULL), f), "%a -> %s via double", (double)f, buf);
+    char t[40];
+    for (int p = 1; p <= 9; p++) {
+        snprintf(t, sizeof t, "%.*g", p, (double)f);
+        if (same_bits(strtof(t, NULL), f))
+            return sig_digits(buf) > p;
+    }
+    return 0;
+}
+
+static void expect_text(float f, const char *want) {
+    char buf[KDR_FLOAT_CHARS + 1];
+    buf[kdr_format_float(f, buf)] = '\0';
+    CHECK(!strcmp(buf, want), "%a -> %s, want %s", (double)f, buf, want);
+}
+
+static void test_float_format(void) {
+    expect_text(0.0f, "0");
+    expect_text(-0.0f, "-0");
+    expect_text(1.0f, "1");
+    expect_text(-1.0f, "-1");
+    expect_text(0.1f, "0.1");
+    expect_text(1e-45f, "1e-45");
+    expect_text(FLT_MAX, "3.4028235e38");
+    expect_text(FLT_MIN, "1.1754944e-38");
+    expect_text(16777216.0f, "16777216");
+    expect_text(0.001f, "0.001");
+    expect_text(123456.7f, "123456.7");
+    expect_text(NAN, "null");
+    expect_text(INFINITY, "null");
+    int longer = 0, total = 0;
+    for (uint32_t b = 0; b < 2000; b++) { /* denormals, then the top end */
+        float f, g;
+        uint32_t hi = 0x7f7fffffu - b;
+        memcpy(&f, &b, 4);
+        memcpy(&g, &hi, 4);
+        longer += check_float_text(f) + check_float_text(g);
+        total += 2;
+    }
+    for (int e = -149; e <= 127; e++) {
+        longer += check_float_text(ldexpf(1.0f, e));
+        longer += check_float_text(nextafterf(ldexpf(1.0f, e), 0.0f));
+        total += 2;
+    }
+    for (int i = 0; i < 200000; i++) {
+        uint32_t b = (uint32_t)rng();
+        float f;
+        memcpy(&f, &b, 4);
+        if (isfinite(f)) {
+            longer += check_float_text(f);
+            total++;
+        }
+    }
+    /* shortest up to exact decimal ties the safety margin declines */
+    CHECK(longer * 10000 <= total, "%d of %d not shortest", longer, total);
+}
+
+/* ---- request errors: every path, exact detail ---------------------------------- */
+
+enum { BUNDLE, SHADOW, FRUSTUM };
+
+/* Runs one parser; returns the status and frees whatever it parsed. */
+static int parse_any(int kind, const char *body, size_t len, size_t max_rays,
+                     kdr_proto_error *err) {
+    int st;
+    if (kind == BUNDLE) {
+        kdr_bundle_request r;
+        st = kdr_proto_parse_bundle(body, len, max_rays, &r, err);
+        kdr_bundle_request_free(&r);
+    } else if (kind == SHADOW) {
+        kdr_shadow_request r;
+        st = kdr_proto_parse_shadow(body, len, max_rays, &r, err);
+        kdr_shadow_request_free(&r);
+    } else {
+        kdr_frustum_request r;
+        st = kdr_proto_parse_frustum(body, len, max_rays, &r, err);
+    }
+    return st;
+}
+
+static void expect_error(int kind, const char *body, size_t max_rays, int status,
+                         const char *detail) {
+    kdr_proto_error err = {0, ""};
+    /* bodies are not NUL-terminated: parse from an exact-size copy */
+    size_t len = strlen(body);
+    char *copy = xmalloc(len ? len : 1);
+    memcpy(copy, body, len);
+    int st = parse_any(kind, copy, len, max_rays, &err);
+    free(copy);
+    CHECK(st == status && err.status == status && !strcmp(err.detail, detail),
+          "%s\n    got %d \"%s\"\n    want %d \"%s\"", body, st, err.detail, status,
+          detail);
+}
+
+#define LIGHT "\"lights\":[{\"center\":[0,10,0],\"radius\":1}]"
+#define CAM(extra) "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," extra "}}"
+#define CAMOK "\"fov_y_deg\":60,\"width\":4,\"height\":3"
+
+static const struct err_case {
+    int kind;
+    const char *body;
+    size_t max_rays;
+    int status;
+    const char *detail;
+} err_cases[] = {
+    {BUNDLE, "", 0, 400, "body: empty"},
+    {BUNDLE, "{\"a\":1} x", 0, 400, "body: malformed JSON at offset 8 (data after the value)"},
+    {BUNDLE, "[1,2]", 0, 400, "body: expected a JSON object"},
+    {BUNDLE, "{}", 0, 400, "directions: required"},
+    {BUNDLE, "{\"directions\":\"abc\"}", 0, 400,
+     "directions: expected an array of numbers or {\"f32\": base64}"},
+    {BUNDLE, "{\"directions\":{\"x\":1}}", 0, 400,
+     "directions: expected an array of numbers or {\"f32\": base64}"},
+    {BUNDLE, "{\"directions\":{\"f32\":5}}", 0, 400, "directions.f32: expected a base64 string"},
+    {BUNDLE, "{\"directions\":[1,0]}", 0, 400, "directions: length 2 is not 3*N with N >= 1"},
+    {BUNDLE, "{\"directions\":[]}", 0, 400, "directions: length 0 is not 3*N with N >= 1"},
+    {BUNDLE, "{\"directions\":[1,0,0]}", 0, 400, "origins: required"},
+    {BUNDLE, "{\"directions\":[1,0,0,0,1,0,0,0,1,1,1,1],\"origins\":[0,0,0,1,1,1,2]}", 0, 400,
+     "origins: length 7 is not 3 or 3*N (N=4)"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,\"x\"]}", 0, 400,
+     "directions[2]: not a number"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,1e39]}", 0, 400,
+     "directions[2]: out of float32 range"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,1e999]}", 0, 400,
+     "directions[2]: not a finite number"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0,0,0,0]}", 0, 400,
+     "directions[1]: zero direction"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":{\"f32\":\"AAAAAAAA\"}}", 0, 400,
+     "directions.f32: 6 bytes is not a multiple of 4"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":{\"f32\":\"AAAAAAAAAAA*AAAA\"}}", 0, 400,
+     "directions.f32: invalid base64 at offset 11"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":{\"f32\":\"AAAAAAAAAA\"}}", 0, 400,
+     "directions.f32: invalid base64 at offset 10"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":{\"f32\":\"AAAAAAAAAAAAAAAA\"}}", 0, 400,
+     "directions[0]: zero direction"},
+    {BUNDLE, "{\"origins\":{\"f32\":\"!AAAAAAAAAAAAAAA\"},\"directions\":[1,0,0]}", 0, 400,
+     "origins.f32: invalid base64 at offset 0"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"tmin\":\"x\"}", 0, 400,
+     "tmin: expected a number, an array of N numbers or {\"f32\": base64}"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"tmax\":[1,2]}", 0, 400,
+     "tmax: length 2 is not N=1"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0,0,1,0],\"tmax\":[1,\"a\"]}", 0, 400,
+     "tmax[1]: not a number"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"query\":\"nearest\"}", 0, 400,
+     "query: must be \"closest\" or \"any\""},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"encoding\":5}", 0, 400,
+     "encoding: must be \"json\" or \"base64\""},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0,0,1,0,0,0,1]}", 2, 413,
+     "batch of 3 rays exceeds the limit of 2"},
+
+    {SHADOW, "{}", 0, 400, "lights: required"},
+    {SHADOW, "{\"lights\":[]}", 0, 400, "lights: expected an array of 1..64 lights"},
+    {SHADOW, "{\"lights\":{}}", 0, 400, "lights: expected an array of 1..64 lights"},
+    {SHADOW, "{\"lights\":[5]}", 0, 400, "lights[0]: expected an object"},
+    {SHADOW, "{\"lights\":[{\"radius\":1}]}", 0, 400, "lights[0].center: required"},
+    {SHADOW, "{\"lights\":[{\"center\":[0,0],\"radius\":1}]}", 0, 400,
+     "lights[0].center: expected 3 numbers, got 2"},
+    {SHADOW, "{\"lights\":[{\"center\":[0,9,0]}]}", 0, 400, "lights[0].radius: required"},
+    {SHADOW, "{\"lights\":[{\"center\":[0,9,0],\"radius\":1},{\"center\":[0,9,0],\"radius\":0}]}",
+     0, 400, "lights[1].radius: must be > 0"},
+    {SHADOW, "{\"lights\":[{\"center\":[0,9,0],\"radius\":-2}]}", 0, 400,
+     "lights[0].radius: must be > 0"},
+    {SHADOW, "{\"lights\":[{\"center\":[0,9,0],\"radius\":\"a\"}]}", 0, 400,
+     "lights[0].radius: not a number"},
+    {SHADOW, "{" LIGHT ",\"samples\":0}", 0, 400, "samples: must be an integer in 1..4096"},
+    {SHADOW, "{" LIGHT ",\"samples\":4097}", 0, 400, "samples: must be an integer in 1..4096"},
+    {SHADOW, "{" LIGHT ",\"samples\":1.5}", 0, 400, "samples: must be an integer in 1..4096"},
+    {SHADOW, "{" LIGHT ",\"samples\":\"64\"}", 0, 400, "samples: must be an integer in 1..4096"},
+    {SHADOW, "{" LIGHT ",\"seed\":-1}", 0, 400, "seed: must be an integer in 0..2^53"},
+    {SHADOW, "{" LIGHT ",\"seed\":9007199254740994}", 0, 400,
+     "seed: must be an integer in 0..2^53"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":-1}", 0, 400, "epsilon: must be a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":\"x\"}", 0, 400, "epsilon: must be a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":1e39}", 0, 400, "epsilon: must be a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"stats\":1}", 0, 400, "stats: must be true or false"},
+    {SHADOW, "{" LIGHT ",\"encoding\":\"hex\"}", 0, 400,
+     "encoding: must be \"json\" or \"base64\""},
+    {SHADOW, "{" LIGHT "}", 0, 400, "points: required"},
+    {SHADOW, "{" LIGHT ",\"points\":[0,0]}", 0, 400,
+     "points: length 2 is not 3*N with N >= 1"},
+    {SHADOW, "{" LIGHT ",\"points\":[0,0,0],\"normals\":[0,0,1,0]}", 0, 400,
+     "normals: length 4 is not 3*N (N=1)"},
+    {SHADOW, "{" LIGHT ",\"points\":[0,0,0],\"normals\":[0,0,\"z\"]}", 0, 400,
+     "normals[2]: not a number"},
+    {SHADOW, "{" LIGHT ",\"points\":[0,0,0,5,5,5,0,9.5,0]}", 0, 400,
+     "points[2]: inside lights[0]"},
+    {SHADOW, "{" LIGHT ",\"points\":[0,9,0]}", 0, 400, "points[0]: inside lights[0]"},
+    {SHADOW, "{\"lights\":[{\"center\":[0,10,0],\"radius\":1},{\"center\":[5,0,0],"
+             "\"radius\":0.5}],\"points\":[0,0,0,5,0.25,0]}",
+     0, 400, "points[1]: inside lights[1]"},
+    {SHADOW, "{" LIGHT ",\"points\":[0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0,0]}",
+     100, 413, "batch of 640 rays (points*lights*samples) exceeds the limit of 100"},
+
+    {FRUSTUM, "{}", 0, 400, "camera: required"},
+    {FRUSTUM, "{\"camera\":5}", 0, 400, "camera: expected an object"},
+    {FRUSTUM, "{\"camera\":{}}", 0, 400, "camera.eye: required"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0]}}", 0, 400, "camera.eye: expected 3 numbers, got 2"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,0]}}", 0, 400, "camera.target: required"},
+    {FRUSTUM, CAM("\"width\":4"), 0, 400, "camera.fov_y_deg: required"},
+    {FRUSTUM, CAM("\"fov_y_deg\":180"), 0, 400, "camera.fov_y_deg: must be a number in (0, 180)"},
+    {FRUSTUM, CAM("\"fov_y_deg\":0"), 0, 400, "camera.fov_y_deg: must be a number in (0, 180)"},
+    {FRUSTUM, CAM("\"fov_y_deg\":\"60\""), 0, 400,
+     "camera.fov_y_deg: must be a number in (0, 180)"},
+    {FRUSTUM, CAM("\"fov_y_deg\":60"), 0, 400, "camera.width: required"},
+    {FRUSTUM, CAM("\"fov_y_deg\":60,\"width\":0"), 0, 400,
+     "camera.width: must be an integer in 1..16384"},
+    {FRUSTUM, CAM("\"fov_y_deg\":60,\"width\":16385"), 0, 400,
+     "camera.width: must be an integer in 1..16384"},
+    {FRUSTUM, CAM("\"fov_y_deg\":60,\"width\":10.5"), 0, 400,
+     "camera.width: must be an integer in 1..16384"},
+    {FRUSTUM, CAM("\"fov_y_deg\":60,\"width\":4"), 0, 400, "camera.height: required"},
+    {FRUSTUM, CAM("\"fov_y_deg\":60,\"width\":4,\"height\":-3"), 0, 400,
+     "camera.height: must be an integer in 1..16384"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[1,2,3],\"target\":[1,2,3]," CAMOK "}}", 0, 400,
+     "camera: eye and target coincide"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,0],\"target\":[0,5,0]," CAMOK "}}", 0, 400,
+     "camera.up: parallel to the view direction"},
+    {FRUSTUM, CAM(CAMOK ",\"up\":[0,0,0]"), 0, 400, "camera.up: zero vector"},
+    {FRUSTUM, CAM(CAMOK ",\"up\":[0,1]"), 0, 400, "camera.up: expected 3 numbers, got 2"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," CAMOK "},\"tile\":3}", 0, 400,
+     "tile: must be an integer in 4..64"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," CAMOK "},\"tile\":65}", 0, 400,
+     "tile: must be an integer in 4..64"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," CAMOK "},\"tile\":8.5}", 0,
+     400, "tile: must be an integer in 4..64"},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," CAMOK "},\"query\":\"all\"}", 0,
+     400, "query: must be \"closest\" or \"any\""},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," CAMOK "},\"encoding\":null}",
+     0, 400, "encoding: must be \"json\" or \"base64\""},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0],\"fov_y_deg\":60,\"width\":100,"
+              "\"height\":100}}",
+     9999, 413, "batch of 10000 rays exceeds the limit of 9999"},
+};
+
+/* Errors inside base64 arrays: NaN / Inf elements are named. */
+static void test_base64_element_errors(void) {
+    float dir[6] = {1, 0, 0, 0, NAN, 0}, tmax[4] = {1, INFINITY, 2, NAN};
+    char body[512], *b1 = b64_of(dir, sizeof dir), *b2 = b64_of(tmax, sizeof tmax);
+    snprintf(body, sizeof body, "{\"origins\":[0,0,0],\"directions\":{\"f32\":\"%s\"}}", b1);
+    expect_error(BUNDLE, body, 0, 400, "directions[4]: not a finite number");
+    dir[4] = -INFINITY;
+    free(b1);
+    b1 = b64_of(dir, sizeof dir);
+    snprintf(body, sizeof body, "{\"origins\":[0,0,0],\"directions\":{\"f32\":\"%s\"}}", b1);
+    expect_error(BUNDLE, body, 0, 400, "directions[4]: not a finite number");
+    snprintf(body, sizeof body,
+             "{\"origins\":[0,0,0],\"directions\":[1,0,0,0,1,0,0,0,1,1,1,1],"
+             "\"tmax\":{\"f32\":\"%s\"}}",
+             b2);
+    expect_error(BUNDLE, body, 0, 400, "tmax[3]: not a number");
+    free(b1);
+    free(b2);
+}
+
+static void test_errors(void) {
+    for (size_t i = 0; i < sizeof err_cases / sizeof err_cases[0]; i++)
+        expect_error(err_cases[i].kind, err_cases[i].body, err_cases[i].max_rays,
+                     err_cases[i].status, err_cases[i].detail);
+    /* malformed JSON names an offset; truncated bodies of a valid request
+     * are all errors, never a crash */
+    const char *good = "{\"origins\":[0,0,0],\"directions\":[1,0,0]}";
+    for (size_t len = 0; len < strlen(good); len++) {
+        kdr_proto_error err;
+        char *copy = xmalloc(len ? len : 1);
+        memcpy(copy, good, len);
+        int st = parse_any(BUNDLE, copy, len, 0, &err);
+        free(copy);
+        CHECK(st == 400 && (len == 0 || !strncmp(err.detail, "body: malformed JSON at offset ",
+                                                 31)),
+              "prefix %zu: %d %s", len, st, err.detail);
+    }
+    test_base64_element_errors();
+}
+
+/* ---- successful requests ------------------------------------------------------------ */
+
+static int parse_bundle_str(const char *body, kdr_bundle_request *r) {
+    kdr_proto_error err;
+    int st = kdr_proto_parse_bundle(body, strlen(body), 0, r, &err);
+    CHECK(st == 0, "%s: %d %s", body, st, err.detail);
+    return st;
+}
+
+static void test_bundle_ok(void) {
+    kdr_bundle_request r;
+    /* shared origin, defaults: tmin 0, tmax +inf, closest, json */
+    if (!parse_bundle_str("{\"origins\":[1,2,3],\"directions\":[1,0,0,0,-0.5,1e-45],"
+                          "\"unknown\":{\"x\":[1]}}",
+                          &r)) {
+        const kdr_ray_batch *b = &r.batch;
+        CHECK(b->n == 2 && b->org_stride == 0 && b->tmin_stride == 0 && b->tmax_stride == 0,
+              "shape");
+        CHECK(b->org[0] == 1 && b->org[1] == 2 && b->org[2] == 3, "origin");
+        CHECK(b->dir[4] == -0.5f && same_bits(b->dir[5], 1e-45f) && b->dir[0] == 1, "dirs");
+        CHECK(b->tmin[0] == 0.0f && isinf(b->tmax[0]) && b->tmax[0] > 0, "defaults");
+        CHECK(r.query == KDR_CLOSEST && r.encoding == KDR_ENCODING_JSON, "enums");
+        kdr_bundle_request_free(&r);
+    }
+    /* per-ray arrays, tmax 1e30 and 1e300 (saturates), any, base64 */
+    if (!parse_bundle_str("{\"origins\":[0,0,0,1,1,1],\"directions\":[1,0,0,0,1,0],"
+                          "\"tmin\":[0.5,-1e300],\"tmax\":[1e30,1e300],\"query\":\"any\","
+                          "\"encoding\":\"base64\"}",
+                          &r)) {
+        const kdr_ray_batch *b = &r.batch;
+        CHECK(b->org_stride == 3 && b->tmin_stride == 1 && b->tmax_stride == 1, "strides");
+        CHECK(b->org[3] == 1 && b->tmin[0] == 0.5f && isinf(b->tmin[1]) && b->tmin[1] < 0,
+              "tmin");
+        CHECK(b->tmax[0] == 1e30f && isinf(b->tmax[1]), "tmax");
+        CHECK(r.query == KDR_ANY && r.encoding == KDR_ENCODING_BASE64, "enums");
+        kdr_bundle_request_free(&r);
+    }
+    /* scalar tmin/tmax numbers */
+    if (!parse_bundle_str("{\"origins\":[0,0,0],\"directions\":[0,0,2],\"tmin\":0.25,"
+                          "\"tmax\":1e30}",
+                          &r)) {
+        CHECK(r.batch.tmin[0] == 0.25f && r.batch.tmax[0] == 1e30f, "scalars");
+        kdr_bundle_request_free(&r);
+    }
+}
+
+/* The same rays as JSON numbers and as base64 parse to identical bits. */
+static void test_both_forms(size_t n) {
+    float *org = xmalloc(12 * n), *dir = xmalloc(12 * n), *tmax = xmalloc(4 * n);
+    for (size_t i = 0; i < 3 * n; i++) {
+        uint32_t bits = (uint32_t)rng() & 0xbfffffffu; /* finite: exponent < 255 */
+        memcpy(&org[i], &bits, 4);
+        dir[i] = (float)((int)(rng() % 2001) - 1000) / 7.0f;
+    }
+    for (size_t i = 0; i < n; i++) {
+        dir[3 * i] = 1.0f + (float)i; /* never zero */
+        tmax[i] = (float)(rng() % 1000) * 0.37f;
+    }
+    char *b_org = b64_of(org, 12 * n), *b_dir = b64_of(dir, 12 * n), *b_tmax = b64_of(tmax, 4 * n);
+    size_t cap = 64 * n + 3 * (16 * n) + 256;
+    char *body_json = xmalloc(cap * 2), *body_b64 = xmalloc(cap);
+    size_t len = put_str(body_json, "{\"origins\":[");
+    for (size_t i = 0; i < 3 * n; i++) {
+        len += put_str(body_json + len, i ? "," : "");
+        len += kdr_format_float(org[i], body_json + len);
+    }
+    len += put_str(body_json + len, "],\"directions\":[");
+    for (size_t i = 0; i < 3 * n; i++) {
+        len += put_str(body_json + len, i ? "," : "");
+        len += kdr_format_float(dir[i], body_json + len);
+    }
+    len += put_str(body_json + len, "],\"tmax\":[");
+    for (size_t i = 0; i < n; i++) {
+        len += put_str(body_json + len, i ? "," : "");
+        len += kdr_format_float(tmax[i], body_json + len);
+    }
+    len += put_str(body_json + len, "]}");
+    size_t len2 = (size_t)sprintf(body_b64,
+                                  "{\"origins\":{\"f32\":\"%s\"},\"directions\":{\"f32\":\"%s\"},"
+                                  "\"tmax\":{\"f32\":\"%s\"}}",
+                                  b_org, b_dir, b_tmax);
+    kdr_bundle_request a, b;
+    kdr_proto_error err;
+    int sa = kdr_proto_parse_bundle(body_json, len, 0, &a, &err);
+    CHECK(sa == 0, "json form: %s", err.detail);
+    int sb = kdr_proto_parse_bundle(body_b64, len2, 0, &b, &err);
+    CHECK(sb == 0, "base64 form: %s", err.detail);
+    if (!sa && !sb) {
+        CHECK(a.batch.n == n && b.batch.n == n, "n");
+        CHECK(!memcmp(a.batch.org, org, 12 * n) && !memcmp(b.batch.org, org, 12 * n), "org");
+        CHECK(!memcmp(a.batch.dir, dir, 12 * n) && !memcmp(b.batch.dir, dir, 12 * n), "dir");
+        CHECK(!memcmp(a.batch.tmax, tmax, 4 * n) && !memcmp(b.batch.tmax, tmax, 4 * n),
+              "tmax");
+    }
+    kdr_bundle_request_free(&a);
+    kdr_bundle_request_free(&b);
+    free(org), free(dir), free(tmax), free(b_org), free(b_dir), free(b_tmax);
+    free(body_json), free(body_b64);
+}
+
+static void test_shadow_ok(void) {
+    kdr_shadow_request r;
+    kdr_proto_error err;
+    const char *body = "{\"points\":[0,0,0,1,1,1],\"lights\":[{\"center\":[0,10,0],"
+                       "\"radius\":0.5},{\"center\":{\"f32\":\"AAAAAAAAIEEAAAAA\"},"
+                       "\"radius\":2}]}";
+    int st = kdr_proto_parse_shadow(body, strlen(body), 0, &r, &err);
+    CHECK(st == 0, "%s", err.detail);
+    if (!st) {
+        const kdr_shadow_query *q = &r.query;
+        CHECK(q->n == 2 && q->nlights == 2 && q->normals == NULL, "shape");
+        CHECK(q->samples == KDR_PROTO_DEFAULT_SAMPLES && q->seed == 1 &&
+                  q->epsilon == 1e-4f && !r.want_stats,
+              "defaults");
+        CHECK(q->lights[1].center[1] == 10.0f && q->lights[1].radius == 2.0f, "light 1");
+        CHECK(q->points[3] == 1.0f, "points");
+    }
+    kdr_shadow_request_free(&r);
+    body = "{\"points\":[0,0,0],\"normals\":[0,0,0],\"lights\":[{\"center\":[0,10,0],"
+           "\"radius\":0.5}],\"samples\":4096,\"seed\":9007199254740992,\"epsilon\":0,"
+           "\"stats\":true,\"encoding\":\"base64\"}";
+    st = kdr_proto_parse_shadow(body, strlen(body), 0, &r, &err);
+    CHECK(st == 0, "%s", err.detail);
+    if (!st) {
+        const kdr_shadow_query *q = &r.query;
+        CHECK(q->normals && q->samples == 4096 && q->seed == 9007199254740992ull &&
+                  q->epsilon == 0.0f && r.want_stats && r.encoding == KDR_ENCODING_BASE64,
+              "options");
+    }
+    kdr_shadow_request_free(&r);
+}
+
+static void test_frustum_ok(void) {
+    kdr_frustum_request r;
+    kdr_proto_error err;
+    const char *body = "{\"camera\":{\"eye\":[0,1,5],\"target\":[0,1,0],\"fov_y_deg\":60,"
+                       "\"width\":640,\"height\":480},\"encoding\":\"base64\"}";
+    int st = kdr_proto_parse_frustum(body, strlen(body), 0, &r, &err);
+    CHECK(st == 0, "%s", err.detail);
+    CHECK(r.tile == 8 && r.rays == 640 * 480 && r.query == KDR_CLOSEST &&
+              r.encoding == KDR_ENCODING_BASE64 && r.camera.up[1] == 1.0f &&
+              r.camera.fov_y_deg == 60.0f && r.camera.eye[2] == 5.0f,
+          "frustum fields");
+    body = "{\"camera\":{\"eye\":[0,0,0],\"target\":[0,5,0],\"up\":[0,0,1],\"fov_y_deg\":"
+           "179.9,\"width\":16384,\"height\":1},\"tile\":64,\"query\":\"any\"}";
+    st = kdr_proto_parse_frustum(body, strlen(body), 0, &r, &err);
+    CHECK(st == 0 && r.tile == 64 && r.query == KDR_ANY && r.camera.width == 16384,
+          "%s", err.detail);
+}
+
+/* ---- responses, parsed back ------------------------------------------------------- */
+
+static cJSON *parse_buf(kdr_buf *b) {
+    cJSON *doc = cJSON_ParseWithLength(b->data, b->len);
+    CHECK(doc != NULL, "response is not JSON: %.*s", (int)(b->len < 200 ? b->len : 200),
+          b->data ? b->data : "");
+    return doc;
+}
+
+/* Reads field name of doc as n floats (JSON or {"f32"}) or n int32s. */
+static int read_back(const cJSON *doc, const char *name, int is_int, size_t n, void *dst) {
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(doc, name);
+    if (cJSON_IsArray(it)) {
+        size_t i = 0;
+        for (const cJSON *c = it->child; c; c = c->next, i++) {
+            if (i >= n || !cJSON_IsNumber(c))
+                return -1;
+            if (is_int)
+                ((int32_t *)dst)[i] = (int32_t)c->valuedouble;
+            else
+                ((float *)dst)[i] = (float)c->valuedouble;
+        }
+        return i == n ? 0 : -1;
+    }
+    const cJSON *s = cJSON_GetObjectItemCaseSensitive(it, is_int ? "i32" : "f32");
+    if (!cJSON_IsString(s))
+        return -1;
+    size_t len = strlen(s->valuestring), got, bad;
+    if (kdr_base64_decoded_max(len) > 4 * n + 2)
+        return -1;
+    unsigned char *tmp = xmalloc(kdr_base64_decoded_max(len) + 1);
+    int rc = kdr_base64_decode(s->valuestring, len, tmp, &got, &bad);
+    if (!rc && got == 4 * n)
+        memcpy(dst, tmp, 4 * n);
+    free(tmp);
+    return !rc && got == 4 * n ? 0 : -1;
+}
+
+static void test_hits_response(size_t n, kdr_encoding enc) {
+    float *t = xmalloc(4 * n), *u = xmalloc(4 * n), *v = xmalloc(4 * n), *f = xmalloc(4 * n);
+    int32_t *prim = xmalloc(4 * n), *ib = xmalloc(4 * n);
+    uint8_t *hit = xmalloc(n);
+    static const float special[] = {0.0f, -0.0f, 1e-45f, FLT_MAX, FLT_MIN, 0.1f, 1e30f};
+    for (size_t i = 0; i < n; i++) {
+        uint32_t bits = (uint32_t)rng() & 0xbfffffffu;
+        memcpy(&t[i], &bits, 4);
+        if (i < sizeof special / sizeof special[0])
+            t[i] = special[i];
+        u[i] = (float)(rng() % 100000) / 99991.0f;
+        v[i] = -u[i];
+        prim[i] = i % 5 == 3 ? -1 : (int32_t)(rng() % 2147483647u);
+        hit[i] = (uint8_t)(rng() & 1);
+    }
+    kdr_hits h = {.t = t, .prim = prim, .u = u, .v = v, .hit = hit};
+    kdr_buf b;
+    kdr_buf_init(&b);
+    CHECK(kdr_proto_encode_hits(&h, n, KDR_CLOSEST, enc, &b) == 0, "encode");
+    cJSON *doc = parse_buf(&b);
+    const cJSON *cnt = cJSON_GetObjectItemCaseSensitive(doc, "count");
+    CHECK(cJSON_IsNumber(cnt) && cnt->valuedouble == (double)n, "count");
+    CHECK(read_back(doc, "t", 0, n, f) == 0, "t array");
+    for (size_t i = 0; i < n; i++)
+        CHECK(same_bits(f[i], prim[i] < 0 ? -1.0f : t[i]), "t[%zu]", i);
+    CHECK(read_back(doc, "prim", 1, n, ib) == 0, "prim array");
+    CHECK(!memcmp(ib, prim, 4 * n), "prim values");
+    CHECK(read_back(doc, "u", 0, n, f) == 0, "u array");
+    for (size_t i = 0; i < n; i++)
+        CHECK(same_bits(f[i], prim[i] < 0 ? 0.0f : u[i]), "u[%zu]", i);
+    CHECK(read_back(doc, "v", 0, n, f) == 0, "v array");
+    for (size_t i = 0; i < n; i++)
+        CHECK(same_bits(f[i], prim[i] < 0 ? 0.0f : v[i]), "v[%zu]", i);
+    cJSON_Delete(doc);
+    b.len = 0;
+    CHECK(kdr_proto_encode_hits(&h, n, KDR_ANY, enc, &b) == 0, "encode any");
+    doc = parse_buf(&b);
+    CHECK(read_back(doc, "hit", 1, n, ib) == 0, "hit array");
+    for (size_t i = 0; i < n; i++)
+        CHECK(ib[i] == hit[i], "hit[%zu]", i);
+    CHECK(!cJSON_GetObjectItemCaseSensitive(doc, "t"), "any has no t");
+    cJSON_Delete(doc);
+    kdr_buf_free(&b);
+    free(t), free(u), free(v), free(f), free(prim), free(ib), free(hit);
+}
+
+static void test_shadow_response(void) {
+    float vis[6] = {1, 0, 0.5f, 0.25f, 1e-45f, 0.999f}, back[6];
+    kdr_shadow_stats st = {7, 123456789012ull, 42};
+    for (int enc = 0; enc < 2; enc++) {
+        kdr_buf b;
+        kdr_buf_init(&b);
+        CHECK(kdr_proto_encode_shadow(vis, 3, 2, enc ? NULL : &st, (kdr_encoding)enc, &b) == 0,
+              "encode");
+        cJSON *doc = parse_buf(&b);
+        CHECK(cJSON_GetObjectItemCaseSensitive(doc, "count")->valuedouble == 3, "count");
+        CHECK(read_back(doc, "visibility", 0, 6, back) == 0 && !memcmp(back, vis, sizeof vis),
+              "visibility");
+        const cJSON *s = cJSON_GetObjectItemCaseSensitive(doc, "stats");
+        if (enc)
+            CHECK(s == NULL, "no stats unless asked");
+        else
+            CHECK(cJSON_GetObjectItemCaseSensitive(s, "rays_traced")->valuedouble ==
+                          123456789012.0 &&
+                      cJSON_GetObjectItemCaseSensitive(s, "cones_decided")->valuedouble == 7 &&
+                      cJSON_GetObjectItemCaseSensitive(s, "nodes_visited")->valuedouble == 42,
+                  "stats");
+        cJSON_Delete(doc);
+        kdr_buf_free(&b);
+    }
+}
+
+static void test_scene_and_errors(void) {
+    kdr_proto_mesh_range m[2] = {{0, 0, 0, 0, 12}, {3, 1, 2, 12, 30}};
+    kdr_proto_scene_info s[2];
+    memset(s, 0, sizeof s);
+    s[0].name = "default \"quoted\"\n";
+    s[0].triangles = 42;
+    s[0].bounds = (kdr_bounds){{-1, -2.5f, 0}, {1, 2, 1e-45f}};
+    s[0].tree.nodes = 9;
+    s[0].tree.leaves = 5;
+    s[0].tree.empty_leaves = 1;
+    s[0].tree.max_depth = 4;
+    s[0].tree.refs_per_leaf = 0.1;
+    s[0].tree.sah_cost = 12.75;
+    s[0].tree.build_ms = 1.0 / 3.0;
+    s[0].meshes = m;
+    s[0].nmeshes = 2;
+    s[1].name = "empty";
+    kdr_buf b;
+    kdr_buf_init(&b);
+    CHECK(kdr_proto_encode_scenes(s, 2, &b) == 0, "scenes");
+    cJSON *doc = parse_buf(&b);
+    const cJSON *arr = cJSON_GetObjectItemCaseSensitive(doc, "scenes");
+    CHECK(cJSON_GetArraySize(arr) == 2, "two scenes");
+    const cJSON *s0 = cJSON_GetArrayItem(arr, 0);
+    CHECK(!strcmp(cJSON_GetObjectItemCaseSensitive(s0, "name")->valuestring, s[0].name), "name");
+    CHECK(cJSON_GetObjectItemCaseSensitive(s0, "triangles")->valuedouble == 42, "triangles");
+    const cJSON *bmin = cJSON_GetObjectItemCaseSensitive(
+        cJSON_GetObjectItemCaseSensitive(s0, "bounds"), "min");
+    CHECK((float)cJSON_GetArrayItem(bmin, 1)->valuedouble == -2.5f, "bounds");
+    const cJSON *kd = cJSON_GetObjectItemCaseSensitive(s0, "kdtree");
+    CHECK(cJSON_GetObjectItemCaseSensitive(kd, "build_ms")->valuedouble == 1.0 / 3.0 &&
+              cJSON_GetObjectItemCaseSensitive(kd, "refs_per_leaf")->valuedouble == 0.1 &&
+              cJSON_GetObjectItemCaseSensitive(kd, "empty_leaves")->valuedouble == 1,
+          "kdtree");
+    const cJSON *m1 = cJSON_GetArrayItem(cJSON_GetObjectItemCaseSensitive(s0, "meshes"), 1);
+    CHECK(cJSON_GetObjectItemCaseSensitive(m1, "node")->valuedouble == 3 &&
+              cJSON_GetObjectItemCaseSensitive(m1, "primitive")->valuedouble == 2 &&
+              cJSON_GetObjectItemCaseSensitive(m1, "first_prim")->valuedouble == 12 &&
+              cJSON_GetObjectItemCaseSensitive(m1, "count")->valuedouble == 30,
+          "mesh range");
+    cJSON_Delete(doc);
+    b.len = 0;
+    kdr_proto_error e;
+    kdr_proto_error_set(&e, 413, "batch of %d rays exceeds the limit of %d", 5, 4);
+    CHECK(kdr_proto_encode_error(&e, &b) == 0, "error body");
+    CHECK(b.len && !strcmp(kdr_buf_cstr(&b),
+                           "{\"type\":\"about:blank\",\"title\":\"Content Too Large\","
+                           "\"status\":413,\"detail\":\"batch of 5 rays exceeds the limit of 4\"}"),
+          "%s", b.data);
+    static const int codes[] = {400, 404, 405, 413, 415, 500, 503};
+    for (size_t i = 0; i < sizeof codes / sizeof codes[0]; i++)
+        CHECK(strcmp(kdr_proto_status_title(codes[i]), "Error") != 0, "title %d", codes[i]);
+    b.len = 0;
+    CHECK(kdr_proto_encode_health("ok", 3, &b) == 0 &&
+              !strcmp(kdr_buf_cstr(&b), "{\"status\":\"ok\",\"scenes\":3}"),
+          "health");
+    kdr_buf_free(&b);
+}
+
+int main(void) {
+    test_base64();
+    test_float_format();
+    test_errors();
+    test_bundle_ok();
+    test_both_forms(1);
+    test_both_forms(50000);
+    test_shadow_ok();
+    test_frustum_ok();
+    test_hits_response(1, KDR_ENCODING_JSON);
+    test_hits_response(3, KDR_ENCODING_BASE64);
+    test_hits_response(40000, KDR_ENCODING_JSON);
+    test_hits_response(40001, KDR_ENCODING_BASE64);
+    test_shadow_response();
+    test_scene_and_errors();
+    if (failures)
+        fprintf(stderr, "test_protocol: %d check(s) failed\n", failures);
+    else
+        printf("test_protocol: all checks passed\n");
+    return failures ? 1 : 0;
+}
