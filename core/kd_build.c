@@ -56,6 +56,12 @@ typedef struct builder {
     kdr_build_opts o;
     int max_depth;
     uint8_t *side; /* per triangle, valid for the node being split */
+    kd_event *lvl[KD_MAX_DEPTH + 1]; /* children of a node at depth d */
+    size_t lvl_cap[KD_MAX_DEPTH + 1];
+    uint32_t *both; /* straddlers of the node being split */
+    size_t both_cap;
+    kd_event *add; /* their new events */
+    size_t add_cap;
     kd_node *nodes;
     size_t nnodes, cap_nodes;
     uint32_t *refs;
@@ -132,11 +138,6 @@ static void radix_sort(kd_event *a, kd_event *tmp, size_t n) {
     }
 }
 
-static int ev_cmp(const void *pa, const void *pb) {
-    kd_event a = *(const kd_event *)pa, b = *(const kd_event *)pb;
-    return (a > b) - (a < b);
-}
-
 /* ---- boxes and clipping ---------------------------------------------------- */
 
 static double box_area(const kdr_bounds *b) {
@@ -175,7 +176,19 @@ static int clip_plane(const cvert *in, int n, cvert *out, int k, float c,
     return m;
 }
 
-/* Bounds of tri clipped to box, conservative; 0 when the part is empty. */
+/* The next float toward -infinity (finite input). */
+static inline float step_down(float f) {
+    uint32_t u;
+    if (f == 0.0f)
+        return -FLT_TRUE_MIN;
+    memcpy(&u, &f, sizeof u);
+    u = f > 0.0f ? u - 1 : u + 1;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+/* Bounds of tri clipped to box, conservative; 0 when the part is empty.
+ * Only the planes the triangle's own bounds cross are clipped against. */
 static int clip_bounds(const float *tri, const kdr_bounds *box, kdr_bounds *out) {
     cvert buf[2][16];
     int n = 3, cur = 0;
@@ -185,9 +198,13 @@ static int clip_bounds(const float *tri, const kdr_bounds *box, kdr_bounds *out)
         buf[0][i].exact = 7u;
     }
     for (int k = 0; k < 3 && n > 0; k++) {
-        n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->min[k], 1.0);
-        cur ^= 1;
-        if (n > 0) {
+        const float lo = fminf(tri[k], fminf(tri[3 + k], tri[6 + k]));
+        const float hi = fmaxf(tri[k], fmaxf(tri[3 + k], tri[6 + k]));
+        if (lo < box->min[k]) {
+            n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->min[k], 1.0);
+            cur ^= 1;
+        }
+        if (n > 0 && hi > box->max[k]) {
             n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->max[k], -1.0);
             cur ^= 1;
         }
@@ -198,10 +215,10 @@ static int clip_bounds(const float *tri, const kdr_bounds *box, kdr_bounds *out)
         float lo = INFINITY, hi = -INFINITY;
         for (int i = 0; i < n; i++) {
             const cvert *v = &buf[cur][i];
-            float f = (float)v->p[k];
-            int ex = (v->exact >> k) & 1u;
-            float flo = ex ? f : nextafterf(f, -INFINITY);
-            float fhi = ex ? f : nextafterf(f, INFINITY);
+            const float f = (float)v->p[k];
+            const int ex = (v->exact >> k) & 1u;
+            const float flo = ex ? f : step_down(f);
+            const float fhi = ex ? f : -step_down(-f);
             lo = flo < lo ? flo : lo;
             hi = fhi > hi ? fhi : hi;
         }
@@ -304,10 +321,22 @@ static int find_split(const builder *b, const kdr_bounds *box,
 
 /* ---- splitting the event lists ------------------------------------------------ */
 
-/* Marks each triangle of the node LEFT, RIGHT or BOTH; returns the BOTH
- * ones in *both (caller frees). */
-static size_t classify(builder *b, const ev_list *ev, const kd_split *s,
-                       uint32_t **both) {
+/* Makes *p hold at least need elements; the old contents are dead. */
+static int grow(void **p, size_t *cap, size_t need, size_t elem) {
+    if (need <= *cap)
+        return KDR_OK;
+    size_t c = *cap ? *cap : 4096;
+    while (c < need)
+        c *= 2;
+    free(*p);
+    *p = malloc(c * elem);
+    *cap = *p ? c : 0;
+    return *p ? KDR_OK : KDR_ENOMEM;
+}
+
+/* Marks each triangle of the node LEFT, RIGHT or BOTH and gathers the BOTH
+ * ones in b->both; returns their count, or (size_t)-1 without memory. */
+static size_t classify(builder *b, const ev_list *ev, const kd_split *s) {
     const kd_event *e0 = ev->e[0];
     for (size_t i = 0; i < ev->n[0]; i++)
         if (ev_type(e0[i]) != EV_END)
@@ -325,13 +354,12 @@ static size_t classify(builder *b, const ev_list *ev, const kd_split *s,
             *side = (p < s->pos || (p == s->pos && s->planar_left)) ? SIDE_LEFT
                                                                     : SIDE_RIGHT;
     }
-    size_t nboth = 0;
-    *both = malloc((ev->ntri ? ev->ntri : 1) * sizeof **both);
-    if (!*both)
+    if (grow((void **)&b->both, &b->both_cap, ev->ntri + 1, sizeof *b->both))
         return (size_t)-1;
+    size_t nboth = 0;
     for (size_t i = 0; i < ev->n[0]; i++)
         if (ev_type(e0[i]) != EV_END && b->side[ev_tri(e0[i])] == SIDE_BOTH)
-            (*both)[nboth++] = ev_tri(e0[i]);
+            b->both[nboth++] = ev_tri(e0[i]);
     return nboth;
 }
 
@@ -349,62 +377,105 @@ static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
     }
 }
 
-/* The new events of the straddling triangles on one side of the split. */
-static int clip_side(builder *b, const uint32_t *both, size_t nboth,
-                     const kdr_bounds *cbox, kd_event *add[3], size_t nadd[3],
-                     size_t *ntri) {
-    for (int k = 0; k < 3; k++) {
-        add[k] = malloc((2 * nboth + 1) * sizeof(kd_event));
-        nadd[k] = 0;
-        if (!add[k])
-            return KDR_ENOMEM;
-    }
-    for (size_t i = 0; i < nboth; i++) {
-        kdr_bounds bb;
-        if (tri_box_bounds(b->tris + 9 * (size_t)both[i], cbox, &bb)) {
-            ev_add(add, nadd, &bb, both[i]);
-            (*ntri)++;
+/* Sorts the few new events of straddling triangles (keys are unique). */
+static void sort_events(kd_event *a, size_t n) {
+    while (n > 16) {
+        kd_event x = a[0], y = a[n / 2], z = a[n - 1];
+        kd_event p = x < y ? (y < z ? y : (x < z ? z : x)) : (x < z ? x : (y < z ? z : y));
+        size_t i = 0, j = n - 1;
+        for (;;) {
+            while (a[i] < p)
+                i++;
+            while (a[j] > p)
+                j--;
+            if (i >= j)
+                break;
+            kd_event t = a[i];
+            a[i++] = a[j];
+            a[j--] = t;
         }
+        sort_events(a, j + 1);
+        a += j + 1;
+        n -= j + 1;
     }
-    for (int k = 0; k < 3; k++)
-        qsort(add[k], nadd[k], sizeof(kd_event), ev_cmp);
-    return KDR_OK;
+    for (size_t i = 1; i < n; i++) {
+        kd_event v = a[i];
+        size_t j = i;
+        for (; j > 0 && a[j - 1] > v; j--)
+            a[j] = a[j - 1];
+        a[j] = v;
+    }
 }
 
-/* Builds one child's list: the parent's events of triangles on that side
- * (in order) merged with the clipped straddlers' new events. */
-static int child_events(builder *b, const ev_list *ev, uint8_t which,
-                        const uint32_t *both, size_t nboth,
-                        const kdr_bounds *cbox, ev_list *out) {
-    kd_event *add[3] = {NULL, NULL, NULL};
-    size_t nadd[3];
-    memset(out, 0, sizeof *out);
-    int err = clip_side(b, both, nboth, cbox, add, nadd, &out->ntri);
-    for (int k = 0; k < 3 && err == KDR_OK; k++) {
-        const kd_event *e = ev->e[k];
-        size_t nold = 0;
-        for (size_t i = 0; i < ev->n[k]; i++)
-            nold += b->side[ev_tri(e[i])] == which;
-        out->e[k] = malloc((nold + nadd[k] + 1) * sizeof(kd_event));
-        if (!out->e[k]) {
-            err = KDR_ENOMEM;
-            break;
+/* Clips the straddlers to both child boxes; their new events go to
+ * add[0..2] (left) and add[3..5] (right), sorted. */
+static void clip_both(builder *b, size_t nboth, const kdr_bounds cbox[2],
+                      kd_event *add[6], size_t nadd[6], size_t ntri[2]) {
+    for (size_t i = 0; i < nboth; i++) {
+        const float *tri = b->tris + 9 * (size_t)b->both[i];
+        for (int side = 0; side < 2; side++) {
+            kdr_bounds bb;
+            if (tri_box_bounds(tri, &cbox[side], &bb)) {
+                ev_add(add + 3 * side, nadd + 3 * side, &bb, b->both[i]);
+                ntri[side]++;
+            }
         }
-        kd_event *w = out->e[k] + nadd[k];
-        for (size_t i = 0; i < ev->n[k]; i++)
-            if (b->side[ev_tri(e[i])] == which)
-                *w++ = e[i];
-        merge_tail(out->e[k], nadd[k], nold, add[k]);
-        out->n[k] = nold + nadd[k];
     }
-    for (size_t i = 0; err == KDR_OK && i < ev->n[0]; i++)
-        out->ntri += ev_type(ev->e[0][i]) != EV_END &&
-                     b->side[ev_tri(ev->e[0][i])] == which;
+    for (int k = 0; k < 6; k++)
+        sort_events(add[k], nadd[k]);
+}
+
+/* Partitions the node's events into the two children (kept in order,
+ * branch-free) and merges in the straddlers' new events. The children live
+ * in this depth's scratch buffer: a subtree only writes deeper buffers. */
+static int split_events(builder *b, const ev_list *ev, const kd_split *s,
+                        const kdr_bounds cbox[2], int depth, ev_list ch[2]) {
+    const size_t nboth = classify(b, ev, s);
+    if (nboth == (size_t)-1)
+        return KDR_ENOMEM;
+    const size_t stride = 2 * nboth + 1;
+    if (grow((void **)&b->add, &b->add_cap, 6 * stride, sizeof *b->add))
+        return KDR_ENOMEM;
+    kd_event *add[6];
+    size_t nadd[6] = {0, 0, 0, 0, 0, 0}, ntri[2] = {0, 0};
+    for (int k = 0; k < 6; k++)
+        add[k] = b->add + (size_t)k * stride;
+    clip_both(b, nboth, cbox, add, nadd, ntri);
+    size_t need = 0;
     for (int k = 0; k < 3; k++)
-        free(add[k]);
-    if (err != KDR_OK)
-        ev_free(out);
-    return err;
+        need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
+    if (grow((void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)))
+        return KDR_ENOMEM;
+    kd_event *base = b->lvl[depth];
+    for (int k = 0; k < 3; k++) {
+        kd_event *w[2];
+        for (int side = 0; side < 2; side++) {
+            ch[side].e[k] = base;
+            w[side] = base + nadd[3 * side + k];
+            base += ev->n[k] + nadd[3 * side + k];
+        }
+        for (size_t i = 0; i < ev->n[k]; i++) {
+            const kd_event e = ev->e[k][i];
+            const uint8_t sd = b->side[ev_tri(e)];
+            *w[0] = e;
+            *w[1] = e;
+            w[0] += sd == SIDE_LEFT;
+            w[1] += sd == SIDE_RIGHT;
+            if (k == 0 && ev_type(e) != EV_END) {
+                ntri[0] += sd == SIDE_LEFT;
+                ntri[1] += sd == SIDE_RIGHT;
+            }
+        }
+        for (int side = 0; side < 2; side++) {
+            const size_t na = nadd[3 * side + k];
+            const size_t nold = (size_t)(w[side] - ch[side].e[k]) - na;
+            merge_tail(ch[side].e[k], na, nold, add[3 * side + k]);
+            ch[side].n[k] = na + nold;
+        }
+    }
+    ch[0].ntri = ntri[0];
+    ch[1].ntri = ntri[1];
+    return KDR_OK;
 }
 
 /* ---- the recursion ------------------------------------------------------------- */
@@ -440,7 +511,8 @@ static int reserve_refs(builder *b, size_t more) {
     return KDR_OK;
 }
 
-static void make_leaf(builder *b, ev_list *ev, const kdr_bounds *box, int depth) {
+static void make_leaf(builder *b, const ev_list *ev, const kdr_bounds *box,
+                      int depth) {
     size_t idx;
     const size_t count = ev->ntri;
     int err = count >= KD_MAX_TRIS ? KDR_ERANGE : reserve_refs(b, count);
@@ -448,7 +520,6 @@ static void make_leaf(builder *b, ev_list *ev, const kdr_bounds *box, int depth)
         err = push_node(b, &idx);
     if (err != KDR_OK) {
         b->err = err;
-        ev_free(ev);
         return;
     }
     b->nodes[idx].u.first = (uint32_t)b->nrefs;
@@ -461,34 +532,20 @@ static void make_leaf(builder *b, ev_list *ev, const kdr_bounds *box, int depth)
     if ((uint64_t)depth > b->depth_seen)
         b->depth_seen = (uint64_t)depth;
     b->sah += b->o.isect_cost * (double)count * box_area(box) * b->inv_root_area;
-    ev_free(ev);
 }
 
-static void build_node(builder *b, const kdr_bounds *box, ev_list *ev,
+static void build_node(builder *b, const kdr_bounds *box, const ev_list *ev,
                        int depth, int bad);
 
-static void make_interior(builder *b, const kdr_bounds *box, ev_list *ev,
+static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
                           const kd_split *s, int depth, int bad) {
-    kdr_bounds lb = *box, rb = *box;
-    lb.max[s->axis] = rb.min[s->axis] = s->pos;
-    uint32_t *both = NULL;
-    ev_list L, R;
+    kdr_bounds cbox[2] = {*box, *box};
+    cbox[0].max[s->axis] = cbox[1].min[s->axis] = s->pos;
+    ev_list ch[2];
     size_t idx = 0;
-    size_t nboth = classify(b, ev, s, &both);
-    int err = nboth == (size_t)-1 ? KDR_ENOMEM : KDR_OK;
+    int err = split_events(b, ev, s, cbox, depth, ch);
     if (err == KDR_OK)
-        err = child_events(b, ev, SIDE_LEFT, both, nboth, &lb, &L);
-    if (err == KDR_OK) {
-        err = child_events(b, ev, SIDE_RIGHT, both, nboth, &rb, &R);
-        if (err != KDR_OK)
-            ev_free(&L);
-    }
-    free(both);
-    ev_free(ev);
-    if (err == KDR_OK && (err = push_node(b, &idx)) != KDR_OK) {
-        ev_free(&L);
-        ev_free(&R);
-    }
+        err = push_node(b, &idx);
     if (err != KDR_OK) {
         b->err = err;
         return;
@@ -496,18 +553,16 @@ static void make_interior(builder *b, const kdr_bounds *box, ev_list *ev,
     b->nodes[idx].u.split = s->pos;
     b->nodes[idx].bits = (uint32_t)s->axis;
     b->sah += b->o.trav_cost * box_area(box) * b->inv_root_area;
-    build_node(b, &lb, &L, depth + 1, bad);
+    build_node(b, &cbox[0], &ch[0], depth + 1, bad);
     b->nodes[idx].bits = ((uint32_t)b->nnodes << 2) | (uint32_t)s->axis;
-    build_node(b, &rb, &R, depth + 1, bad);
+    build_node(b, &cbox[1], &ch[1], depth + 1, bad);
 }
 
-static void build_node(builder *b, const kdr_bounds *box, ev_list *ev,
+static void build_node(builder *b, const kdr_bounds *box, const ev_list *ev,
                        int depth, int bad) {
     kd_split s;
-    if (b->err) {
-        ev_free(ev);
+    if (b->err)
         return;
-    }
     if (ev->ntri > (size_t)b->o.leaf_size && depth < b->max_depth &&
         find_split(b, box, ev, &s)) {
         const float leaf_cost = b->o.isect_cost * (float)ev->ntri;
@@ -630,7 +685,7 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     b.inv_root_area = area > 0.0 ? 1.0 / area : 0.0;
     const int phases = nvalid > KD_LOG_PHASES;
     double t0 = now_ms();
-    ev_list ev;
+    ev_list ev = {{NULL, NULL, NULL}, {0, 0, 0}, 0};
     b.side = malloc(s->ntris);
     int err = b.side ? root_events(s, nvalid, &ev) : KDR_ENOMEM;
     if (err == KDR_OK) {
@@ -641,6 +696,11 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
         err = b.err;
     }
     free(b.side);
+    ev_free(&ev);
+    for (int d = 0; d <= KD_MAX_DEPTH; d++)
+        free(b.lvl[d]);
+    free(b.both);
+    free(b.add);
     if (err != KDR_OK) {
         free(b.nodes);
         free(b.refs);
