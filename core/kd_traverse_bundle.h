@@ -70,11 +70,13 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
 #endif /* KD_TRAVERSE_BUNDLE_DECL */
 
 #ifdef KB_W
+#include <string.h>
+
 #include "kd_tri_simd.h"
 
 /* One bundle: the lanes' rays in SoA and their best hits. */
 typedef struct KB(bundle) {
-    _Alignas(32) float org[3][KB_W], inv_dir[3][KB_W];
+    _Alignas(32) float org[3][KB_W], inv_dir[3][KB_W], dt[3][KB_W];
     _Alignas(32) float tmin[KB_W], t_near[KB_W], t_far[KB_W];
     _Alignas(32) float best_t[KB_W], best_u[KB_W], best_v[KB_W];
     _Alignas(32) int32_t best_prim[KB_W];
@@ -94,8 +96,10 @@ typedef struct KB(entry) {
 /* Live traversal state of one bundle. */
 typedef struct KB(state) {
     KB(tri_pre) tp;
-    VF org[3], inv_dir[3], tmin;
+    VF org[3], inv_dir[3], dt[3], tmin;
     VF best_t, best_u, best_v, best_prim;
+    float sorg[3]; /* the origin, when every lane has the same one */
+    int shared;
     VF live;   /* lanes still searching (any-hit lanes leave on a hit) */
     VF limit;  /* kd_term_bound(best_t) on live lanes, -inf elsewhere */
     int any;
@@ -130,13 +134,13 @@ KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
                     KB(bundle) *b) {
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
-    const int nact = __builtin_popcount((unsigned)V(bits)(act));
+    const int nact = kd_lane_count(V(bits)(act));
     for (uint32_t r = 0; r < cnt; r++) {
         const int32_t prim = (int32_t)refs[r];
-        VF t, u, v;
+        VF t, Vv, W, det;
         b->tri_tests += (uint64_t)nact;
-        VF hit = KB(tri_test)(&st->tp, s->tris + 9 * (size_t)prim, act,
-                              st->tmin, st->best_t, &t, &u, &v);
+        VF hit = KB(tri_test_raw)(&st->tp, s->tris + 9 * (size_t)prim, act,
+                                  st->tmin, st->best_t, &t, &Vv, &W, &det);
         if (!V(bits)(hit))
             continue;
         if (st->any) {
@@ -150,19 +154,121 @@ KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
             better = V(or)(better, KB(ties)(st, eq, prim));
         better = V(and)(better, hit);
         st->best_t = V(sel)(better, t, st->best_t);
-        st->best_u = V(sel)(better, u, st->best_u);
-        st->best_v = V(sel)(better, v, st->best_v);
+        st->best_u = V(sel)(better, V(div)(Vv, det), st->best_u);
+        st->best_v = V(sel)(better, V(div)(W, det), st->best_v);
         st->best_prim = V(sel)(better, V(seti)(prim), st->best_prim);
     }
     KB(update_limit)(st);
 }
 
-/* Plane distance per lane: the paper's d, negative (and -0.0) as +inf,
- * except for origins on the plane (see the top of this file). */
-KB_FN VF KB(plane_dist)(VF dist, VF inv_dir, VF on_plane) {
-    VF d = V(mul)(dist, inv_dir);
-    VF neg = V(andnot)(on_plane, V(and)(V(ord)(d, d), V(signmask)(d)));
-    return V(sel)(neg, V(set1)(INFINITY), d);
+/* Where a bundle is: a node, the lanes' interval there, the active lanes. */
+typedef struct KB(cursor) {
+    VF t_near, t_far, act;
+    uint32_t node;
+} KB(cursor);
+
+KB_FN void KB(push)(KB(entry) *stack, int *sp, uint32_t node, VF t_near,
+                    VF t_far) {
+    KB(entry) *e = &stack[(*sp)++];
+    e->node = node, e->t_near = t_near, e->t_far = t_far;
+}
+
+/* A child's interval per lane: [t_near, t_far]. */
+typedef struct KB(span) {
+    VF t_near, t_far;
+} KB(span);
+
+/*
+ * The front and back intervals of every lane at a split plane, from the
+ * distance d = (split - org) * inv_dir and the slack dt of kd_traverse.h:
+ *   front [t_near, min(d + dt, t_far)]        (d negative: [t_near, t_far])
+ *   back  [max(d - dt, t_near), t_far]        (d negative: up to d + dt)
+ * "Negative" is the paper's rule (d as +inf for the front); d + dt still
+ * bounds the back child of a ray leaving a plane closer than its slack,
+ * exactly as the single-ray walk sees it. min/max take d's expressions
+ * first: a NaN d (a lane lying in the plane) yields the lane's own t_far /
+ * t_near, i.e. both children over the whole interval.
+ */
+KB_FN void KB(spans)(VF d, VF dt, VF neg, VF t_near, VF t_far, KB(span) *f,
+                     KB(span) *b) {
+    const VF inf = V(set1)(INFINITY), hi = V(add)(d, dt);
+    f->t_near = t_near;
+    f->t_far = V(min)(V(sel)(neg, inf, hi), t_far);
+    b->t_near = V(max)(V(sub)(d, dt), t_near);
+    b->t_far = V(min)(V(sel)(neg, hi, inf), t_far);
+}
+
+/*
+ * Interior node, shared origin strictly off the plane: one front child for
+ * every lane, the paper's listing. Returns 0 when no lane enters either
+ * child. d cannot be NaN (dist != 0): its sign bit alone says "negative"
+ * (-0.0 from an underflow included).
+ */
+KB_FN int KB(step_shared)(const KB(state) *st, const kd_node *n, float dist,
+                          KB(cursor) *c, KB(entry) *stack, int *sp) {
+    const int axis = kd_axis(n);
+    const VF d = V(mul)(V(set1)(dist), st->inv_dir[axis]);
+    KB(span) f, b;
+    KB(spans)(d, st->dt[axis], V(signmask)(d), c->t_near, c->t_far, &f, &b);
+    const VF f_act = V(and)(c->act, V(le)(f.t_near, f.t_far));
+    const VF b_act = V(and)(c->act, KB(active)(st, b.t_near, b.t_far));
+    const uint32_t front = dist < 0.0f ? kd_above(n) : c->node + 1;
+    const uint32_t back = dist < 0.0f ? c->node + 1 : kd_above(n);
+    const int fb = V(bits)(f_act), bb = V(bits)(b_act);
+    if (fb && bb)
+        KB(push)(stack, sp, back, b.t_near, b.t_far);
+    if (fb) {
+        c->node = front, c->t_far = f.t_far, c->act = f_act;
+        return 1;
+    }
+    if (bb) {
+        c->node = back, c->t_near = b.t_near, c->t_far = b.t_far, c->act = b_act;
+        return 1;
+    }
+    return 0;
+}
+
+/*
+ * Interior node, general case: per-lane origins, or a shared origin on the
+ * plane. Each lane's below/above intervals come from its own front/back; an
+ * origin ON the plane takes as front the child its direction leaves (seen
+ * over [t_near, dt], as the single-ray walk does). The child that is front
+ * for most active lanes is entered first.
+ */
+KB_FN int KB(step_general)(const KB(state) *st, const kd_node *n,
+                           KB(cursor) *c, KB(entry) *stack, int *sp) {
+    const int axis = kd_axis(n);
+    const VF zero = V(set1)(0.0f), inv = st->inv_dir[axis];
+    const VF dist = V(sub)(V(set1)(n->u.split), st->org[axis]);
+    const VF on_plane = V(eq)(dist, zero);
+    const VF d = V(mul)(dist, inv);
+    const VF neg = V(andnot)(on_plane, V(and)(V(ord)(d, d), V(signmask)(d)));
+    const VF above_front = V(or)(V(lt)(dist, zero), V(and)(on_plane, V(lt)(inv, zero)));
+    KB(span) f, b;
+    KB(spans)(d, st->dt[axis], neg, c->t_near, c->t_far, &f, &b);
+    const KB(span) lo = {V(sel)(above_front, b.t_near, f.t_near),
+                         V(sel)(above_front, b.t_far, f.t_far)};
+    const KB(span) hi = {V(sel)(above_front, f.t_near, b.t_near),
+                         V(sel)(above_front, f.t_far, b.t_far)};
+    const VF lo_act = V(and)(c->act, KB(active)(st, lo.t_near, lo.t_far));
+    const VF hi_act = V(and)(c->act, KB(active)(st, hi.t_near, hi.t_far));
+    const int lb = V(bits)(lo_act), hb = V(bits)(hi_act);
+    if (!lb && !hb)
+        return 0;
+    int go_above = !lb;
+    if (lb && hb) {
+        const int votes = kd_lane_count(V(bits)(V(and)(c->act, above_front)));
+        go_above = 2 * votes > kd_lane_count(V(bits)(c->act));
+        if (go_above)
+            KB(push)(stack, sp, c->node + 1, lo.t_near, lo.t_far);
+        else
+            KB(push)(stack, sp, kd_above(n), hi.t_near, hi.t_far);
+    }
+    c->node = go_above ? kd_above(n) : c->node + 1;
+    c->t_near = go_above ? hi.t_near : lo.t_near;
+    c->t_far = go_above ? hi.t_far : lo.t_far;
+    c->act = go_above ? hi_act : lo_act;
+    return 1;
 }
 
 /* The node loop: from the root interval to an empty stack. */
@@ -170,57 +276,27 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
                     KB(bundle) *b) {
     KB(entry) stack[KD_MAX_DEPTH + 1];
     int sp = 0;
-    uint32_t node = 0;
-    VF act = KB(active)(st, t_near, t_far);
-    const VF zero = V(set1)(0.0f);
+    KB(cursor) c = {t_near, t_far, KB(active)(st, t_near, t_far), 0};
     for (;;) {
-        const kd_node *n = &s->nodes[node];
+        const kd_node *n = &s->nodes[c.node];
         b->steps++;
-        b->lane_steps += (uint64_t)__builtin_popcount((unsigned)V(bits)(act));
+        b->lane_steps += (uint64_t)kd_lane_count(V(bits)(c.act));
         if (!kd_is_leaf(n)) {
-            const int axis = kd_axis(n);
-            VF dist = V(sub)(V(set1)(n->u.split), st->org[axis]);
-            VF on_plane = V(eq)(dist, zero);
-            VF d = KB(plane_dist)(dist, st->inv_dir[axis], on_plane);
-            VF above_front = V(or)(V(lt)(dist, zero),
-                                   V(and)(on_plane, V(lt)(st->inv_dir[axis], zero)));
-            /* operand order: a NaN d yields t_far / t_near */
-            VF f_far = V(min)(d, t_far), b_near = V(max)(d, t_near);
-            VF lo_near = V(sel)(above_front, b_near, t_near);
-            VF lo_far = V(sel)(above_front, t_far, f_far);
-            VF hi_near = V(sel)(above_front, t_near, b_near);
-            VF hi_far = V(sel)(above_front, f_far, t_far);
-            VF lo_act = V(and)(act, KB(active)(st, lo_near, lo_far));
-            VF hi_act = V(and)(act, KB(active)(st, hi_near, hi_far));
-            const int lo = V(bits)(lo_act), hi = V(bits)(hi_act);
-            int go_above = !lo;
-            if (lo && hi) {
-                /* the child that is front for most active lanes goes first */
-                int votes = __builtin_popcount((unsigned)V(bits)(V(and)(act, above_front)));
-                go_above = 2 * votes > __builtin_popcount((unsigned)V(bits)(act));
-                KB(entry) *e = &stack[sp++];
-                e->node = go_above ? node + 1 : kd_above(n);
-                e->t_near = go_above ? lo_near : hi_near;
-                e->t_far = go_above ? lo_far : hi_far;
-            }
-            if (lo || hi) {
-                node = go_above ? kd_above(n) : node + 1;
-                t_near = go_above ? hi_near : lo_near;
-                t_far = go_above ? hi_far : lo_far;
-                act = go_above ? hi_act : lo_act;
+            const float dist = n->u.split - st->sorg[kd_axis(n)];
+            if (st->shared && dist != 0.0f ? KB(step_shared)(st, n, dist, &c, stack, &sp)
+                                           : KB(step_general)(st, n, &c, stack, &sp))
                 continue;
-            }
         } else {
-            KB(leaf)(s, n, st, act, b);
+            KB(leaf)(s, n, st, c.act, b);
         }
         /* pop the nearest entry that still has an active lane */
         for (;;) {
             if (sp == 0)
                 return;
-            KB(entry) *e = &stack[--sp];
-            act = KB(active)(st, e->t_near, e->t_far);
-            if (V(bits)(act)) {
-                node = e->node, t_near = e->t_near, t_far = e->t_far;
+            const KB(entry) *e = &stack[--sp];
+            c.act = KB(active)(st, e->t_near, e->t_far);
+            if (V(bits)(c.act)) {
+                c.node = e->node, c.t_near = e->t_near, c.t_far = e->t_far;
                 break;
             }
         }
@@ -238,13 +314,15 @@ KB_FN void KB(load)(const kdr_scene *s, const kdr_ray_batch *rb, size_t base,
         float tn = INFINITY, tf = -INFINITY;
         if (j < n && !kd_batch_ray(rb, base + (size_t)j, &r))
             *alone |= 1 << j;
-        float inv[3] = {1.0f / r.dir[0], 1.0f / r.dir[1], 1.0f / r.dir[2]};
+        float inv[3] = {1.0f / r.dir[0], 1.0f / r.dir[1], 1.0f / r.dir[2]}, dt[3];
+        kd_ray_slack_dt(s, r.org, r.dir, inv, dt);
         if (j < n && !((*alone >> j) & 1) &&
-            kd_clip_root(s, r.org, r.dir, inv, r.tmin, r.tmax, &tn, &tf))
+            kd_clip_root_dt(s, r.org, r.dir, inv, dt, r.tmin, r.tmax, &tn, &tf))
             b->lanes |= 1 << j;
         for (int k = 0; k < 3; k++) {
             b->org[k][j] = r.org[k];
             b->inv_dir[k][j] = inv[k];
+            b->dt[k][j] = dt[k];
         }
         b->tmin[j] = r.tmin;
         b->t_near[j] = (b->lanes >> j) & 1 ? tn : INFINITY;
@@ -263,10 +341,19 @@ KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
     b->steps = b->lane_steps = b->tri_tests = 0;
     if (!b->lanes)
         return;
-    KB(tri_pre_init)(&st.tp, b->pre, b->lanes, __builtin_ctz((unsigned)b->lanes));
+    const int ref = __builtin_ctz((unsigned)b->lanes);
+    KB(tri_pre_init)(&st.tp, b->pre, b->lanes, ref);
+    st.shared = 1;
+    for (int k = 0; k < 3; k++) {
+        st.sorg[k] = b->org[k][ref];
+        for (int j = 0; j < KB_W; j++)
+            if ((b->lanes >> j) & 1)
+                st.shared &= memcmp(&b->org[k][j], &st.sorg[k], 4) == 0;
+    }
     for (int k = 0; k < 3; k++) {
         st.org[k] = V(load)(b->org[k]);
         st.inv_dir[k] = V(load)(b->inv_dir[k]);
+        st.dt[k] = V(load)(b->dt[k]);
     }
     st.tmin = V(load)(b->tmin);
     st.best_t = V(load)(b->best_t);
@@ -306,7 +393,7 @@ KB_FN void KB(stats_add)(kdr_trav_stats *stats, const KB(bundle) *b, int n,
                          int alone) {
     if (!stats)
         return;
-    stats->rays += (uint64_t)(n - __builtin_popcount((unsigned)alone));
+    stats->rays += (uint64_t)(n - kd_lane_count(alone));
     stats->nodes_visited += b->lane_steps;
     stats->tri_tests += b->tri_tests;
 }

@@ -12,7 +12,8 @@
  * exactly the scalar float operations in the scalar order. Lanes may shear
  * along different axes (a hemisphere of directions has several dominant
  * axes), so each lane picks its own vertex components with masks; picking
- * is exact, so only the arithmetic that follows has to match. The rare
+ * is exact, so only the arithmetic that follows has to match (4 lanes:
+ * masked selects; 8 lanes: one AVX2 permute per component). The rare
  * double-precision fallback (an edge function exactly 0) runs per lane in
  * scalar code, as in kd_tri.h.
  */
@@ -24,6 +25,9 @@ typedef struct KB(tri_pre) {
     VF ox, oy, oz;                    /* org[kx], org[ky], org[kz] */
     VF sx, sy, sz;
     VF kx0, kx1, ky0, ky1, kz0, kz1;  /* lane masks: kx == 0, kx == 1, ... */
+#if KB_W == 8
+    VF idx[9]; /* int32 indices of A, B, C's x, y, z in tri[0..7] / tri[1..8] */
+#endif
     int uniform;                      /* every used lane shears alike */
     int kx, ky, kz;                   /* the shared axes when uniform */
 } KB(tri_pre);
@@ -55,6 +59,20 @@ KB_FN void KB(tri_pre_init)(KB(tri_pre) *p, const kd_ray_pre *pre, int used,
         *dst[k] = V(load)(f[k]);
     for (int k = 6; k < 12; k++) /* -1.0f has the sign bit: make full masks */
         *dst[k] = V(signmask)(*dst[k]);
+#if KB_W == 8
+    _Alignas(32) int32_t ix[9][KB_W];
+    for (int j = 0; j < KB_W; j++) {
+        const kd_ray_pre *r = &pre[(used >> j) & 1 ? j : ref];
+        const int k[3] = {r->kx, r->ky, r->kz};
+        for (int c = 0; c < 3; c++) {
+            ix[c][j] = k[c];         /* A: tri[0..7] */
+            ix[3 + c][j] = 3 + k[c]; /* B: tri[0..7] */
+            ix[6 + c][j] = 5 + k[c]; /* C: tri[1..8] */
+        }
+    }
+    for (int c = 0; c < 9; c++)
+        p->idx[c] = V(load)((const float *)ix[c]);
+#endif
     p->uniform = uniform;
     p->kx = pre[ref].kx;
     p->ky = pre[ref].ky;
@@ -89,10 +107,13 @@ KB_FN void KB(tri_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
 
 /*
  * Tests triangle tri against the lanes in mask act; returns the mask of
- * lanes that hit with tmin <= t <= tmax, and their t, u, v.
+ * lanes that hit with tmin <= t <= tmax, their t, and the scaled V, W and
+ * det (u = V / det, v = W / det: callers divide only for the lanes whose
+ * best hit changes, as the scalar test divides only on a hit).
  */
-KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
-                      VF tmax, VF *t_out, VF *u_out, VF *v_out) {
+KB_FN VF KB(tri_test_raw)(const KB(tri_pre) *p, const float *tri, VF act,
+                          VF tmin, VF tmax, VF *t_out, VF *V_out, VF *W_out,
+                          VF *det_out) {
     VF Ax, Ay, Az0, Bx, By, Bz0, Cx, Cy, Cz0;
     if (p->uniform) {
         Ax = V(sub)(V(set1)(tri[0 + p->kx]), p->ox);
@@ -105,6 +126,18 @@ KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
         Cy = V(sub)(V(set1)(tri[6 + p->ky]), p->oy);
         Cz0 = V(sub)(V(set1)(tri[6 + p->kz]), p->oz);
     } else {
+#if KB_W == 8
+        const VF lo = f8_loadu(tri), hi = f8_loadu(tri + 1);
+        Ax = V(sub)(f8_permute(lo, p->idx[0]), p->ox);
+        Ay = V(sub)(f8_permute(lo, p->idx[1]), p->oy);
+        Az0 = V(sub)(f8_permute(lo, p->idx[2]), p->oz);
+        Bx = V(sub)(f8_permute(lo, p->idx[3]), p->ox);
+        By = V(sub)(f8_permute(lo, p->idx[4]), p->oy);
+        Bz0 = V(sub)(f8_permute(lo, p->idx[5]), p->oz);
+        Cx = V(sub)(f8_permute(hi, p->idx[6]), p->ox);
+        Cy = V(sub)(f8_permute(hi, p->idx[7]), p->oy);
+        Cz0 = V(sub)(f8_permute(hi, p->idx[8]), p->oz);
+#else
         Ax = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 0), p->ox);
         Ay = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 0), p->oy);
         Az0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 0), p->oz);
@@ -114,6 +147,7 @@ KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
         Cx = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 6), p->ox);
         Cy = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 6), p->oy);
         Cz0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 6), p->oz);
+#endif
     }
     /* shear into ray space */
     const VF ax = V(sub)(Ax, V(mul)(p->sx, Az0)), ay = V(sub)(Ay, V(mul)(p->sy, Az0));
@@ -140,7 +174,20 @@ KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
     const VF t = V(div)(T, det);
     ok = V(and)(ok, V(and)(V(le)(tmin, t), V(le)(t, tmax)));
     *t_out = t;
-    *u_out = V(div)(Vv, det);
-    *v_out = V(div)(W, det);
+    *V_out = Vv;
+    *W_out = W;
+    *det_out = det;
+    return ok;
+}
+
+/* The same with u, v computed for every hit lane. */
+KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
+                      VF tmax, VF *t_out, VF *u_out, VF *v_out) {
+    VF Vv, W, det;
+    VF ok = KB(tri_test_raw)(p, tri, act, tmin, tmax, t_out, &Vv, &W, &det);
+    if (V(bits)(ok)) {
+        *u_out = V(div)(Vv, det);
+        *v_out = V(div)(W, det);
+    }
     return ok;
 }

@@ -59,6 +59,15 @@ static inline f4 f4_bitmask(int bits) {
 /* int32 lanes carried in a float vector (selects are bitwise) */
 static inline f4 f4_seti(int32_t x) { return _mm_castsi128_ps(_mm_set1_epi32(x)); }
 
+/* Number of set bits in a lane mask (<= 8 lanes). A table, because the
+ * baseline build has no popcnt instruction and __builtin_popcount would be
+ * a library call. */
+static inline int kd_lane_count(int bits) {
+    static const unsigned char nib[16] = {0, 1, 1, 2, 1, 2, 2, 3,
+                                          1, 2, 2, 3, 2, 3, 3, 4};
+    return nib[bits & 15] + nib[(bits >> 4) & 15];
+}
+
 /* ---- 8 lanes (AVX2) ------------------------------------------------------ */
 
 typedef __m256 f8;
@@ -92,6 +101,11 @@ KD_AVX2 static inline f8 f8_bitmask(int bits) {
 }
 KD_AVX2 static inline f8 f8_seti(int32_t x) {
     return _mm256_castsi256_ps(_mm256_set1_epi32(x));
+}
+KD_AVX2 static inline f8 f8_loadu(const float *p) { return _mm256_loadu_ps(p); }
+/* Lane j gets v[idx[j]]; idx holds int32 lane indices (0..7) as bits. */
+KD_AVX2 static inline f8 f8_permute(f8 v, f8 idx) {
+    return _mm256_permutevar8x32_ps(v, _mm256_castps_si256(idx));
 }
 
 #endif /* KD_SIMD_H */
