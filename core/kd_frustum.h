@@ -30,11 +30,18 @@ void kd_camera_basis_init(const kdr_camera *cam, kd_camera_basis *b);
  *   sx = ((2 * (px + 0.5)) / w - 1) * h * a   (left to right)
  *   sy = (1 - (2 * (py + 0.5)) / hgt) * h
  *   d[i] = (f[i] + sx * r[i]) + sy * u[i]
+ * sx depends on the column only and sy on the row only, so tile code may
+ * tabulate them (kd_camera_sx, kd_camera_sy) and combine them later.
  */
+static inline float kd_camera_sx(const kd_camera_basis *b, uint32_t px) {
+    return ((2.0f * ((float)px + 0.5f)) / b->w - 1.0f) * b->h * b->a;
+}
+static inline float kd_camera_sy(const kd_camera_basis *b, uint32_t py) {
+    return (1.0f - (2.0f * ((float)py + 0.5f)) / b->hgt) * b->h;
+}
 static inline void kd_camera_dir(const kd_camera_basis *b, uint32_t px,
                                  uint32_t py, float d[3]) {
-    const float sx = ((2.0f * ((float)px + 0.5f)) / b->w - 1.0f) * b->h * b->a;
-    const float sy = (1.0f - (2.0f * ((float)py + 0.5f)) / b->hgt) * b->h;
+    const float sx = kd_camera_sx(b, px), sy = kd_camera_sy(b, py);
     for (int i = 0; i < 3; i++)
         d[i] = (b->f[i] + sx * b->r[i]) + sy * b->u[i];
 }

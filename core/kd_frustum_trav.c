@@ -54,6 +54,10 @@
  * unsigned compare. */
 #define KF_NO_PRIM INT32_MAX
 
+/* min/max without libm's NaN rules (no NaN reaches them). */
+static inline float kf_minf(float a, float b) { return b < a ? b : a; }
+static inline float kf_maxf(float a, float b) { return b > a ? b : a; }
+
 /* Four rays of a 2x2 pixel block and their best hits. */
 typedef struct kf_group {
     kf4_tri_pre pre;
@@ -82,6 +86,7 @@ typedef struct kf_ctx {
     kdr_query q;
     float pad;          /* absolute box padding */
     kf_group *groups;   /* KF_LANES tiles' worth */
+    float *sx_tab, *sy_tab; /* kd_camera_sx per column, kd_camera_sy per row */
     uint32_t *sel;      /* groups selected at a leaf */
     int *selbits;
     kf_tile ft[KF_LANES];
@@ -104,35 +109,90 @@ static size_t kf_groups_per_tile(uint32_t tile) {
     return half * half;
 }
 
-/* Fills group g with the pixels (x, y) .. (x+1, y+1) inside [.., x1) x
- * [.., y1), and widens the tile's direction interval. */
-static void kf_group_init(kf_ctx *c, kf_tile *ft, kf_group *g, uint32_t x,
-                          uint32_t y, uint32_t x1, uint32_t y1) {
-    kd_ray_pre pre[4];
-    int used = 0;
-    for (int j = 0; j < 4; j++) {
-        const uint32_t px = x + (uint32_t)(j & 1), py = y + (uint32_t)(j >> 1);
-        float d[3] = {1.0f, 1.0f, 1.0f};
-        g->pix[j] = -1;
-        if (px < x1 && py < y1) {
-            kd_camera_dir(c->b, px, py, d);
-            g->pix[j] = (int32_t)((size_t)py * c->cam->width + px);
-            used |= 1 << j;
-            ft->nrays++;
-            for (int a = 0; a < 3; a++) {
-                ft->dmin[a] = fminf(ft->dmin[a], d[a]);
-                ft->dmax[a] = fmaxf(ft->dmax[a], d[a]);
-            }
-        }
-        kd_ray_precompute(c->b->eye, d, &pre[j]);
-        for (int a = 0; a < 3; a++)
-            g->inv[a][j] = 1.0f / d[a];
-        g->t[j] = INFINITY;
-        g->u[j] = g->v[j] = 0.0f;
-        g->prim[j] = KF_NO_PRIM;
+/* The shear of kd_ray_precompute for four rays at once, when they share
+ * the dominant axis and its sign (nearly always in a 2x2 block): the same
+ * divisions, so the same bits. Returns 0 when the lanes disagree. */
+static int kf_pre_uniform(const kf_ctx *c, kf_group *g, const f4 d[3]) {
+    const f4 sign = f4_set1(-0.0f), zero = f4_set1(0.0f);
+    const f4 ax = f4_andnot(sign, d[0]), ay = f4_andnot(sign, d[1]),
+             az = f4_andnot(sign, d[2]);
+    const f4 ge_xy = _mm_cmpge_ps(ax, ay);
+    const int b0 = f4_bits(f4_and(ge_xy, _mm_cmpge_ps(ax, az)));
+    const int b1 = f4_bits(f4_andnot(ge_xy, _mm_cmpge_ps(ay, az)));
+    const int kz = b0 == 15 ? 0 : b1 == 15 ? 1 : (b0 | b1) == 0 ? 2 : -1;
+    if (kz < 0)
+        return 0;
+    int kx = kz + 1 == 3 ? 0 : kz + 1, ky = kx + 1 == 3 ? 0 : kx + 1;
+    const int neg = f4_bits(f4_lt(d[kz], zero));
+    if (neg != 0 && neg != 15)
+        return 0;
+    if (neg) {
+        const int tmp = kx;
+        kx = ky;
+        ky = tmp;
     }
-    kf4_tri_pre_init(&g->pre, pre, used, 0);
-    g->live = used;
+    kf4_tri_pre *p = &g->pre;
+    p->ox = f4_set1(c->b->eye[kx]);
+    p->oy = f4_set1(c->b->eye[ky]);
+    p->oz = f4_set1(c->b->eye[kz]);
+    p->sx = f4_div(d[kx], d[kz]);
+    p->sy = f4_div(d[ky], d[kz]);
+    p->sz = f4_div(f4_set1(1.0f), d[kz]);
+    p->kx0 = f4_seti(kx == 0 ? -1 : 0);
+    p->kx1 = f4_seti(kx == 1 ? -1 : 0);
+    p->ky0 = f4_seti(ky == 0 ? -1 : 0);
+    p->ky1 = f4_seti(ky == 1 ? -1 : 0);
+    p->kz0 = f4_seti(kz == 0 ? -1 : 0);
+    p->kz1 = f4_seti(kz == 1 ? -1 : 0);
+    p->uniform = 1;
+    p->kx = kx;
+    p->ky = ky;
+    p->kz = kz;
+    return 1;
+}
+
+/* Per-lane scalar precomputation, for blocks whose rays shear differently. */
+static void kf_pre_mixed(const kf_ctx *c, kf_group *g, const f4 d[3]) {
+    _Alignas(16) float dd[3][4];
+    kd_ray_pre pre[4];
+    for (int a = 0; a < 3; a++)
+        f4_store(dd[a], d[a]);
+    for (int j = 0; j < 4; j++) {
+        const float dir[3] = {dd[0][j], dd[1][j], dd[2][j]};
+        kd_ray_precompute(c->b->eye, dir, &pre[j]);
+    }
+    kf4_tri_pre_init(&g->pre, pre, 15, 0);
+}
+
+/* Fills group g with the 2x2 block at (x, y), clipped to [.., x1) x
+ * [.., y1): clipped-off lanes repeat a pixel of the block (so the block
+ * still shears uniformly) but are never live nor written. Widens the
+ * tile's direction interval. */
+static void kf_group_init(kf_ctx *c, kf_group *g, uint32_t x, uint32_t y,
+                          uint32_t x1, uint32_t y1, f4 dmin[3], f4 dmax[3]) {
+    const uint32_t xb = x + 1 < x1 ? x + 1 : x, yb = y + 1 < y1 ? y + 1 : y;
+    const f4 sx = _mm_setr_ps(c->sx_tab[x], c->sx_tab[xb], c->sx_tab[x], c->sx_tab[xb]);
+    const f4 sy = _mm_setr_ps(c->sy_tab[y], c->sy_tab[y], c->sy_tab[yb], c->sy_tab[yb]);
+    const size_t W = c->cam->width;
+    f4 d[3];
+    for (int a = 0; a < 3; a++) {
+        d[a] = f4_add(f4_add(f4_set1(c->b->f[a]), f4_mul(sx, f4_set1(c->b->r[a]))),
+                      f4_mul(sy, f4_set1(c->b->u[a])));
+        dmin[a] = f4_min(dmin[a], d[a]);
+        dmax[a] = f4_max(dmax[a], d[a]);
+        f4_store(g->inv[a], f4_div(f4_set1(1.0f), d[a]));
+    }
+    if (!kf_pre_uniform(c, g, d))
+        kf_pre_mixed(c, g, d);
+    g->pix[0] = (int32_t)((size_t)y * W + x);
+    g->pix[1] = xb > x ? (int32_t)((size_t)y * W + xb) : -1;
+    g->pix[2] = yb > y ? (int32_t)((size_t)yb * W + x) : -1;
+    g->pix[3] = xb > x && yb > y ? (int32_t)((size_t)yb * W + xb) : -1;
+    g->live = 1 | (g->pix[1] >= 0) << 1 | (g->pix[2] >= 0) << 2 | (g->pix[3] >= 0) << 3;
+    f4_store(g->t, f4_set1(INFINITY));
+    f4_store(g->u, f4_set1(0.0f));
+    f4_store(g->v, f4_set1(0.0f));
+    f4_store((float *)g->prim, f4_seti(KF_NO_PRIM));
     g->term = INFINITY;
 }
 
@@ -183,15 +243,26 @@ static void kf_group_update_term(kf_ctx *c, kf_group *g) {
     f4_store(tb, kf_term4(f4_load(g->t)));
     for (int j = 0; j < 4; j++)
         if ((g->live >> j) & 1)
-            m = fmaxf(m, tb[j]);
+            m = kf_maxf(m, tb[j]);
     g->term = m;
 }
 
 static void kf_tile_update_term(kf_ctx *c, kf_tile *ft) {
     float m = -INFINITY;
     for (size_t k = 0; k < ft->ng; k++)
-        m = fmaxf(m, c->groups[ft->g0 + k].term);
+        m = kf_maxf(m, c->groups[ft->g0 + k].term);
     ft->term = m;
+}
+
+static float kf_hmin(f4 v) {
+    _Alignas(16) float x[4];
+    f4_store(x, v);
+    return kf_minf(kf_minf(x[0], x[1]), kf_minf(x[2], x[3]));
+}
+static float kf_hmax(f4 v) {
+    _Alignas(16) float x[4];
+    f4_store(x, v);
+    return kf_maxf(kf_maxf(x[0], x[1]), kf_maxf(x[2], x[3]));
 }
 
 /* Builds tile k's groups in lane l; clips its rays to the root box (rays
@@ -202,35 +273,35 @@ static void kf_tile_init(kf_ctx *c, int l, size_t k) {
     const size_t tiles_x = ((size_t)W + T - 1) / T;
     const uint32_t x0 = (uint32_t)(k % tiles_x) * T, y0 = (uint32_t)(k / tiles_x) * T;
     const uint32_t x1 = W - x0 < T ? W : x0 + T, y1 = H - y0 < T ? H : y0 + T;
+    f4 dmin[3], dmax[3], tn = f4_set1(INFINITY), tf = f4_set1(-INFINITY);
     float rlo[3], rhi[3];
+    for (int a = 0; a < 3; a++) {
+        dmin[a] = f4_set1(INFINITY);
+        dmax[a] = f4_set1(-INFINITY);
+    }
     ft->g0 = (size_t)l * kf_groups_per_tile(T);
     ft->ng = 0;
-    ft->nrays = 0;
-    ft->tn = INFINITY;
-    ft->tf = -INFINITY;
-    for (int a = 0; a < 3; a++) {
-        ft->dmin[a] = INFINITY;
-        ft->dmax[a] = -INFINITY;
-    }
+    ft->nrays = (x1 - x0) * (y1 - y0);
     kf_rel_box(c, c->s->root.min, c->s->root.max, rlo, rhi);
     for (uint32_t y = y0; y < y1; y += 2) {
         for (uint32_t x = x0; x < x1; x += 2) {
             kf_group *g = &c->groups[ft->g0 + ft->ng++];
-            _Alignas(16) float tn[4], tf[4];
             f4 vn, vf;
-            kf_group_init(c, ft, g, x, y, x1, y1);
+            kf_group_init(c, g, x, y, x1, y1, dmin, dmax);
             g->live &= kf_group_box(g, rlo, rhi, &vn, &vf);
-            f4_store(tn, vn);
-            f4_store(tf, vf);
-            for (int j = 0; j < 4; j++) {
-                if ((g->live >> j) & 1) {
-                    ft->tn = fminf(ft->tn, tn[j]);
-                    ft->tf = fmaxf(ft->tf, tf[j]);
-                }
-            }
-            kf_group_update_term(c, g);
+            const f4 live = f4_bitmask(g->live);
+            tn = f4_min(tn, f4_sel(live, vn, f4_set1(INFINITY)));
+            tf = f4_max(tf, f4_sel(live, vf, f4_set1(-INFINITY)));
+            if (!g->live)
+                g->term = -INFINITY;
         }
     }
+    for (int a = 0; a < 3; a++) {
+        ft->dmin[a] = kf_hmin(dmin[a]);
+        ft->dmax[a] = kf_hmax(dmax[a]);
+    }
+    ft->tn = kf_hmin(tn);
+    ft->tf = kf_hmax(tf);
     kf_tile_update_term(c, ft);
 }
 
@@ -448,9 +519,9 @@ static void kf_write(const kf_ctx *c, kdr_hits *out) {
 static float kf_pad(const kdr_scene *s, const kd_camera_basis *b) {
     float m = 0.0f;
     for (int a = 0; a < 3; a++) {
-        m = fmaxf(m, fabsf(b->eye[a]));
-        m = fmaxf(m, fabsf(s->root.min[a]));
-        m = fmaxf(m, fabsf(s->root.max[a]));
+        m = kf_maxf(m, fabsf(b->eye[a]));
+        m = kf_maxf(m, fabsf(s->root.min[a]));
+        m = kf_maxf(m, fabsf(s->root.max[a]));
     }
     return m * KF_ABS_PAD + FLT_MIN;
 }
@@ -464,13 +535,20 @@ int kd_frustum_trace_tiles(const kdr_scene *s, const kdr_camera *cam,
     c.groups = malloc((size_t)KF_LANES * gpt * sizeof *c.groups);
     c.sel = malloc((size_t)KF_LANES * gpt * sizeof *c.sel);
     c.selbits = malloc((size_t)KF_LANES * gpt * sizeof *c.selbits);
-    if (!c.groups || !c.sel || !c.selbits) {
+    c.sx_tab = malloc(((size_t)cam->width + cam->height) * sizeof *c.sx_tab);
+    if (!c.groups || !c.sel || !c.selbits || !c.sx_tab) {
+        free(c.sx_tab);
         free(c.groups);
         free(c.sel);
         free(c.selbits);
         return KDR_ENOMEM;
     }
     c.pad = kf_pad(s, b);
+    c.sy_tab = c.sx_tab + cam->width;
+    for (uint32_t x = 0; x < cam->width; x++)
+        c.sx_tab[x] = kd_camera_sx(b, x);
+    for (uint32_t y = 0; y < cam->height; y++)
+        c.sy_tab[y] = kd_camera_sy(b, y);
     uint64_t rays = 0;
     for (size_t k = first; k < first + count; k += (size_t)c.nlanes) {
         c.nlanes = (int)(first + count - k < (size_t)lanes ? first + count - k : (size_t)lanes);
@@ -491,5 +569,6 @@ int kd_frustum_trace_tiles(const kdr_scene *s, const kdr_camera *cam,
     free(c.groups);
     free(c.sel);
     free(c.selbits);
+    free(c.sx_tab);
     return KDR_OK;
 }
