@@ -294,12 +294,12 @@ static void sweep_axis(const builder *b, const kdr_bounds *box,
     for (size_t i = 0; i < n;) {
         const uint32_t key = ev_key(e[i]);
         size_t pe = 0, pp = 0, ps = 0;
-        while (i < n && ev_key(e[i]) == key && ev_type(e[i]) == EV_END)
-            pe++, i++;
-        while (i < n && ev_key(e[i]) == key && ev_type(e[i]) == EV_PLANAR)
-            pp++, i++;
-        while (i < n && ev_key(e[i]) == key && ev_type(e[i]) == EV_START)
-            ps++, i++;
+        do { /* one group: the events at this position */
+            const unsigned type = ev_type(e[i]);
+            pe += type == EV_END;
+            pp += type == EV_PLANAR;
+            ps += type == EV_START;
+        } while (++i < n && ev_key(e[i]) == key);
         const float p = key_float(key);
         nr -= pp + pe;
         if (p > c.min && p < c.max)
@@ -335,31 +335,34 @@ static int grow(void **p, size_t *cap, size_t need, size_t elem) {
 }
 
 /* Marks each triangle of the node LEFT, RIGHT or BOTH and gathers the BOTH
- * ones in b->both; returns their count, or (size_t)-1 without memory. */
+ * ones in b->both; returns their count, or (size_t)-1 without memory.
+ * One pass over the split axis suffices: a triangle's start event comes
+ * before its end event. */
 static size_t classify(builder *b, const ev_list *ev, const kd_split *s) {
-    const kd_event *e0 = ev->e[0];
-    for (size_t i = 0; i < ev->n[0]; i++)
-        if (ev_type(e0[i]) != EV_END)
-            b->side[ev_tri(e0[i])] = SIDE_BOTH;
-    const kd_event *e = ev->e[s->axis];
-    for (size_t i = 0; i < ev->n[s->axis]; i++) {
-        const float p = key_float(ev_key(e[i]));
-        const unsigned type = ev_type(e[i]);
-        uint8_t *side = &b->side[ev_tri(e[i])];
-        if (type == EV_END && p <= s->pos)
-            *side = SIDE_LEFT;
-        else if (type == EV_START && p >= s->pos)
-            *side = SIDE_RIGHT;
-        else if (type == EV_PLANAR)
-            *side = (p < s->pos || (p == s->pos && s->planar_left)) ? SIDE_LEFT
-                                                                    : SIDE_RIGHT;
-    }
     if (grow((void **)&b->both, &b->both_cap, ev->ntri + 1, sizeof *b->both))
         return (size_t)-1;
+    const kd_event *e = ev->e[s->axis];
+    const uint32_t split_key = float_key(s->pos + 0.0f);
+    uint8_t *side = b->side;
     size_t nboth = 0;
-    for (size_t i = 0; i < ev->n[0]; i++)
-        if (ev_type(e0[i]) != EV_END && b->side[ev_tri(e0[i])] == SIDE_BOTH)
-            b->both[nboth++] = ev_tri(e0[i]);
+    for (size_t i = 0; i < ev->n[s->axis]; i++) {
+        const uint32_t key = ev_key(e[i]), tri = ev_tri(e[i]);
+        switch (ev_type(e[i])) {
+        case EV_START:
+            side[tri] = key >= split_key ? SIDE_RIGHT : SIDE_BOTH;
+            break;
+        case EV_END:
+            if (key <= split_key)
+                side[tri] = SIDE_LEFT;
+            else if (side[tri] == SIDE_BOTH)
+                b->both[nboth++] = tri;
+            break;
+        default: /* planar */
+            side[tri] = (key < split_key || (key == split_key && s->planar_left))
+                            ? SIDE_LEFT
+                            : SIDE_RIGHT;
+        }
+    }
     return nboth;
 }
 
