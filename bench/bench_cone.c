@@ -13,7 +13,8 @@
  * gnuplot is installed) a log-log PNG through bench/plot_cone.gp.
  *
  * usage: kdray_bench_cone [--res N] [--max-samples N] [--out PREFIX]
- *                         [scene.glb ...]
+ *                         [--methods MASK] [--ref-samples N] [scene.glb ...]
+ * --methods 4 --ref-samples 1 runs the cone alone (for a profiler).
  */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
@@ -41,6 +42,8 @@
 
 enum { M_EMBREE, M_KD_RAYS, M_KD_CONE, M_COUNT };
 static const char *method_name[M_COUNT] = {"embree_rays", "kd_rays", "kd_cone"};
+static int method_mask = (1 << M_COUNT) - 1;
+static int ref_samples = BENCH_REF_SAMPLES;
 
 static double now_s(void) {
     struct timespec ts;
@@ -215,7 +218,7 @@ static int bench_config(const char *name, const kdr_scene *s, RTCScene es,
                           .lights = &li, .nlights = 1, .seed = 0x5eed,
                           .epsilon = BENCH_EPSILON};
     float *ref = malloc(q.n * sizeof *ref), *vis = malloc(q.n * sizeof *vis);
-    q.samples = BENCH_REF_SAMPLES;
+    q.samples = (uint32_t)ref_samples;
     q.seed = 0xfeedbeef; /* independent of the measured estimates */
     double t0 = now_s();
     if (embree_visibility(s, es, &q, ref) != 0)
@@ -230,7 +233,7 @@ static int bench_config(const char *name, const kdr_scene *s, RTCScene es,
     printf("\n%s, %s light: %zu points, lit %.1f%%, umbra %.1f%%, penumbra "
            "%.1f%% (reference %d spp: %.2f s)\n",
            name, lname, q.n, 100.0 * lit / q.n, 100.0 * dark / q.n,
-           100.0 * (q.n - lit - dark) / q.n, BENCH_REF_SAMPLES, ref_s);
+           100.0 * (q.n - lit - dark) / q.n, ref_samples, ref_s);
     printf("%8s %12s %10s %9s %12s %10s %9s %12s %10s %9s %9s %8s\n", "samples",
            "embree_s", "rmse", "Mray/s", "kd_rays_s", "rmse", "Mray/s",
            "kd_cone_s", "rmse", "decided", "cone/emb", "rays/emb");
@@ -240,6 +243,9 @@ static int bench_config(const char *name, const kdr_scene *s, RTCScene es,
     for (int n = 1; n <= max_samples; n *= 2, nrows++) {
         q.samples = (uint32_t)n;
         for (int m = 0; m < M_COUNT; m++) {
+            res[m][nrows] = (run_result){1.0, 1.0, 0, 0};
+            if (!((method_mask >> m) & 1))
+                continue;
             if (measure(m, s, es, &q, ref, vis, &res[m][nrows]) != 0)
                 return -1;
             const run_result *r = &res[m][nrows];
@@ -359,10 +365,15 @@ int main(int argc, char **argv) {
             max_samples = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--out") && a + 1 < argc)
             prefix = argv[++a];
+        else if (!strcmp(argv[a], "--methods") && a + 1 < argc)
+            method_mask = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--ref-samples") && a + 1 < argc)
+            ref_samples = atoi(argv[++a]);
         else if (np < 16)
             paths[np++] = argv[a];
     }
-    if (res < 4 || max_samples < 1 || max_samples > 4096) {
+    if (res < 4 || max_samples < 1 || max_samples > 4096 || ref_samples < 1 ||
+        ref_samples > 4096) {
         fprintf(stderr, "usage: %s [--res N] [--max-samples N] [--out PREFIX] "
                         "[scene.glb ...]\n", argv[0]);
         return 2;

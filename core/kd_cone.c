@@ -25,71 +25,75 @@
 #include "kd_tri.h"
 
 #define SHADOW_MAX_SAMPLES 4096u
-/* Tuning (bench/bench_cone.c): budgets of the whole-light cone, above which
- * the samples are grouped, and of each group's cone, above which its
- * samples go through the tree one by one. */
-#define CONE_MAX_CANDS 48u
-#define CONE_MAX_NODES 384u
-#define GROUP_SIZE 16u
-#define GROUP_MAX_CANDS 32u
-#define GROUP_MAX_NODES 256u
+/* Tuning (bench/bench_cone.c): the whole-light cone gives up beyond
+ * CONE_MAX_CANDS candidates or CONE_NODES_BASE + CONE_NODES_PER_SAMPLE *
+ * samples nodes (a wasted walk then costs a fraction of a ray per sample).
+ * The samples are then cut into packets of 4 or 8 neighbours on the light's
+ * disc, each walking its own narrow cone; a packet's lanes still undecided
+ * after GROUP_MAX_NODES nodes go through the tree one by one. */
+#define CONE_MAX_CANDS 32u
+#define CONE_NODES_BASE 24u
+#define CONE_NODES_PER_SAMPLE 6u
+#define GROUP_MAX_NODES 512u
 #define NO_PRIM UINT32_MAX
 
 typedef struct shadow_ws {
     kd_cand_list cl;
-    kdr_ray *rays;  /* the samples of one (point, light), grouped path */
-    uint64_t *keys; /* Morton key << 12 | sample */
+    kdr_ray *rays;  /* the samples of one (point, light) */
+    uint32_t *idx;  /* pending (not yet decided) samples */
+    uint64_t *keys; /* Morton key << 12 | sample, for grouping */
     uint32_t *last; /* last blocker per light */
+    int wide;       /* AVX2 packets */
     kdr_shadow_stats st;
 } shadow_ws;
 
-/* ---- testing one sample -------------------------------------------------- */
+/* ---- testing samples ----------------------------------------------------- */
 
-static int hits_tri(const kdr_scene *scene, const kd_ray_pre *pre,
-                    const kdr_ray *r, uint32_t prim) {
-    float t, u, v;
-    return kd_tri_intersect(pre, scene->tris + 9 * (size_t)prim, r->tmin,
-                            r->tmax, &t, &u, &v);
+/* Of the samples idx[0..n), keeps in idx those the candidates do not block
+ * (packets of 8); returns how many are kept. */
+static uint32_t filter_by_list(const kdr_scene *scene, shadow_ws *ws,
+                               uint32_t *idx, uint32_t n, const uint32_t *cands,
+                               size_t ncand, uint32_t *last) {
+    uint32_t kept = 0;
+    for (uint32_t g = 0; g < n; g += 8) {
+        const kdr_ray *lanes[8];
+        const int m = (int)(n - g < 8 ? n - g : 8);
+        for (int j = 0; j < m; j++)
+            lanes[j] = &ws->rays[idx[g + j]];
+        const int blocked = kd_cone_packet_blocked(scene, lanes, m, cands, ncand,
+                                                   last, ws->wide);
+        for (int j = 0; j < m; j++)
+            if (!((blocked >> j) & 1))
+                idx[kept++] = idx[g + j];
+    }
+    ws->st.rays_traced += n;
+    return kept;
 }
 
-/* Occlusion of r by the candidates (cl non-NULL) or by the whole tree. */
-static int sample_blocked(const kdr_scene *scene, const kdr_ray *r,
-                          const kd_cand_list *cl, uint32_t *last,
-                          kdr_shadow_stats *st) {
-    kd_ray_pre pre;
-    kd_ray_precompute(r->org, r->dir, &pre);
-    st->rays_traced++;
-    if (*last != NO_PRIM && hits_tri(scene, &pre, r, *last))
-        return 1;
-    if (!cl) {
-        kdr_trav_stats ts = {0};
-        const int hit = kdr_occluded1(scene, r, &ts);
-        st->nodes_visited += ts.nodes_visited;
-        return hit;
-    }
-    for (size_t j = 0; j < cl->n; j++) {
-        if (hits_tri(scene, &pre, r, cl->v[j])) {
-            *last = cl->v[j];
-            return 1;
-        }
-    }
-    return 0;
-}
-
-/* Lit samples among all of the frame's, each against cl (or the tree). */
-static uint32_t lit_all(const kdr_scene *scene, const kd_shadow_frame *f,
-                        uint32_t nsamples, const kd_cand_list *cl,
-                        uint32_t *last, kdr_shadow_stats *st) {
+/* Lit samples among idx[0..n), each traced through the whole tree. */
+static uint32_t lit_by_tree(const kdr_scene *scene, shadow_ws *ws,
+                            const uint32_t *idx, uint32_t n) {
+    kdr_trav_stats ts = {0};
     uint32_t lit = 0;
-    for (uint32_t s = 0; s < nsamples; s++) {
-        kdr_ray r;
-        kd_shadow_frame_ray(f, s, nsamples, &r);
-        lit += sample_blocked(scene, &r, cl, last, st) ? 0u : 1u;
-    }
+    for (uint32_t j = 0; j < n; j++)
+        lit += kdr_occluded1(scene, &ws->rays[idx[j]], &ts) ? 0u : 1u;
+    ws->st.rays_traced += n;
+    ws->st.nodes_visited += ts.nodes_visited;
     return lit;
 }
 
-/* ---- grouped samples --------------------------------------------------------- */
+/* Drops the pending samples that the last blocker blocks. */
+static uint32_t filter_by_last(const kdr_scene *scene, shadow_ws *ws,
+                               uint32_t *idx, uint32_t n, uint32_t *last) {
+    if (*last == NO_PRIM || n == 0)
+        return n;
+    const uint32_t cand = *last;
+    const uint32_t kept = filter_by_list(scene, ws, idx, n, &cand, 1, last);
+    ws->st.rays_traced -= n; /* counted when they are decided */
+    return kept;
+}
+
+/* ---- packets of neighbouring samples ------------------------------------------ */
 
 /* Spreads the low 16 bits of x to the even bits. */
 static uint32_t spread_bits(uint32_t x) {
@@ -114,22 +118,36 @@ static int cmp_u64(const void *a, const void *b) {
     return (x > y) - (x < y);
 }
 
-/* The narrowest cone (around the mean direction) holding the group's
- * samples; returns 0 if it would be too wide to help. */
+/* Orders the pending samples along a Morton curve of the light's disc, so
+ * that consecutive samples are close in direction. */
+static void sort_pending(const kd_shadow_frame *f, shadow_ws *ws, uint32_t n) {
+    for (uint32_t j = 0; j < n; j++) {
+        const float *d = ws->rays[ws->idx[j]].dir;
+        const uint64_t m = spread_bits(disc_coord(f, d, f->b1)) |
+                           spread_bits(disc_coord(f, d, f->b2)) << 1;
+        ws->keys[j] = m << 12 | ws->idx[j];
+    }
+    qsort(ws->keys, n, sizeof *ws->keys, cmp_u64);
+    for (uint32_t j = 0; j < n; j++)
+        ws->idx[j] = (uint32_t)(ws->keys[j] & 0xfffu);
+}
+
+/* The narrowest cone around the mean direction holding samples idx[0..n);
+ * 0 if it would be too wide to help. */
 static int group_cone(const kdr_scene *scene, const kd_shadow_frame *f,
-                      const kdr_ray *rays, const uint64_t *keys, uint32_t n,
+                      const kdr_ray *rays, const uint32_t *idx, uint32_t n,
                       kd_cone *c) {
-    double axis[3] = {0, 0, 0}, len = 0.0, cos_min = 1.0;
+    double axis[3] = {0, 0, 0}, cos_min = 1.0;
     for (uint32_t j = 0; j < n; j++)
         for (int k = 0; k < 3; k++)
-            axis[k] += rays[keys[j] & 0xfffu].dir[k];
-    len = sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
+            axis[k] += rays[idx[j]].dir[k];
+    const double len = sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
     if (!(len > 0.0))
         return 0;
     for (int k = 0; k < 3; k++)
         axis[k] /= len;
     for (uint32_t j = 0; j < n; j++) {
-        const float *d = rays[keys[j] & 0xfffu].dir;
+        const float *d = rays[idx[j]].dir;
         const double dl = sqrt((double)d[0] * d[0] + (double)d[1] * d[1] +
                                (double)d[2] * d[2]);
         cos_min = fmin(cos_min, (d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2]) / dl);
@@ -140,39 +158,41 @@ static int group_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     return 1;
 }
 
-/* Lit samples when the whole-light cone was too busy. */
-static int lit_grouped(const kdr_scene *scene, const kd_shadow_frame *f,
-                       uint32_t nsamples, shadow_ws *ws, uint32_t *last,
-                       uint32_t *lit) {
-    for (uint32_t s = 0; s < nsamples; s++) {
-        kdr_ray *r = &ws->rays[s];
-        kd_shadow_frame_ray(f, s, nsamples, r);
-        const uint64_t m = spread_bits(disc_coord(f, r->dir, f->b1)) |
-                           spread_bits(disc_coord(f, r->dir, f->b2)) << 1;
-        ws->keys[s] = m << 12 | s;
+static uint32_t popcount8(int m) {
+    uint32_t c = 0;
+    for (; m; m &= m - 1)
+        c++;
+    return c;
+}
+
+/* Lit samples of one packet idx[0..n) (reordered in place). */
+static void lit_group(const kdr_scene *scene, const kd_shadow_frame *f,
+                      shadow_ws *ws, uint32_t *idx, uint32_t n, uint32_t *last,
+                      uint32_t *lit) {
+    const uint32_t n0 = n;
+    n = filter_by_last(scene, ws, idx, n, last);
+    ws->st.rays_traced += n0 - n;
+    if (n == 0)
+        return;
+    kd_cone c;
+    if (!group_cone(scene, f, ws->rays, idx, n, &c)) {
+        *lit += lit_by_tree(scene, ws, idx, n);
+        return;
     }
-    qsort(ws->keys, nsamples, sizeof *ws->keys, cmp_u64);
-    *lit = 0;
-    for (uint32_t g = 0; g < nsamples; g += GROUP_SIZE) {
-        const uint32_t n = nsamples - g < GROUP_SIZE ? nsamples - g : GROUP_SIZE;
-        const uint64_t *keys = ws->keys + g;
-        kd_cone c;
-        int rc = KD_CONE_OVER;
-        if (group_cone(scene, f, ws->rays, keys, n, &c))
-            rc = kd_cone_collect(scene, &c, &ws->cl, GROUP_MAX_CANDS,
-                                 GROUP_MAX_NODES, &ws->st.nodes_visited);
-        if (rc == KDR_ENOMEM)
-            return rc;
-        const kd_cand_list *cl = rc == KDR_OK ? &ws->cl : NULL;
-        if (cl && cl->n == 0) {
-            *lit += n;
-            continue;
-        }
-        for (uint32_t j = 0; j < n; j++)
-            *lit += sample_blocked(scene, &ws->rays[keys[j] & 0xfffu], cl, last,
-                                   &ws->st) ? 0u : 1u;
-    }
-    return KDR_OK;
+    const kdr_ray *lanes[8];
+    for (uint32_t j = 0; j < n; j++)
+        lanes[j] = &ws->rays[idx[j]];
+    int open = 0;
+    const int blocked = kd_cone_packet_walk(scene, &c, lanes, (int)n,
+                                            GROUP_MAX_NODES, last,
+                                            &ws->st.nodes_visited, &open, ws->wide);
+    ws->st.rays_traced += n - popcount8(open);
+    *lit += popcount8(((1 << n) - 1) & ~blocked & ~open);
+    uint32_t rest[8], nrest = 0;
+    for (uint32_t j = 0; j < n; j++)
+        if ((open >> j) & 1)
+            rest[nrest++] = idx[j];
+    *lit += lit_by_tree(scene, ws, rest, nrest);
 }
 
 /* ---- one (point, light) ---------------------------------------------------- */
@@ -181,37 +201,82 @@ static int ws_reserve(shadow_ws *ws, uint32_t nsamples) {
     if (ws->rays)
         return KDR_OK;
     ws->rays = malloc(nsamples * sizeof *ws->rays);
+    ws->idx = malloc(nsamples * sizeof *ws->idx);
     ws->keys = malloc(nsamples * sizeof *ws->keys);
-    return ws->rays && ws->keys ? KDR_OK : KDR_ENOMEM;
+    return ws->rays && ws->idx && ws->keys ? KDR_OK : KDR_ENOMEM;
+}
+
+static void make_samples(const kd_shadow_frame *f, uint32_t n, shadow_ws *ws) {
+    for (uint32_t s = 0; s < n; s++) {
+        kd_shadow_frame_ray(f, s, n, &ws->rays[s]);
+        ws->idx[s] = s;
+    }
+}
+
+/* 1 if the last blocker also blocks sample 0: the point is probably in
+ * umbra, and testing every sample against it first is worth it. */
+static int umbra_likely(const kdr_scene *scene, const kd_shadow_frame *f,
+                        uint32_t n, uint32_t last) {
+    kdr_ray r;
+    kd_ray_pre pre;
+    float t, u, v;
+    if (last == NO_PRIM)
+        return 0;
+    kd_shadow_frame_ray(f, 0, n, &r);
+    kd_ray_precompute(r.org, r.dir, &pre);
+    return kd_tri_intersect(&pre, scene->tris + 9 * (size_t)last, r.tmin, r.tmax,
+                            &t, &u, &v);
+}
+
+/* Lit samples once the whole-light cone was walked (rc, ws->cl). */
+static int lit_after_walk(const kdr_scene *scene, const kd_shadow_frame *f,
+                          shadow_ws *ws, int rc, uint32_t n, uint32_t *last,
+                          uint32_t *lit) {
+    if (rc == KDR_OK) {
+        *lit = filter_by_list(scene, ws, ws->idx, n, ws->cl.v, ws->cl.n, last);
+        return KDR_OK;
+    }
+    const uint32_t width = ws->wide ? 8u : 4u;
+    sort_pending(f, ws, n);
+    *lit = 0;
+    for (uint32_t g = 0; g < n; g += width)
+        lit_group(scene, f, ws, ws->idx + g, n - g < width ? n - g : width, last,
+                  lit);
+    return KDR_OK;
 }
 
 static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
                               uint32_t nsamples, shadow_ws *ws, uint32_t *last,
                               float *vis) {
-    kd_cone c;
-    uint32_t lit = 0;
-    kd_cone_init(&c, scene, f, NULL, 0.0);
-    int rc = kd_cone_collect(scene, &c, &ws->cl, CONE_MAX_CANDS, CONE_MAX_NODES,
-                             &ws->st.nodes_visited);
-    if (rc == KDR_OK && ws->cl.n == 0) {
-        ws->st.cones_decided++;
-        *vis = 1.0f;
-        return KDR_OK;
-    }
-    if (rc == KDR_OK) {
-        lit = lit_all(scene, f, nsamples, &ws->cl, last, &ws->st);
-    } else if (rc == KD_CONE_OVER && nsamples >= 2 * GROUP_SIZE) {
-        rc = ws_reserve(ws, nsamples);
-        if (rc == KDR_OK)
-            rc = lit_grouped(scene, f, nsamples, ws, last, &lit);
-    } else if (rc == KD_CONE_OVER) {
-        lit = lit_all(scene, f, nsamples, NULL, last, &ws->st);
-        rc = KDR_OK;
-    }
+    uint32_t pending = nsamples, lit = 0;
+    int made = 0, rc = ws_reserve(ws, nsamples);
     if (rc != KDR_OK)
         return rc;
+    if (umbra_likely(scene, f, nsamples, *last)) {
+        make_samples(f, nsamples, ws);
+        made = 1;
+        pending = filter_by_last(scene, ws, ws->idx, nsamples, last);
+        ws->st.rays_traced += nsamples - pending;
+    }
+    if (pending > 0) {
+        kd_cone c;
+        kd_cone_init(&c, scene, f, NULL, 0.0);
+        rc = kd_cone_collect(scene, &c, &ws->cl, CONE_MAX_CANDS,
+                             CONE_NODES_BASE + CONE_NODES_PER_SAMPLE * pending,
+                             &ws->st.nodes_visited);
+        if (rc == KDR_ENOMEM)
+            return rc;
+        if (rc == KDR_OK && ws->cl.n == 0) {
+            ws->st.cones_decided += !made;
+            lit = pending;
+        } else {
+            if (!made)
+                make_samples(f, nsamples, ws);
+            rc = lit_after_walk(scene, f, ws, rc, pending, last, &lit);
+        }
+    }
     *vis = (float)lit / (float)nsamples;
-    return KDR_OK;
+    return rc;
 }
 
 /* ---- the query ----------------------------------------------------------- */
@@ -234,9 +299,12 @@ static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q,
             float *vis = &visibility[i * q->nlights + l];
             int rc = kd_shadow_frame_init(scene, q, i, l, &f);
             if (rc == KDR_OK && mode == KDR_SHADOW_RAYS) {
-                uint32_t none = NO_PRIM;
-                *vis = (float)lit_all(scene, &f, q->samples, NULL, &none, &ws->st) /
-                       (float)q->samples;
+                rc = ws_reserve(ws, q->samples);
+                if (rc == KDR_OK) {
+                    make_samples(&f, q->samples, ws);
+                    *vis = (float)lit_by_tree(scene, ws, ws->idx, q->samples) /
+                           (float)q->samples;
+                }
             } else if (rc == KDR_OK) {
                 rc = visibility_by_cone(scene, &f, q->samples, ws, &ws->last[l], vis);
             }
@@ -255,6 +323,7 @@ int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
     if (mode != KDR_SHADOW_CONE && mode != KDR_SHADOW_RAYS)
         return KDR_EINVAL;
     shadow_ws ws = {0};
+    ws.wide = kdr_cpu_has_avx2();
     ws.last = malloc(q->nlights * sizeof *ws.last);
     int rc = ws.last ? KDR_OK : KDR_ENOMEM;
     for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++)
@@ -268,6 +337,7 @@ int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
     }
     free(ws.cl.v);
     free(ws.rays);
+    free(ws.idx);
     free(ws.keys);
     free(ws.last);
     return rc;

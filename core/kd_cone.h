@@ -11,6 +11,7 @@
 
 #include <stdint.h>
 
+#include "kd_internal.h"
 #include "kdray.h"
 
 typedef struct kd_shadow_frame {
@@ -46,6 +47,7 @@ void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
 typedef struct kd_cone {
     float apex[3];
     float lo[3], hi[3]; /* slopes of the cone's extent along each world axis */
+    float inv_lo[3], inv_nhi[3]; /* 1 / lo, -1 / hi */
     float band;         /* positional slack (apex rounding, triangle test) */
     float t_far;        /* axial reach: every segment ends before it */
     double dapex[3], axis[3];
@@ -56,6 +58,23 @@ typedef struct kd_cone {
  * with half-angle asin(sin_a) from the frame's apex. */
 void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
                   const double *axis, double sin_a);
+
+/* Leaf by leaf, front to back (kd_cone_walk_next returns NULL at the end). */
+typedef struct kd_cone_item {
+    uint32_t node;
+    float tn, tf;
+} kd_cone_item;
+
+typedef struct kd_cone_walk {
+    const kdr_scene *scene;
+    const kd_cone *cone;
+    kd_cone_item stack[KD_MAX_DEPTH + 2]; /* one push per level at most */
+    int top;
+    uint64_t visited; /* nodes entered so far */
+} kd_cone_walk;
+
+void kd_cone_walk_init(kd_cone_walk *w, const kdr_scene *scene, const kd_cone *c);
+const struct kd_node *kd_cone_walk_next(kd_cone_walk *w);
 
 typedef struct kd_cand_list {
     uint32_t *v;
@@ -70,5 +89,24 @@ typedef struct kd_cand_list {
  * list is then incomplete). Adds the nodes visited to *nodes. */
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
                     size_t max_cands, uint64_t max_nodes, uint64_t *nodes);
+
+/* ---- packets (kd_cone_packet.c) ------------------------------------------ */
+
+/* Tests the n <= 8 rays lanes[0..n) against the candidates (any hit in each
+ * ray's [tmin, tmax]); returns the mask of blocked lanes and sets *blocker
+ * to the last triangle that blocked one. wide: use AVX2 (only when
+ * kdr_cpu_has_avx2()). */
+int kd_cone_packet_blocked(const kdr_scene *scene, const kdr_ray *const *lanes,
+                           int n, const uint32_t *cands, size_t ncand,
+                           uint32_t *blocker, int wide);
+
+/* The n rays (n <= 8 with wide, <= 4 without) walk cone c together, testing
+ * each leaf's triangles on the way; returns the mask of blocked lanes. When
+ * more than max_nodes nodes would be needed the lanes still undecided are
+ * returned in *open (they must be traced otherwise). */
+int kd_cone_packet_walk(const kdr_scene *scene, const kd_cone *c,
+                        const kdr_ray *const *lanes, int n, uint64_t max_nodes,
+                        uint32_t *blocker, uint64_t *visited, int *open,
+                        int wide);
 
 #endif /* KD_CONE_H */

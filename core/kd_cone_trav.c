@@ -64,6 +64,8 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
         c->axis[k] = axis[k];
         c->lo[k] = (float)axis[k] - spread;
         c->hi[k] = (float)axis[k] + spread;
+        c->inv_lo[k] = 1.0f / c->lo[k];    /* the paper's precomputed */
+        c->inv_nhi[k] = -1.0f / c->hi[k];  /* denominators, inverted */
     }
     c->band = magnitude(scene, f->apex, f->along) * KD_SLACK_REL + FLT_MIN;
     c->t_far = (float)f->dist * (1.0f + 0x1p-16f) + f->along;
@@ -73,38 +75,40 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
     c->tan_p = a < CULL_MAX_ANGLE ? c->sin_p / c->cos_p : INFINITY;
 }
 
-/* The t >= 0 with t*m <= e, as [*lo, *hi] padded outward; 0 (and *lo, *hi
- * untouched) if none. This
+/* The t >= 0 with t*m <= e (inv_m = 1/m), as [*lo, *hi] padded outward
+ * (CONE_REL_PAD covers the rounding of the reciprocal and the product); 0
+ * (and *lo, *hi untouched) if none. A zero slope never reaches a product. This
  * one case analysis covers the hard cases: an axis parallel to the plane
  * (both slopes non-zero thanks to the slack), wide cones whose slopes have
  * opposite signs (one side is reached from the apex on, the other never ends),
  * and an apex on the plane (e = band >= 0 on both sides). */
-static int halfline(float m, float e, float *lo, float *hi) {
+static int halfline(float m, float inv_m, float e, float *lo, float *hi) {
     if (e >= 0.0f) {
         *lo = 0.0f;
-        *hi = m > 0.0f ? (e / m) * (1.0f + CONE_REL_PAD) : INFINITY;
+        *hi = m > 0.0f ? (e * inv_m) * (1.0f + CONE_REL_PAD) : INFINITY;
         return 1;
     }
     if (m >= 0.0f)
         return 0;
-    *lo = (e / m) * (1.0f - CONE_REL_PAD);
+    *lo = (e * inv_m) * (1.0f - CONE_REL_PAD);
     *hi = INFINITY;
     return 1;
 }
 
 /* Interval of t where the cone reaches the side x_k <= split (below != 0)
- * or x_k >= split, clipped to [tn, tf]; 0 if empty. */
+ * or x_k >= split, clipped to [tn, tf]; 0 if empty. (Plain comparisons, not
+ * fminf/fmaxf: no operand is NaN and the libm calls showed in profiles.) */
 static int cone_side(const kd_cone *c, int k, float split, int below, float tn,
                      float tf, float *t0, float *t1) {
     const float delta = split - c->apex[k];
     const float band = c->band + fabsf(split) * CONE_REL_PAD;
     float lo = INFINITY, hi = 0.0f; /* empty unless halfline says otherwise */
     if (below)
-        halfline(c->lo[k], delta + band, &lo, &hi);
+        halfline(c->lo[k], c->inv_lo[k], delta + band, &lo, &hi);
     else
-        halfline(-c->hi[k], band - delta, &lo, &hi);
-    *t0 = fmaxf(lo, tn);
-    *t1 = fminf(hi, tf);
+        halfline(-c->hi[k], c->inv_nhi[k], band - delta, &lo, &hi);
+    *t0 = lo > tn ? lo : tn;
+    *t1 = hi < tf ? hi : tf;
     return *t0 <= *t1;
 }
 
@@ -194,40 +198,60 @@ static int cmp_u32(const void *a, const void *b) {
 
 /* ---- the walk ------------------------------------------------------------------ */
 
-typedef struct cone_item {
-    uint32_t node;
-    float tn, tf;
-} cone_item;
-
-/* Walks from it.node down to a leaf, pushing the far child wherever the
- * cone reaches both sides; NULL if the cone leaves the subtree. */
-static const kd_node *cone_descend(const kdr_scene *scene, const kd_cone *c,
-                                   cone_item it, cone_item *stack, int *top,
-                                   uint64_t *nodes_visited) {
-    const kd_node *node = &scene->nodes[it.node];
+/* Walks from it down to a leaf, stacking the far child wherever the cone
+ * reaches both sides (the apex's side is near: front to back, so that a
+ * packet of samples meets its nearest blockers first); NULL if the cone
+ * leaves the subtree. */
+static const kd_node *cone_descend(kd_cone_walk *w, kd_cone_item it) {
+    const kd_node *nodes = w->scene->nodes, *node = &nodes[it.node];
+    const kd_cone *c = w->cone;
     for (;;) {
-        ++*nodes_visited;
+        w->visited++;
         if (kd_is_leaf(node))
             return node;
         const int k = kd_axis(node);
         const float split = node->u.split;
-        float b0, b1, a0, a1;
-        const int below = cone_side(c, k, split, 1, it.tn, it.tf, &b0, &b1);
-        const int above = cone_side(c, k, split, 0, it.tn, it.tf, &a0, &a1);
-        if (below && above)
-            stack[(*top)++] = (cone_item){kd_above(node), a0, a1};
-        if (below) {
-            node = node + 1;
-            it.tn = b0;
-            it.tf = b1;
-        } else if (above) {
-            node = &scene->nodes[kd_above(node)];
-            it.tn = a0;
-            it.tf = a1;
+        kd_cone_item b = {(uint32_t)(node - nodes) + 1, 0, 0};
+        kd_cone_item a = {kd_above(node), 0, 0};
+        const int below = cone_side(c, k, split, 1, it.tn, it.tf, &b.tn, &b.tf);
+        const int above = cone_side(c, k, split, 0, it.tn, it.tf, &a.tn, &a.tf);
+        const int below_first = c->apex[k] <= split;
+        if (below && above) {
+            w->stack[w->top++] = below_first ? a : b;
+            it = below_first ? b : a;
+        } else if (below || above) {
+            it = below ? b : a;
         } else {
             return NULL;
         }
+        node = &nodes[it.node];
     }
+}
+
+void kd_cone_walk_init(kd_cone_walk *w, const kdr_scene *scene,
+                       const kd_cone *c) {
+    float tn, tf;
+    w->scene = scene;
+    w->cone = c;
+    w->top = 0;
+    w->visited = 0;
+    if (scene->nodes && cone_clip_root(scene, c, &tn, &tf))
+        w->stack[w->top++] = (kd_cone_item){0, tn, tf};
+}
+
+/*
+ * The paper's cone traversal with a stack: at each split, each child is
+ * entered over the part of [tn, tf] where the cone reaches its side of the
+ * plane (cone_side); see the file comment for why no reachable leaf is
+ * skipped. Returns the next leaf, or NULL when the walk is over.
+ */
+const kd_node *kd_cone_walk_next(kd_cone_walk *w) {
+    while (w->top > 0) {
+        const kd_node *leaf = cone_descend(w, w->stack[--w->top]);
+        if (leaf)
+            return leaf;
+    }
+    return NULL;
 }
 
 /* Appends the leaf's triangles that may touch a segment; 0 once the list
@@ -271,31 +295,20 @@ static void cand_unique(kd_cand_list *cl) {
     cl->n = out;
 }
 
-/*
- * The paper's cone traversal with a stack: at each split, each child is
- * entered over the part of [tn, tf] where the cone reaches its side of the
- * plane (cone_side); see the file comment for why no reachable leaf is
- * skipped.
- */
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
                     size_t max_cands, uint64_t max_nodes, uint64_t *nodes) {
-    cone_item stack[KD_MAX_DEPTH + 2]; /* one push per level at most */
-    int top = 0, rc = KDR_OK;
-    uint64_t visited = 0;
-    float tn, tf;
+    kd_cone_walk w;
+    const kd_node *leaf;
+    int rc = KDR_OK;
     cl->n = 0;
-    if (!scene->nodes || !cone_clip_root(scene, c, &tn, &tf))
-        return KDR_OK;
-    stack[top++] = (cone_item){0, tn, tf};
-    while (top > 0 && rc == KDR_OK) {
-        const kd_node *leaf =
-            cone_descend(scene, c, stack[--top], stack, &top, &visited);
-        if (leaf && !take_leaf(scene, c, leaf, cl, max_cands, &rc))
+    kd_cone_walk_init(&w, scene, c);
+    while (rc == KDR_OK && (leaf = kd_cone_walk_next(&w)) != NULL) {
+        if (!take_leaf(scene, c, leaf, cl, max_cands, &rc))
             break;
-        if (visited > max_nodes)
+        if (w.visited > max_nodes)
             rc = KD_CONE_OVER;
     }
-    *nodes += visited;
+    *nodes += w.visited;
     if (rc == KDR_OK)
         cand_unique(cl);
     return rc;
