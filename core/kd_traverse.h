@@ -40,14 +40,20 @@
 static inline void kd_ray_slack_dt(const struct kdr_scene *s, const float org[3],
                                    const float dir[3], const float inv_dir[3],
                                    float dt[3]) {
+    /* plain compares: fmaxf is a library call without -ffast-math */
     float m = 0.0f;
     for (int k = 0; k < 3; k++) {
-        m = fmaxf(m, fmaxf(fabsf(s->root.min[k]), fabsf(s->root.max[k])));
-        m = fmaxf(m, fabsf(org[k]));
+        const float a = -s->root.min[k], b = s->root.max[k];
+        const float o = org[k] < 0.0f ? -org[k] : org[k];
+        m = a > m ? a : m;
+        m = b > m ? b : m;
+        m = o > m ? o : m;
     }
     const float slack = m * KD_SLACK_REL;
-    for (int k = 0; k < 3; k++)
-        dt[k] = dir[k] == 0.0f ? 0.0f : slack * fabsf(inv_dir[k]);
+    for (int k = 0; k < 3; k++) {
+        const float ai = inv_dir[k] < 0.0f ? -inv_dir[k] : inv_dir[k];
+        dt[k] = dir[k] == 0.0f ? 0.0f : slack * ai;
+    }
 }
 
 /* 1 if the ray can be traced: finite origin and direction, non-zero
