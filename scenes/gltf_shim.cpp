@@ -613,6 +613,8 @@ std::string base_dir(const char *path) {
 
 void parse(const char *path, tinygltf::Model &m) {
     std::vector<unsigned char> bytes = read_file(path);
+    if (is_glb(bytes) && bytes.size() >= 8 && bytes[4] != 2)
+        fail("GLB container version %u is not supported (glTF 1.0?), need 2", bytes[4]);
     std::string json = json_text(bytes);
     if (!json.empty()) check_schema(json);
     tinygltf::TinyGLTF loader;
