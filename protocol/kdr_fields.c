@@ -7,38 +7,51 @@
  */
 #include <float.h>
 #include <math.h>
+#include <stdlib.h>
 
 #include "kdr_proto_internal.h"
 
-/* Doubles at or beyond the midpoint between FLT_MAX and 2^128 round to
- * infinity as float32; below it they round to a finite float. Checking
- * first keeps the double->float conversion defined (C11 6.3.1.5). */
-#define KDR_FLOAT_OVERFLOW 0x1.ffffffp127
-
-int kdr_pf_parse_body(const char *body, size_t len, cJSON **root,
-                      kdr_proto_error *err) {
-    *root = NULL;
-    if (!body || len == 0)
-        return kdr_proto_error_set(err, 400, "body: empty");
+/* The whole body through cJSON: the general path, and the one that names
+ * the offset of malformed JSON. */
+static int cjson_doc(const char *body, size_t len, kdr_pf_doc *doc,
+                     kdr_proto_error *err) {
     const char *end = NULL;
-    cJSON *doc = cJSON_ParseWithLengthOpts(body, len, &end, 0);
+    cJSON *root = cJSON_ParseWithLengthOpts(body, len, &end, 0);
     size_t at = end && end >= body && end <= body + len ? (size_t)(end - body) : 0;
-    if (!doc)
+    if (!root)
         return kdr_proto_error_set(err, 400, "body: malformed JSON at offset %zu", at);
+    doc->root = root;
     while (at < len && (body[at] == ' ' || body[at] == '\t' || body[at] == '\n' ||
                         body[at] == '\r'))
         at++;
-    if (at < len) {
-        cJSON_Delete(doc);
+    if (at < len)
         return kdr_proto_error_set(
             err, 400, "body: malformed JSON at offset %zu (data after the value)", at);
-    }
-    if (!cJSON_IsObject(doc)) {
-        cJSON_Delete(doc);
+    if (!cJSON_IsObject(root))
         return kdr_proto_error_set(err, 400, "body: expected a JSON object");
-    }
-    *root = doc;
     return 0;
+}
+
+int kdr_pf_parse_body(const char *body, size_t len, kdr_pf_doc *doc,
+                      kdr_proto_error *err) {
+    memset(doc, 0, sizeof *doc);
+    if (!body || len == 0)
+        return kdr_proto_error_set(err, 400, "body: empty");
+    int st = kdr_pf_fast_doc(body, len, doc, err);
+    if (st == 1) {
+        kdr_pf_doc_free(doc);
+        st = cjson_doc(body, len, doc, err);
+    }
+    if (st)
+        kdr_pf_doc_free(doc);
+    return st;
+}
+
+void kdr_pf_doc_free(kdr_pf_doc *doc) {
+    cJSON_Delete(doc->root);
+    for (int i = 0; i < doc->nfast; i++)
+        free(doc->fast[i].v);
+    memset(doc, 0, sizeof *doc);
 }
 
 static int wrong_form(const char *name, kdr_proto_error *err) {
@@ -61,9 +74,14 @@ static const char *f32_string(const cJSON *item, const char *name,
     return s->valuestring;
 }
 
-int kdr_pf_count(const cJSON *item, const char *name, size_t *count,
+int kdr_pf_count(kdr_pf_field f, const char *name, size_t *count,
                  kdr_proto_error *err) {
+    const cJSON *item = f.item;
     *count = 0;
+    if (f.arr) {
+        *count = f.arr->n;
+        return 0;
+    }
     if (cJSON_IsArray(item)) {
         for (const cJSON *c = item->child; c; c = c->next)
             (*count)++;
@@ -124,8 +142,26 @@ static int check_decoded(const float *v, size_t count, const char *name,
     return 0;
 }
 
-int kdr_pf_read(const cJSON *item, const char *name, float *dst, size_t count,
+/* A numeric array parsed by the fast walk: the same errors as element by
+ * element (JSON numbers are never NaN; the earliest problem is named). */
+static int read_fast(const kdr_numarray *a, const char *name, float *dst, size_t count,
+                     unsigned flags, kdr_proto_error *err) {
+    if (!(flags & KDR_PF_SATURATE) && (a->first_inf < count || a->first_big < count)) {
+        if (a->first_inf < a->first_big)
+            return kdr_proto_error_set(err, 400, "%s[%zu]: not a finite number", name,
+                                       a->first_inf);
+        return kdr_proto_error_set(err, 400, "%s[%zu]: out of float32 range", name,
+                                   a->first_big);
+    }
+    memcpy(dst, a->v, (count < a->n ? count : a->n) * sizeof *dst);
+    return 0;
+}
+
+int kdr_pf_read(kdr_pf_field f, const char *name, float *dst, size_t count,
                 unsigned flags, kdr_proto_error *err) {
+    const cJSON *item = f.item;
+    if (f.arr)
+        return read_fast(f.arr, name, dst, count, flags, err);
     if (cJSON_IsArray(item)) {
         size_t i = 0;
         for (const cJSON *c = item->child; c && i < count; c = c->next, i++)
@@ -153,11 +189,11 @@ int kdr_pf_vec3(const cJSON *item, const char *name, float out[3],
     size_t n;
     if (!item)
         return kdr_proto_error_set(err, 400, "%s: required", name);
-    if (kdr_pf_count(item, name, &n, err))
+    if (kdr_pf_count(kdr_pf_wrap(item), name, &n, err))
         return err->status;
     if (n != 3)
         return kdr_proto_error_set(err, 400, "%s: expected 3 numbers, got %zu", name, n);
-    return kdr_pf_read(item, name, out, 3, 0, err);
+    return kdr_pf_read(kdr_pf_wrap(item), name, out, 3, 0, err);
 }
 
 int kdr_pf_float(const cJSON *item, const char *name, float *out,

@@ -29,18 +29,58 @@ static inline void kdr_buf_put(kdr_buf *b, const void *bytes, size_t n) {
  * >= 0x80 copied, so UTF-8 stays UTF-8). */
 int kdr_buf_json_string(kdr_buf *b, const char *s);
 
-/* ---- field readers (kdr_fields.c) -------------------------------------- */
+/* ---- field readers (kdr_fields.c, kdr_json_fast.c) ---------------------- */
+
+/* Doubles at or beyond the midpoint between FLT_MAX and 2^128 round to
+ * infinity as float32; below it they round to a finite float. Checking
+ * first keeps the double->float conversion defined (C11 6.3.1.5). */
+#define KDR_FLOAT_OVERFLOW 0x1.ffffffp127
+
+/* A top-level flat array of JSON numbers, already float32 (saturated);
+ * first_inf / first_big: first element that was infinite as a double
+ * (1e999) / finite but beyond float32 (SIZE_MAX: none). */
+typedef struct kdr_numarray {
+    char key[32];
+    float *v;
+    size_t n, first_inf, first_big;
+} kdr_numarray;
+
+#define KDR_PF_MAX_FAST 8
+/* A parsed body: numeric arrays apart, every other member in root. */
+typedef struct kdr_pf_doc {
+    cJSON *root;
+    kdr_numarray fast[KDR_PF_MAX_FAST];
+    int nfast;
+} kdr_pf_doc;
+
+/* One field value: a cJSON item, or a numeric array, or neither (absent). */
+typedef struct kdr_pf_field {
+    const cJSON *item;
+    const kdr_numarray *arr;
+} kdr_pf_field;
+
+static inline kdr_pf_field kdr_pf_wrap(const cJSON *item) {
+    kdr_pf_field f = {item, NULL};
+    return f;
+}
+static inline int kdr_pf_present(kdr_pf_field f) { return f.item || f.arr; }
 
 /* Parses the body into an object; 0 or the error status. */
-int kdr_pf_parse_body(const char *body, size_t len, cJSON **root,
+int kdr_pf_parse_body(const char *body, size_t len, kdr_pf_doc *doc,
                       kdr_proto_error *err);
+void kdr_pf_doc_free(kdr_pf_doc *doc);
+/* The fast walk: 0 done, 1 "parse it all with cJSON", or an error status. */
+int kdr_pf_fast_doc(const char *body, size_t len, kdr_pf_doc *doc,
+                    kdr_proto_error *err);
+/* A top-level member. */
+kdr_pf_field kdr_pf_get(const kdr_pf_doc *doc, const char *name);
 
 /* Float arrays in both forms. kdr_pf_count validates the form and gives the
  * number of floats without decoding; kdr_pf_read then fills dst[count]. */
 #define KDR_PF_SATURATE 1u /* tmin/tmax: +-inf allowed, huge -> +-inf */
-int kdr_pf_count(const cJSON *item, const char *name, size_t *count,
+int kdr_pf_count(kdr_pf_field f, const char *name, size_t *count,
                  kdr_proto_error *err);
-int kdr_pf_read(const cJSON *item, const char *name, float *dst, size_t count,
+int kdr_pf_read(kdr_pf_field f, const char *name, float *dst, size_t count,
                 unsigned flags, kdr_proto_error *err);
 /* A field of exactly 3 floats (e.g. "camera.eye"). */
 int kdr_pf_vec3(const cJSON *item, const char *name, float out[3],

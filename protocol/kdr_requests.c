@@ -30,16 +30,16 @@ typedef struct bundle_shape {
 } bundle_shape;
 
 /* tmin/tmax: absent, a number, or an array of N. */
-static int interval_shape(const cJSON *it, const char *name, size_t n, size_t *count,
+static int interval_shape(kdr_pf_field f, const char *name, size_t n, size_t *count,
                           kdr_proto_error *err) {
     *count = 0;
-    if (!it || cJSON_IsNumber(it))
+    if (!kdr_pf_present(f) || (f.item && cJSON_IsNumber(f.item)))
         return 0;
-    if (!cJSON_IsArray(it) && !cJSON_IsObject(it))
+    if (f.item && !cJSON_IsArray(f.item) && !cJSON_IsObject(f.item))
         return kdr_proto_error_set(
             err, 400, "%s: expected a number, an array of N numbers or {\"f32\": base64}",
             name);
-    if (kdr_pf_count(it, name, count, err))
+    if (kdr_pf_count(f, name, count, err))
         return err->status;
     if (*count != n)
         return kdr_proto_error_set(err, 400, "%s: length %zu is not N=%zu", name, *count,
@@ -47,11 +47,12 @@ static int interval_shape(const cJSON *it, const char *name, size_t n, size_t *c
     return 0;
 }
 
-static int bundle_shapes(const cJSON *root, size_t max, bundle_shape *sh,
+static int bundle_shapes(const kdr_pf_doc *doc, size_t max, bundle_shape *sh,
                          kdr_proto_error *err) {
-    const cJSON *dir = field(root, "directions"), *org = field(root, "origins");
+    const kdr_pf_field dir = kdr_pf_get(doc, "directions");
+    const kdr_pf_field org = kdr_pf_get(doc, "origins");
     size_t nd;
-    if (!dir)
+    if (!kdr_pf_present(dir))
         return kdr_proto_error_set(err, 400, "directions: required");
     if (kdr_pf_count(dir, "directions", &nd, err))
         return err->status;
@@ -61,21 +62,21 @@ static int bundle_shapes(const cJSON *root, size_t max, bundle_shape *sh,
     sh->n = nd / 3;
     if (sh->n > max)
         return kdr_pf_too_many(err, sh->n, max, "rays");
-    if (!org)
+    if (!kdr_pf_present(org))
         return kdr_proto_error_set(err, 400, "origins: required");
     if (kdr_pf_count(org, "origins", &sh->norg, err))
         return err->status;
     if (sh->norg != 3 && sh->norg != nd)
         return kdr_proto_error_set(err, 400, "origins: length %zu is not 3 or 3*N (N=%zu)",
                                    sh->norg, sh->n);
-    if (interval_shape(field(root, "tmin"), "tmin", sh->n, &sh->ntmin, err) ||
-        interval_shape(field(root, "tmax"), "tmax", sh->n, &sh->ntmax, err))
+    if (interval_shape(kdr_pf_get(doc, "tmin"), "tmin", sh->n, &sh->ntmin, err) ||
+        interval_shape(kdr_pf_get(doc, "tmax"), "tmax", sh->n, &sh->ntmax, err))
         return err->status;
     return 0;
 }
 
 /* Fills one of tmin/tmax: a shared value (stride 0) or N values. */
-static int read_interval(const cJSON *it, const char *name, size_t count, float dflt,
+static int read_interval(kdr_pf_field f, const char *name, size_t count, float dflt,
                          float **storage, const float **ptr, size_t *stride,
                          kdr_proto_error *err) {
     *storage = alloc_floats(count ? count : 1);
@@ -84,13 +85,14 @@ static int read_interval(const cJSON *it, const char *name, size_t count, float 
     *ptr = *storage;
     *stride = count ? 1 : 0;
     if (count)
-        return kdr_pf_read(it, name, *storage, count, KDR_PF_SATURATE, err);
+        return kdr_pf_read(f, name, *storage, count, KDR_PF_SATURATE, err);
     (*storage)[0] = dflt;
-    if (!it)
+    if (!f.item)
         return 0;
-    double d = it->valuedouble; /* any number; huge saturates to +-inf */
-    (*storage)[0] = d >= 0x1.ffffffp127 ? INFINITY : d <= -0x1.ffffffp127 ? -INFINITY
-                                                                         : (float)d;
+    double d = f.item->valuedouble; /* any number; huge saturates to +-inf */
+    (*storage)[0] = d >= KDR_FLOAT_OVERFLOW    ? INFINITY
+                    : d <= -KDR_FLOAT_OVERFLOW ? -INFINITY
+                                               : (float)d;
     return 0;
 }
 
@@ -101,23 +103,23 @@ static int zero_direction(const float *dir, size_t n, kdr_proto_error *err) {
     return 0;
 }
 
-static int bundle_arrays(const cJSON *root, const bundle_shape *sh,
+static int bundle_arrays(const kdr_pf_doc *doc, const bundle_shape *sh,
                          kdr_bundle_request *out, kdr_proto_error *err) {
     kdr_ray_batch *b = &out->batch;
     float *org = out->owned[0] = alloc_floats(sh->norg);
     float *dir = out->owned[1] = alloc_floats(3 * sh->n);
     if (!org || !dir)
         return kdr_proto_error_set(err, 500, "body: out of memory");
-    if (kdr_pf_read(field(root, "origins"), "origins", org, sh->norg, 0, err) ||
-        kdr_pf_read(field(root, "directions"), "directions", dir, 3 * sh->n, 0, err))
+    if (kdr_pf_read(kdr_pf_get(doc, "origins"), "origins", org, sh->norg, 0, err) ||
+        kdr_pf_read(kdr_pf_get(doc, "directions"), "directions", dir, 3 * sh->n, 0, err))
         return err->status;
     b->n = sh->n;
     b->org = org;
     b->org_stride = sh->norg == 3 ? 0 : 3;
     b->dir = dir;
-    if (read_interval(field(root, "tmin"), "tmin", sh->ntmin, 0.0f, &out->owned[2],
+    if (read_interval(kdr_pf_get(doc, "tmin"), "tmin", sh->ntmin, 0.0f, &out->owned[2],
                       &b->tmin, &b->tmin_stride, err) ||
-        read_interval(field(root, "tmax"), "tmax", sh->ntmax, INFINITY, &out->owned[3],
+        read_interval(kdr_pf_get(doc, "tmax"), "tmax", sh->ntmax, INFINITY, &out->owned[3],
                       &b->tmax, &b->tmax_stride, err))
         return err->status;
     return zero_direction(dir, sh->n, err);
@@ -125,21 +127,21 @@ static int bundle_arrays(const cJSON *root, const bundle_shape *sh,
 
 int kdr_proto_parse_bundle(const char *body, size_t len, size_t max_rays,
                            kdr_bundle_request *out, kdr_proto_error *err) {
-    cJSON *root;
+    kdr_pf_doc doc;
     bundle_shape sh = {0, 0, 0, 0};
     memset(out, 0, sizeof *out);
     err->status = 0;
     err->detail[0] = '\0';
-    if (kdr_pf_parse_body(body, len, &root, err))
+    if (kdr_pf_parse_body(body, len, &doc, err))
         return err->status;
-    int st = bundle_shapes(root, limit_of(max_rays), &sh, err);
+    int st = bundle_shapes(&doc, limit_of(max_rays), &sh, err);
     if (!st)
-        st = kdr_pf_query(root, &out->query, err);
+        st = kdr_pf_query(doc.root, &out->query, err);
     if (!st)
-        st = kdr_pf_encoding(root, &out->encoding, err);
+        st = kdr_pf_encoding(doc.root, &out->encoding, err);
     if (!st)
-        st = bundle_arrays(root, &sh, out, err);
-    cJSON_Delete(root);
+        st = bundle_arrays(&doc, &sh, out, err);
+    kdr_pf_doc_free(&doc);
     if (st)
         kdr_bundle_request_free(out);
     return st;
@@ -226,20 +228,20 @@ static int shadow_options(const cJSON *root, kdr_shadow_request *out,
     return kdr_pf_encoding(root, &out->encoding, err);
 }
 
-static int shadow_points(const cJSON *root, size_t max, kdr_shadow_request *out,
+static int shadow_points(const kdr_pf_doc *doc, size_t max, kdr_shadow_request *out,
                          kdr_proto_error *err) {
-    const cJSON *pts = field(root, "points"), *nrm = field(root, "normals");
+    const kdr_pf_field pts = kdr_pf_get(doc, "points"), nrm = kdr_pf_get(doc, "normals");
     size_t np, nn = 0;
-    if (!pts)
+    if (!kdr_pf_present(pts))
         return kdr_proto_error_set(err, 400, "points: required");
     if (kdr_pf_count(pts, "points", &np, err))
         return err->status;
     if (np == 0 || np % 3)
         return kdr_proto_error_set(err, 400, "points: length %zu is not 3*N with N >= 1",
                                    np);
-    if (nrm && kdr_pf_count(nrm, "normals", &nn, err))
+    if (kdr_pf_present(nrm) && kdr_pf_count(nrm, "normals", &nn, err))
         return err->status;
-    if (nrm && nn != np)
+    if (kdr_pf_present(nrm) && nn != np)
         return kdr_proto_error_set(err, 400, "normals: length %zu is not 3*N (N=%zu)", nn,
                                    np / 3);
     kdr_shadow_query *q = &out->query;
@@ -252,7 +254,7 @@ static int shadow_points(const cJSON *root, size_t max, kdr_shadow_request *out,
         return kdr_proto_error_set(err, 500, "points: out of memory");
     if (kdr_pf_read(pts, "points", out->owned_points, np, 0, err))
         return err->status;
-    if (!nrm)
+    if (!kdr_pf_present(nrm))
         return 0;
     q->normals = out->owned_normals = alloc_floats(nn);
     if (!out->owned_normals)
@@ -282,20 +284,20 @@ static int inside_light(const kdr_shadow_query *q, kdr_proto_error *err) {
 
 int kdr_proto_parse_shadow(const char *body, size_t len, size_t max_rays,
                            kdr_shadow_request *out, kdr_proto_error *err) {
-    cJSON *root;
+    kdr_pf_doc doc;
     memset(out, 0, sizeof *out);
     err->status = 0;
     err->detail[0] = '\0';
-    if (kdr_pf_parse_body(body, len, &root, err))
+    if (kdr_pf_parse_body(body, len, &doc, err))
         return err->status;
-    int st = read_lights(root, out, err);
+    int st = read_lights(doc.root, out, err);
     if (!st)
-        st = shadow_options(root, out, err);
+        st = shadow_options(doc.root, out, err);
     if (!st)
-        st = shadow_points(root, limit_of(max_rays), out, err);
+        st = shadow_points(&doc, limit_of(max_rays), out, err);
     if (!st)
         st = inside_light(&out->query, err);
-    cJSON_Delete(root);
+    kdr_pf_doc_free(&doc);
     if (st)
         kdr_shadow_request_free(out);
     return st;
@@ -373,14 +375,15 @@ static int read_camera(const cJSON *root, kdr_camera *c, kdr_proto_error *err) {
 
 int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
                             kdr_frustum_request *out, kdr_proto_error *err) {
-    cJSON *root;
-    const cJSON *it;
+    kdr_pf_doc doc;
+    const cJSON *it, *root;
     uint64_t tile = KDR_PROTO_DEFAULT_TILE;
     memset(out, 0, sizeof *out);
     err->status = 0;
     err->detail[0] = '\0';
-    if (kdr_pf_parse_body(body, len, &root, err))
+    if (kdr_pf_parse_body(body, len, &doc, err))
         return err->status;
+    root = doc.root;
     int st = read_camera(root, &out->camera, err);
     if (!st && (it = field(root, "tile")))
         st = kdr_pf_int(it, "tile", KDR_PROTO_MIN_TILE, KDR_PROTO_MAX_TILE, "4..64", &tile,
@@ -389,7 +392,7 @@ int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
         st = kdr_pf_query(root, &out->query, err);
     if (!st)
         st = kdr_pf_encoding(root, &out->encoding, err);
-    cJSON_Delete(root);
+    kdr_pf_doc_free(&doc);
     if (st) {
         memset(out, 0, sizeof *out);
         return st;

@@ -38,6 +38,6 @@ if(KDRAY_FUZZ AND KDRAY_CLANG)
   # Work on a copy: libFuzzer adds what it finds to the first corpus dir.
   add_test(NAME protocol_fuzz
            COMMAND ${CMAKE_COMMAND} -E env ASAN_OPTIONS=detect_leaks=1
-                   sh -c "rm -rf fuzz-corpus && cp -r '${CMAKE_CURRENT_SOURCE_DIR}/fuzz/corpus' fuzz-corpus && '${KDRAY_FUZZ_BIN}' -max_total_time=20 -rss_limit_mb=2048 -max_len=4096 -timeout=10 fuzz-corpus"
+                   sh -c "rm -rf fuzz-corpus && cp -r '${CMAKE_CURRENT_SOURCE_DIR}/fuzz/corpus' fuzz-corpus && '${KDRAY_FUZZ_BIN}' -max_total_time=20 -rss_limit_mb=2048 -max_len=4096 -timeout=10 -dict='${CMAKE_CURRENT_SOURCE_DIR}/fuzz/request.dict' fuzz-corpus"
            WORKING_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR})
 endif()

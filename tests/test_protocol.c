@@ -726,10 +726,111 @@ static void test_scene_and_errors(void) {
     kdr_buf_free(&b);
 }
 
+/* ---- the fast top-level walk versus the all-cJSON path --------------------- */
+
+/* The same body with a member whose escaped name makes the parser take the
+ * all-cJSON path; NULL when body is not an object. */
+static char *force_cjson(const char *body) {
+    size_t len = strlen(body);
+    if (len < 2 || body[0] != '{')
+        return NULL;
+    const char *rest = body + 1;
+    while (*rest == ' ')
+        rest++;
+    char *out = xmalloc(len + 32);
+    snprintf(out, len + 32, "{\"\\u0078\":0%s%s", *rest == '}' ? "" : ",", body + 1);
+    return out;
+}
+
+static void same_result(int kind, const char *body) {
+    char *other = force_cjson(body);
+    if (!other)
+        return;
+    kdr_proto_error e1 = {0, ""}, e2 = {0, ""};
+    int s1 = parse_any(kind, body, strlen(body), 0, &e1);
+    int s2 = parse_any(kind, other, strlen(other), 0, &e2);
+    CHECK(s1 == s2 && (!strncmp(e1.detail, "body:", 5) || !strcmp(e1.detail, e2.detail)),
+          "%s: fast %d \"%s\", cJSON %d \"%s\"", body, s1, e1.detail, s2, e2.detail);
+    free(other);
+}
+
+/* One number as directions[0], both paths: (float)strtod, or the error. */
+static void check_number(const char *num) {
+    char body[256];
+    snprintf(body, sizeof body, "{\"origins\":[0,0,0],\"directions\":[%s,1,1]}", num);
+    char *other = force_cjson(body);
+    const double d = strtod(num, NULL);
+    for (int path = 0; path < 2; path++) {
+        const char *b = path ? other : body;
+        kdr_bundle_request r;
+        kdr_proto_error err = {0, ""};
+        int st = kdr_proto_parse_bundle(b, strlen(b), 0, &r, &err);
+        if (isinf(d))
+            CHECK(st == 400 && !strcmp(err.detail, "directions[0]: not a finite number"),
+                  "%s path %d: %s", num, path, err.detail);
+        else if (fabs(d) >= 0x1.ffffffp127)
+            CHECK(st == 400 && !strcmp(err.detail, "directions[0]: out of float32 range"),
+                  "%s path %d: %s", num, path, err.detail);
+        else
+            CHECK(st == 0 && same_bits(r.batch.dir[0], (float)d), "%s path %d: %s %a", num,
+                  path, err.detail, st ? 0.0 : (double)r.batch.dir[0]);
+        kdr_bundle_request_free(&r);
+    }
+    free(other);
+}
+
+static void test_fast_walk(void) {
+    static const char *nums[] = {
+        "0", "-0", "1", "-1", "0.1", "1e-45", "-1.4e-45", "7e-46", "1.5e-7", "2.5E-3", "1E+2",
+        "123456789012345678", "0.000000000000000000000000000001", "1e22", "1e23", "9e15",
+        "3.4028235e38", "3.40282356e38", "3.4028236e38", "1e39", "-1e39", "1e999", "-1e999",
+        "16777217", "0.30000000000000004", "100000000000000000000000000000000000000",
+        "4.9406564584124654e-324", "1.00000005960464477539062500000001"};
+    for (size_t i = 0; i < sizeof nums / sizeof nums[0]; i++)
+        check_number(nums[i]);
+    for (int i = 0; i < 2000; i++) { /* random short decimals */
+        char num[48];
+        snprintf(num, sizeof num, "%s%llu.%llue%d", rng() & 1 ? "-" : "",
+                 (unsigned long long)(rng() % 100000), (unsigned long long)(rng() % 10000000),
+                 (int)(rng() % 90) - 45);
+        check_number(num);
+    }
+    for (size_t i = 0; i < sizeof err_cases / sizeof err_cases[0]; i++)
+        if (err_cases[i].max_rays == 0)
+            same_result(err_cases[i].kind, err_cases[i].body);
+    static const char *bodies[] = {
+        "{\"directions\":[1,0,0],\"directions\":\"x\",\"origins\":[0,0,0]}",
+        "{\"directions\":\"x\",\"directions\":[1,0,0],\"origins\":[0,0,0]}",
+        "{ \"origins\" : [ 0 , 0 , 0 ] , \"directions\" : [ 1 , 0 , 0 ] }",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,0,]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,[0]]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,01]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,1.]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,.5]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,+5]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,1.5.3]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,null]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,1]",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,1]}}",
+        "{\"origins\":[0,0,0] \"directions\":[1,0,1]}",
+        "{\"samples\":[1,2],\"points\":[0,0,0]," LIGHT "}",
+        "{\"lights\":[],\"points\":[0,0,0]}",
+        "{\"tmax\":[],\"origins\":[0,0,0],\"directions\":[1,0,1]}",
+        "{\"tmax\":[5],\"origins\":[0,0,0],\"directions\":[1,0,1]}",
+        "{\"tmin\":[1e999],\"origins\":[0,0,0],\"directions\":[1,0,1]}",
+        "{\"origins\":[0,0,0],\"directions\":[1,0,1],\"tmax\":[-1e39]}",
+    };
+    for (size_t i = 0; i < sizeof bodies / sizeof bodies[0]; i++) {
+        same_result(BUNDLE, bodies[i]);
+        same_result(SHADOW, bodies[i]);
+    }
+}
+
 int main(void) {
     test_base64();
     test_float_format();
     test_errors();
+    test_fast_walk();
     test_bundle_ok();
     test_both_forms(1);
     test_both_forms(50000);
