@@ -158,10 +158,14 @@ static void aimed_ray(kdr_ray *r, const soup *s, float lo, float hi) {
     r->tmax = INFINITY;
 }
 
+#ifndef RAY_MULT
+#define RAY_MULT 1
+#endif
+
 static size_t compare_many(const soup *sp, const kdr_scene *s, size_t nrays,
                            float lo, float hi, float quantum) {
     size_t bad = 0;
-    for (size_t i = 0; i < nrays; i++) {
+    for (size_t i = 0; i < nrays * RAY_MULT; i++) {
         kdr_ray r;
         if (i % 4 == 3)
             aimed_ray(&r, sp, lo, hi);
