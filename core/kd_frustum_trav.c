@@ -86,6 +86,7 @@ typedef struct kf_ctx {
     kdr_query q;
     float pad;          /* absolute box padding */
     kf_group *groups;   /* KF_LANES tiles' worth */
+    size_t gpt;         /* groups per tile: lane l owns [l*gpt, (l+1)*gpt) */
     float *sx_tab, *sy_tab; /* kd_camera_sx per column, kd_camera_sy per row */
     uint32_t *sel;      /* groups selected at a leaf */
     int *selbits;
@@ -279,7 +280,7 @@ static void kf_tile_init(kf_ctx *c, int l, size_t k) {
         dmin[a] = f4_set1(INFINITY);
         dmax[a] = f4_set1(-INFINITY);
     }
-    ft->g0 = (size_t)l * kf_groups_per_tile(T);
+    ft->g0 = (size_t)l * c->gpt;
     ft->ng = 0;
     ft->nrays = (x1 - x0) * (y1 - y0);
     kf_rel_box(c, c->s->root.min, c->s->root.max, rlo, rhi);
@@ -313,7 +314,7 @@ static void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim) {
     f4 t, u, v;
     const f4 hit = kf4_tri_test(&g->pre, tri, f4_bitmask(*bits), f4_set1(0.0f),
                                 f4_set1(INFINITY), &t, &u, &v);
-    c->tri_tests += (uint64_t)__builtin_popcount((unsigned)*bits);
+    c->tri_tests += (uint64_t)((0x4332322132212110ull >> (4 * *bits)) & 15);
     if (!f4_bits(hit))
         return;
     const f4 pv = f4_seti(prim), best_p = f4_load((const float *)g->prim);
@@ -375,10 +376,18 @@ static void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const float tn[4],
         for (size_t k = 0; k < nsel; k++)
             if (c->selbits[k])
                 kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r]);
-    for (size_t k = 0; k < nsel; k++)
-        kf_group_update_term(c, &c->groups[c->sel[k]]);
+    /* a lane's bound can only fall when a group holding it fell */
+    int dirty = 0;
+    for (size_t k = 0; k < nsel; k++) {
+        kf_group *g = &c->groups[c->sel[k]];
+        const int l = (int)(c->sel[k] / c->gpt);
+        const float old = g->term;
+        kf_group_update_term(c, g);
+        if (old >= c->ft[l].term && g->term < old)
+            dirty |= 1 << l;
+    }
     for (int l = 0; l < c->nlanes; l++)
-        if ((lanes >> l) & 1)
+        if ((dirty >> l) & 1)
             kf_tile_update_term(c, &c->ft[l]);
 }
 
@@ -514,6 +523,35 @@ static void kf_write(const kf_ctx *c, kdr_hits *out) {
     }
 }
 
+/* Walks the tiles of [first, end) in 2x2 blocks of tiles, so that the
+ * four frusta of one traversal form a square whenever the range allows. */
+typedef struct kf_order {
+    size_t first, end, tiles_x;
+    size_t bx, by; /* current block */
+    int j;         /* next tile within it */
+} kf_order;
+
+static int kf_next_tile(kf_order *o, size_t *k) {
+    for (;;) {
+        if (2 * o->by * o->tiles_x >= o->end)
+            return 0;
+        const size_t tx = 2 * o->bx + (size_t)(o->j & 1);
+        const size_t ty = 2 * o->by + (size_t)(o->j >> 1);
+        if (++o->j == 4) {
+            o->j = 0;
+            if (2 * ++o->bx >= o->tiles_x) {
+                o->bx = 0;
+                o->by++;
+            }
+        }
+        const size_t idx = ty * o->tiles_x + tx;
+        if (tx < o->tiles_x && idx >= o->first && idx < o->end) {
+            *k = idx;
+            return 1;
+        }
+    }
+}
+
 /* The box padding: a small fraction of the largest coordinate magnitude
  * among the eye and the root box, so it dwarfs rounding in (box - eye). */
 static float kf_pad(const kdr_scene *s, const kd_camera_basis *b) {
@@ -530,8 +568,8 @@ int kd_frustum_trace_tiles(const kdr_scene *s, const kdr_camera *cam,
                            const kd_camera_basis *b, uint32_t tile, size_t first,
                            size_t count, kdr_query q, int lanes, kdr_hits *out,
                            kdr_trav_stats *stats) {
-    kf_ctx c = {.s = s, .cam = cam, .b = b, .tile = tile, .q = q};
     const size_t gpt = kf_groups_per_tile(tile);
+    kf_ctx c = {.s = s, .cam = cam, .b = b, .tile = tile, .q = q, .gpt = gpt};
     c.groups = malloc((size_t)KF_LANES * gpt * sizeof *c.groups);
     c.sel = malloc((size_t)KF_LANES * gpt * sizeof *c.sel);
     c.selbits = malloc((size_t)KF_LANES * gpt * sizeof *c.selbits);
@@ -550,12 +588,17 @@ int kd_frustum_trace_tiles(const kdr_scene *s, const kdr_camera *cam,
     for (uint32_t y = 0; y < cam->height; y++)
         c.sy_tab[y] = kd_camera_sy(b, y);
     uint64_t rays = 0;
-    for (size_t k = first; k < first + count; k += (size_t)c.nlanes) {
-        c.nlanes = (int)(first + count - k < (size_t)lanes ? first + count - k : (size_t)lanes);
-        for (int l = 0; l < c.nlanes; l++) {
-            kf_tile_init(&c, l, k + (size_t)l);
-            rays += c.ft[l].nrays;
+    kf_order o = {first, first + count, ((size_t)cam->width + tile - 1) / tile, 0, 0, 0};
+    o.by = first / o.tiles_x / 2;
+    for (;;) {
+        size_t k;
+        c.nlanes = 0;
+        while (c.nlanes < lanes && kf_next_tile(&o, &k)) {
+            kf_tile_init(&c, c.nlanes, k);
+            rays += c.ft[c.nlanes++].nrays;
         }
+        if (c.nlanes == 0)
+            break;
         if (s->nodes && s->nnodes)
             kf_traverse(&c);
         kf_write(&c, out);
