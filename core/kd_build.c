@@ -17,7 +17,9 @@
  * the split plane goes to the cheaper side; a triangle touching the plane
  * from one side goes to that side only.
  */
+#include <assert.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -588,12 +590,14 @@ static double now_ms(void) {
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-static void logf_(kdr_log_fn log, void *user, const char *fmt, double a,
-                  double b, double c) {
+static void logf_(kdr_log_fn log, void *user, const char *fmt, ...) {
     if (!log)
         return;
     char msg[256];
-    snprintf(msg, sizeof msg, fmt, a, b, c);
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
     log(user, msg);
 }
 
@@ -693,10 +697,13 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     int err = b.side ? root_events(s, nvalid, &ev) : KDR_ENOMEM;
     if (err == KDR_OK) {
         if (phases)
-            logf_(log, user, "kd build: %.0f events sorted in %.1f ms%.0s",
-                  (double)(ev.n[0] + ev.n[1] + ev.n[2]), now_ms() - t0, 0);
+            logf_(log, user, "kd build: %zu events sorted in %.1f ms",
+                  ev.n[0] + ev.n[1] + ev.n[2], now_ms() - t0);
         build_node(&b, &s->bounds, &ev, 0, 0);
         err = b.err;
+        if (phases && err == KDR_OK)
+            logf_(log, user, "kd build: %zu nodes, %zu refs after %.1f ms",
+                  b.nnodes, b.nrefs, now_ms() - t0);
     }
     free(b.side);
     ev_free(&ev);
@@ -724,6 +731,32 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     s->stats.sah_cost = b.sah;
     return KDR_OK;
 }
+
+#ifndef NDEBUG
+/* Debug builds re-check the layout every traversal relies on: splits inside
+ * their node's box, the above child after the below subtree, leaf lists in
+ * range and free of degenerate triangles, every node reached once. */
+static size_t check_subtree(const kdr_scene *s, uint32_t idx, kdr_bounds box,
+                            int depth) {
+    assert(idx < s->nnodes && depth <= KD_MAX_DEPTH);
+    const kd_node *n = &s->nodes[idx];
+    if (kd_is_leaf(n)) {
+        assert((size_t)n->u.first + kd_count(n) <= s->nrefs);
+        for (uint32_t i = 0; i < kd_count(n); i++) {
+            assert(s->refs[n->u.first + i] < s->ntris);
+            assert(!kd_tri_degenerate(s->tris + 9 * (size_t)s->refs[n->u.first + i]));
+        }
+        return 1;
+    }
+    const int k = kd_axis(n);
+    assert(n->u.split > box.min[k] && n->u.split < box.max[k]);
+    assert(kd_above(n) > idx + 1);
+    kdr_bounds lb = box, rb = box;
+    lb.max[k] = rb.min[k] = n->u.split;
+    return 1 + check_subtree(s, idx + 1, lb, depth + 1) +
+           check_subtree(s, kd_above(n), rb, depth + 1);
+}
+#endif
 
 static int check_input(const float *tris, size_t ntris, kdr_scene **out) {
     if (!out)
@@ -762,8 +795,8 @@ int kdr_scene_build(const float *tris, size_t ntris, const kdr_build_opts *opts,
     s->ntris = ntris;
     const size_t nvalid = scene_bounds(s);
     pad_root(s);
-    logf_(log, log_user, "kd build: %.0f triangles (%.0f degenerate)%.0s",
-          (double)ntris, (double)(ntris - nvalid), 0);
+    logf_(log, log_user, "kd build: %zu triangles (%zu degenerate)", ntris,
+          ntris - nvalid);
     if (nvalid > 0 && (err = build_tree(s, nvalid, &o, log, log_user)) != KDR_OK) {
         kdr_scene_free(s);
         return err;
@@ -771,8 +804,21 @@ int kdr_scene_build(const float *tris, size_t ntris, const kdr_build_opts *opts,
     s->stats.build_ms = now_ms() - t0;
     s->stats.bytes = s->nnodes * sizeof(kd_node) + s->nrefs * sizeof(uint32_t) +
                      9 * ntris * sizeof(float);
-    logf_(log, log_user, "kd build: %.0f nodes, %.2f refs/leaf, %.1f ms",
-          (double)s->stats.nodes, s->stats.refs_per_leaf, s->stats.build_ms);
+    logf_(log, log_user,
+          "kd build: done in %.1f ms: %llu nodes (%llu leaves, %llu empty), "
+          "depth %llu, %.2f refs/leaf, SAH %.1f, %.1f MB",
+          s->stats.build_ms, (unsigned long long)s->stats.nodes,
+          (unsigned long long)s->stats.leaves,
+          (unsigned long long)s->stats.empty_leaves,
+          (unsigned long long)s->stats.max_depth, s->stats.refs_per_leaf,
+          s->stats.sah_cost, (double)s->stats.bytes / 1e6);
+#ifndef NDEBUG
+    if (s->nodes) {
+        size_t reached = check_subtree(s, 0, s->bounds, 0);
+        assert(reached == s->nnodes);
+        (void)reached;
+    }
+#endif
     *out = s;
     return KDR_OK;
 }

@@ -330,6 +330,33 @@ static void test_build_errors(void) {
     CHECK(strcmp(kdr_strerror(KDR_ENOMEM), kdr_strerror(KDR_OK)) != 0);
 }
 
+static void count_log(void *user, const char *msg) {
+    CHECK(msg && strncmp(msg, "kd build:", 9) == 0);
+    ++*(int *)user;
+}
+
+/* The log callback hears the start and the end; stats are consistent. */
+static void test_log_and_stats(void) {
+    soup sp = {0};
+    soup_random(&sp, 500, 0.1f, 0);
+    int lines = 0;
+    kdr_scene *s = NULL;
+    CHECK(kdr_scene_build(sp.t, sp.n, NULL, count_log, &lines, &s) == KDR_OK);
+    CHECK(lines >= 2);
+    kdr_tree_stats st;
+    kdr_scene_tree_stats(s, &st);
+    CHECK(st.nodes == 2 * st.leaves - 1);
+    CHECK(st.refs >= 500 && st.sah_cost > 0 && st.build_ms >= 0);
+    CHECK(st.bytes >= st.nodes * 8 + st.refs * 4);
+    CHECK(fabs(st.refs_per_leaf * (double)(st.leaves - st.empty_leaves) -
+               (double)st.refs) < 1e-6 * (double)st.refs);
+    kdr_bounds b;
+    kdr_scene_bounds(s, &b);
+    CHECK(b.min[0] <= b.max[0] && kdr_scene_diagonal(s) > 0);
+    kdr_scene_free(s);
+    free(sp.t);
+}
+
 /* Options change the tree but never an answer. */
 static void test_build_options(void) {
     soup sp = {0};
@@ -354,6 +381,7 @@ int main(void) {
     test_build_errors();
     test_small_scenes();
     test_build_options();
+    test_log_and_stats();
     test_random_soups();
     test_box_grid();
     test_huge_offsets();
