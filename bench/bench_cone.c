@@ -133,7 +133,7 @@ static int embree_visibility(const kdr_scene *s, RTCScene es,
 }
 
 typedef struct run_result {
-    double seconds; /* per full pass over the points */
+    double seconds; /* fastest full pass over the points */
     double rmse;
     uint64_t rays, decided;
 } run_result;
@@ -151,20 +151,20 @@ static int measure(int method, const kdr_scene *s, RTCScene es,
                    const kdr_shadow_query *q, const float *ref, float *vis,
                    run_result *out) {
     kdr_shadow_stats st = {0};
-    int reps = 0;
     const double t0 = now_s();
-    double t1;
-    do {
+    double best = INFINITY, t1 = t0;
+    do { /* the fastest pass: the machine may be shared */
         memset(&st, 0, sizeof st);
+        const double ts = now_s();
         if (run_once(method, s, es, q, vis, &st) != 0)
             return -1;
-        reps++;
         t1 = now_s();
+        best = fmin(best, t1 - ts);
     } while (t1 - t0 < BENCH_MIN_SECONDS);
     double se = 0.0;
     for (size_t i = 0; i < q->n; i++)
         se += ((double)vis[i] - ref[i]) * ((double)vis[i] - ref[i]);
-    out->seconds = (t1 - t0) / reps;
+    out->seconds = best;
     out->rmse = sqrt(se / (double)q->n);
     out->rays = method == M_EMBREE ? (uint64_t)q->n * q->samples : st.rays_traced;
     out->decided = st.cones_decided;

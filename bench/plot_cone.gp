@@ -14,7 +14,7 @@ set terminal pngcairo size 640*cols, 480*rows font ",10"
 set output outfile
 set logscale xy
 set grid
-set key top right autotitle columnhead
+set key top right autotitle columnhead noenhanced
 set xlabel "seconds (single thread, all points)"
 set ylabel "RMSE vs 4096-spp reference"
 set multiplot layout rows, cols

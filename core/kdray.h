@@ -183,7 +183,9 @@ typedef struct kdr_shadow_query {
 
 typedef struct kdr_shadow_stats {
     uint64_t cones_decided;   /* (point, light) pairs answered without rays */
-    uint64_t rays_traced;
+    uint64_t rays_traced;     /* samples tested against triangles (by a
+                                 candidate list, a packet or the tree); samples
+                                 of a decided cone are not counted */
     uint64_t nodes_visited;   /* cone traversal nodes + ray traversal nodes */
 } kdr_shadow_stats;
 
@@ -197,6 +199,17 @@ typedef enum kdr_shadow_mode {
  * tmax = the distance to the sphere's near surface in units of dir).
  * Every mode, and the Embree reference in tests, uses these rays. Returns
  * KDR_EINVAL if the point is inside the light. */
+/* Details (core/kd_cone_sample.c): dir is unit length, so tmax is a
+ * distance. Directions are uniform in solid angle over the cap of half-angle
+ * asin(r/D): cos(theta) stratified into `samples` strata with a hashed
+ * jitter, the azimuth on a golden-ratio lattice rotated per (point, light);
+ * all of it a counter-based hash of (seed, i, l, s): no state, thread-safe.
+ * Offset: with a normal, the start moves epsilon * diagonal along the normal
+ * FLIPPED TO THE LIGHT'S SIDE (normals of single-sided or flipped meshes
+ * must not push the start behind its own surface); the offset point is the
+ * cone's apex and must itself lie outside the light. Without normals (or
+ * with a zero normal) each ray's origin moves that distance along the ray
+ * itself. Non-finite inputs, radius <= 0 and epsilon < 0 are KDR_EINVAL. */
 int kdr_shadow_ray(const kdr_scene *scene, const kdr_shadow_query *q, size_t i,
                    size_t l, uint32_t s, kdr_ray *out);
 
