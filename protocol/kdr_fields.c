@@ -74,10 +74,28 @@ static const char *f32_string(const cJSON *item, const char *name,
     return s->valuestring;
 }
 
+/* Number of floats in the base64 text s[0..n), from length and padding. */
+static int b64_count(const char *s, size_t n, const char *name, size_t *count,
+                     kdr_proto_error *err) {
+    if (n % 4)
+        return kdr_proto_error_set(err, 400, "%s.f32: invalid base64 at offset %zu",
+                                   name, n);
+    size_t bytes = n / 4 * 3;
+    if (n && s[n - 1] == '=') bytes--;
+    if (n && s[n - 2] == '=') bytes--;
+    if (bytes % 4)
+        return kdr_proto_error_set(err, 400, "%s.f32: %zu bytes is not a multiple of 4",
+                                   name, bytes);
+    *count = bytes / 4;
+    return 0;
+}
+
 int kdr_pf_count(kdr_pf_field f, const char *name, size_t *count,
                  kdr_proto_error *err) {
     const cJSON *item = f.item;
     *count = 0;
+    if (f.arr && f.arr->b64)
+        return b64_count(f.arr->b64, f.arr->b64_len, name, count, err);
     if (f.arr) {
         *count = f.arr->n;
         return 0;
@@ -92,18 +110,7 @@ int kdr_pf_count(kdr_pf_field f, const char *name, size_t *count,
     const char *s = f32_string(item, name, err);
     if (!s)
         return err->status;
-    size_t n = strlen(s);
-    if (n % 4)
-        return kdr_proto_error_set(err, 400, "%s.f32: invalid base64 at offset %zu",
-                                   name, n);
-    size_t bytes = n / 4 * 3;
-    if (n && s[n - 1] == '=') bytes--;
-    if (n && s[n - 2] == '=') bytes--;
-    if (bytes % 4)
-        return kdr_proto_error_set(err, 400, "%s.f32: %zu bytes is not a multiple of 4",
-                                   name, bytes);
-    *count = bytes / 4;
-    return 0;
+    return b64_count(s, strlen(s), name, count, err);
 }
 
 /* One JSON number as float32 (saturating to +-inf when allowed). */
@@ -157,9 +164,26 @@ static int read_fast(const kdr_numarray *a, const char *name, float *dst, size_t
     return 0;
 }
 
+/* Decodes count floats (as counted by b64_count) from s[0..n). */
+static int b64_read(const char *s, size_t n, const char *name, float *dst, size_t count,
+                    unsigned flags, kdr_proto_error *err) {
+    size_t got = 0, bad = 0;
+    /* b64_count derived count from this text's length and padding; the
+     * decoder writes only the bytes of valid groups, so never past count
+     * floats, even when it then fails. */
+    if (kdr_base64_decode(s, n, dst, &got, &bad))
+        return kdr_proto_error_set(err, 400, "%s.f32: invalid base64 at offset %zu",
+                                   name, bad);
+    if (got != count * sizeof(float))
+        return kdr_proto_error_set(err, 500, "%s.f32: decoded size mismatch", name);
+    return check_decoded(dst, count, name, flags, err);
+}
+
 int kdr_pf_read(kdr_pf_field f, const char *name, float *dst, size_t count,
                 unsigned flags, kdr_proto_error *err) {
     const cJSON *item = f.item;
+    if (f.arr && f.arr->b64)
+        return b64_read(f.arr->b64, f.arr->b64_len, name, dst, count, flags, err);
     if (f.arr)
         return read_fast(f.arr, name, dst, count, flags, err);
     if (cJSON_IsArray(item)) {
@@ -172,16 +196,7 @@ int kdr_pf_read(kdr_pf_field f, const char *name, float *dst, size_t count,
     const char *s = f32_string(item, name, err);
     if (!s)
         return err->status;
-    size_t n = strlen(s), got = 0, bad = 0;
-    /* kdr_pf_count derived count from this string's length and padding; the
-     * decoder writes only the bytes of valid groups, so never past
-     * count floats, even when it then fails. */
-    if (kdr_base64_decode(s, n, dst, &got, &bad))
-        return kdr_proto_error_set(err, 400, "%s.f32: invalid base64 at offset %zu",
-                                   name, bad);
-    if (got != count * sizeof(float))
-        return kdr_proto_error_set(err, 500, "%s.f32: decoded size mismatch", name);
-    return check_decoded(dst, count, name, flags, err);
+    return b64_read(s, strlen(s), name, dst, count, flags, err);
 }
 
 int kdr_pf_vec3(const cJSON *item, const char *name, float out[3],

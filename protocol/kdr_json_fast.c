@@ -6,7 +6,8 @@
  * member whose value is a flat array of plain JSON numbers is converted
  * straight to float32 (exact decimals with at most 15 digits and a power of
  * ten up to 22 are converted in one correctly rounded double operation,
- * others through strtod); every other member value is handed to cJSON.
+ * others through strtod), and {"f32": "..."} is decoded from the body
+ * itself, without cJSON's copy; every other member value goes to cJSON.
  * Anything unusual (escapes in keys, a body that is not an object) makes
  * the caller parse the whole body with cJSON instead, so behaviour never
  * depends on which path ran, only speed and memory do.
@@ -159,6 +160,39 @@ static int number_array(cursor *c, kdr_numarray *a) {
     return 0;
 }
 
+/* {"f32": "<text without escapes>"} at c->p ('{'): 1 and the text's span
+ * (c->p after '}'), or 0 (c->p unchanged) for anything else, which cJSON
+ * then reads. */
+static int f32_object(cursor *c, kdr_numarray *a) {
+    static const char key[] = "\"f32\"";
+    cursor k = *c;
+    k.p++;
+    skip_ws(&k);
+    if ((size_t)(k.end - k.p) < sizeof key || memcmp(k.p, key, sizeof key - 1))
+        return 0;
+    k.p += sizeof key - 1;
+    skip_ws(&k);
+    if (k.p >= k.end || *k.p++ != ':')
+        return 0;
+    skip_ws(&k);
+    if (k.p >= k.end || *k.p++ != '"')
+        return 0;
+    const char *text = k.p;
+    while (k.p < k.end && *k.p != '"' && *k.p != '\\' && (unsigned char)*k.p >= 0x20)
+        k.p++;
+    if (k.p >= k.end || *k.p != '"')
+        return 0;
+    memset(a, 0, sizeof *a);
+    a->b64 = text;
+    a->b64_len = (size_t)(k.p - text);
+    k.p++;
+    skip_ws(&k);
+    if (k.p >= k.end || *k.p != '}')
+        return 0;
+    c->p = k.p + 1;
+    return 1;
+}
+
 /* A member name without escapes, copied NUL-terminated; 0 otherwise. */
 static int read_key(cursor *c, char *key) {
     if (c->p >= c->end || *c->p != '"')
@@ -203,9 +237,11 @@ static int float_array_field(const char *key) {
 /* One member value: 0 done, 1 give up (use cJSON), or an error status. */
 static int member_value(cursor *c, const char *key, kdr_pf_doc *doc,
                         kdr_proto_error *err) {
-    if (c->p < c->end && *c->p == '[' && float_array_field(key)) {
+    const int is_array = c->p < c->end && *c->p == '[';
+    const int is_object = c->p < c->end && *c->p == '{';
+    if ((is_array || is_object) && float_array_field(key)) {
         kdr_numarray a;
-        const int r = number_array(c, &a);
+        const int r = is_array ? number_array(c, &a) : f32_object(c, &a);
         if (r < 0)
             return kdr_proto_error_set(err, 500, "body: out of memory");
         if (r == 1) {

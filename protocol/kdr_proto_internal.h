@@ -36,13 +36,17 @@ int kdr_buf_json_string(kdr_buf *b, const char *s);
  * first keeps the double->float conversion defined (C11 6.3.1.5). */
 #define KDR_FLOAT_OVERFLOW 0x1.ffffffp127
 
-/* A top-level flat array of JSON numbers, already float32 (saturated);
- * first_inf / first_big: first element that was infinite as a double
- * (1e999) / finite but beyond float32 (SIZE_MAX: none). */
+/* A top-level float-array field found by the fast walk: either a flat
+ * array of JSON numbers, already float32 (saturated; first_inf / first_big:
+ * first element that was infinite as a double (1e999) / finite but beyond
+ * float32, SIZE_MAX if none), or, when b64 is set, {"f32": "..."} as a
+ * pointer to the base64 text inside the body (decoded only once counted). */
 typedef struct kdr_numarray {
     char key[32];
     float *v;
     size_t n, first_inf, first_big;
+    const char *b64;
+    size_t b64_len;
 } kdr_numarray;
 
 #define KDR_PF_MAX_FAST 8

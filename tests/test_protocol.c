@@ -751,6 +751,20 @@ static void same_result(int kind, const char *body) {
     int s2 = parse_any(kind, other, strlen(other), 0, &e2);
     CHECK(s1 == s2 && (!strncmp(e1.detail, "body:", 5) || !strcmp(e1.detail, e2.detail)),
           "%s: fast %d \"%s\", cJSON %d \"%s\"", body, s1, e1.detail, s2, e2.detail);
+    kdr_bundle_request a, b;
+    memset(&a, 0, sizeof a);
+    memset(&b, 0, sizeof b);
+    if (kind == BUNDLE && !kdr_proto_parse_bundle(body, strlen(body), 0, &a, &e1)) {
+        if (!kdr_proto_parse_bundle(other, strlen(other), 0, &b, &e2)) {
+            const kdr_ray_batch *x = &a.batch, *y = &b.batch;
+            CHECK(x->n == y->n && x->org_stride == y->org_stride &&
+                      !memcmp(x->dir, y->dir, 12 * x->n) && !memcmp(x->org, y->org, 12) &&
+                      !memcmp(x->tmax, y->tmax, 4) && !memcmp(x->tmin, y->tmin, 4),
+                  "%s: arrays differ between paths", body);
+        }
+        kdr_bundle_request_free(&b);
+    }
+    kdr_bundle_request_free(&a);
     free(other);
 }
 
@@ -819,6 +833,21 @@ static void test_fast_walk(void) {
         "{\"tmax\":[5],\"origins\":[0,0,0],\"directions\":[1,0,1]}",
         "{\"tmin\":[1e999],\"origins\":[0,0,0],\"directions\":[1,0,1]}",
         "{\"origins\":[0,0,0],\"directions\":[1,0,1],\"tmax\":[-1e39]}",
+        "{\"origins\":{\"f32\":\"AAAAAAAAAAAAAAAA\"},\"directions\":{\"f32\":\"AACAPwAAAAAAAAAA\"}}",
+        "{\"origins\":{ \"f32\" : \"AAAAAAAAAAAAAAAA\" },\"directions\":{\"f32\":\"AACAPwAAAAAAAAAA\"}}",
+        "{\"origins\":{\"f32\":\"AAAAAAAAAAAAAAAA\",\"x\":1},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f32\":\"AAAAAAAAAAAAAAAA\",\"f32\":\"\"},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f32\":\"AAAAAAAAAAAA\\/AAA\"},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f32\":\"AAAAAAAAAAAA/AAA\"},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f\\u0033\\u0032\":\"AAAAAAAAAAAAAAAA\"},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f32\":5},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"F32\":\"AAAA\"},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f32\":\"\"},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f32\":\"AAAAAAAAAAA*AAAA\"},\"directions\":[1,1,1]}",
+        "{\"origins\":{\"f32\":\"AAAAAAAAAAAAAAAA\"}, \"directions\":{\"f32\":\"AACAPwAAAAAAAAAA\"} ,"
+        "\"tmax\":{\"f32\":\"AACAfw==\"}}",
+        "{\"points\":{\"f32\":\"AAAAAAAAAAAAAAAA\"},\"normals\":{\"f32\":\"AACAPwAAAAAAAAAA\"},"
+        LIGHT "}",
     };
     for (size_t i = 0; i < sizeof bodies / sizeof bodies[0]; i++) {
         same_result(BUNDLE, bodies[i]);
