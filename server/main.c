@@ -105,6 +105,9 @@ static int parse_one(options *o, int argc, char **argv, int *i) {
             return bad_flag("--scene %s: expected NAME=PATH", v);
         o->scene_args[o->nscenes++] = (char *)v; /* v is argv storage */
     } else if (IS("--listen")) {
+        if (!kdr_http_addr_ok(v))
+            return bad_flag("--listen %s: expected ADDR:PORT (IPv4, localhost or [IPv6])",
+                            v);
         o->listen = v;
     } else if (IS("--threads")) {
         if (parse_size(v, 1, MAX_THREADS, &n))

@@ -62,6 +62,8 @@ typedef struct kdr_http kdr_http;
 /* addr is "HOST:PORT" (IPv4 literal, "localhost", or "[IPv6]:PORT"); port 0
  * picks a free port. NULL after logging the reason. */
 kdr_http *kdr_http_start(kdr_server *srv, const char *addr);
+/* 1 if addr is a listen address kdr_http_start accepts. */
+int kdr_http_addr_ok(const char *addr);
 unsigned kdr_http_port(const kdr_http *h);
 /* Stops accepting, waits up to grace_s for requests in flight, stops. */
 void kdr_http_stop(kdr_http *h, double grace_s);

@@ -4,8 +4,9 @@
  * integration tests compare the daemon's answers with these byte for byte;
  * the service benchmark uses --repeat to time the core in-process.
  *
- *   kdray-trace --scene PATH --kind bundle|cone-shadow|frustum
+ *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum
  *               [--mode reference|fast] [--threads T] [--repeat R] REQUEST.json
+ *   kdray-trace [--scene PATH] KIND:MODE:REQUEST.json...   (-> REQUEST.json.out)
  *
  * reference (default): one thread, single-ray / per-pixel / per-sample core
  * modes over the whole range; fast: the modes kdrayd uses (bundles, four
@@ -25,9 +26,11 @@
 enum { CHUNK = 4096, CHUNK_TILES = 16, CHUNK_POINTS = 64 };
 
 typedef struct cli {
-    const char *scene_path, *kind, *request;
+    const char *scene_path, *kind;
     int fast;
     unsigned threads, repeat;
+    char **requests; /* argv entries: PATH, or KIND:MODE:PATH */
+    int nrequests;
 } cli;
 
 typedef struct job {
@@ -202,17 +205,17 @@ static int do_shadow(kdr_pool *pool, job *j, const char *body, size_t len, const
 }
 
 static int usage(void) {
-    fprintf(stderr, "usage: kdray-trace --scene PATH --kind bundle|cone-shadow|frustum "
+    fprintf(stderr, "usage: kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum "
                     "[--mode reference|fast] [--threads T] [--repeat R] REQUEST.json\n");
     return 2;
 }
 
 static int parse_cli(cli *c, int argc, char **argv) {
-    *c = (cli){.threads = 1, .repeat = 1};
+    *c = (cli){.threads = 1, .repeat = 1, .requests = argv};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (a[0] != '-') {
-            c->request = a;
+            c->requests[c->nrequests++] = argv[i];
             continue;
         }
         if (!v) return -1;
@@ -230,8 +233,10 @@ static int parse_cli(cli *c, int argc, char **argv) {
         else
             return -1;
     }
-    if (!c->scene_path || !c->kind || !c->request || c->threads < 1 || c->repeat < 1)
-        return -1;
+#ifdef KDRAY_DEFAULT_SCENE
+    if (!c->scene_path) c->scene_path = KDRAY_DEFAULT_SCENE;
+#endif
+    if (!c->scene_path || !c->nrequests || c->threads < 1 || c->repeat < 1) return -1;
     return 0;
 }
 
@@ -251,6 +256,22 @@ static kdr_scene *load_scene(const char *path) {
     return rc ? NULL : s;
 }
 
+/* Writes the answer to stdout (path NULL) or to path + ".out". */
+static int write_out(const char *path, const kdr_buf *out) {
+    FILE *f = stdout;
+    char name[4096];
+    if (path) {
+        snprintf(name, sizeof name, "%s.out", path);
+        if (!(f = fopen(name, "wb"))) {
+            perror(name);
+            return 1;
+        }
+    }
+    int bad = fwrite(out->data, 1, out->len, f) != out->len;
+    if (path) bad |= fclose(f) != 0;
+    return bad;
+}
+
 static int dispatch(kdr_pool *pool, job *j, const cli *c, const char *body, size_t len,
                     kdr_buf *out, kdr_proto_error *err) {
     if (!strcmp(c->kind, "bundle")) return do_bundle(pool, j, body, len, c, out, err);
@@ -260,36 +281,56 @@ static int dispatch(kdr_pool *pool, job *j, const cli *c, const char *body, size
     return kdr_proto_error_set(err, 404, "unknown kind %s", c->kind);
 }
 
+/* Answers one request: a plain PATH goes to stdout with --kind/--mode; a
+ * KIND:MODE:PATH spec (several per run share one scene build) goes to
+ * PATH.out. Returns 0 or 1. */
+static int answer_one(kdr_pool *pool, const kdr_scene *scene, cli c, char *spec) {
+    char *path = spec, *k = NULL, *m = NULL;
+    if (strchr(spec, ':') && strchr(strchr(spec, ':') + 1, ':')) {
+        k = spec;
+        m = strchr(spec, ':');
+        *m++ = '\0';
+        path = strchr(m, ':');
+        *path++ = '\0';
+        c.kind = k;
+        c.fast = !strcmp(m, "fast");
+    }
+    if (!c.kind) {
+        usage();
+        return 1;
+    }
+    size_t len = 0;
+    char *body = read_file(path, &len);
+    if (!body) {
+        perror(path);
+        return 1;
+    }
+    job j = {.scene = scene, .fast = c.fast};
+    atomic_init(&j.rc, 0);
+    kdr_buf out;
+    kdr_buf_init(&out);
+    kdr_proto_error err = {0};
+    int rc = dispatch(pool, &j, &c, body, len, &out, &err);
+    if (rc == 0)
+        rc = write_out(k ? path : NULL, &out);
+    else if (err.status)
+        fprintf(stderr, "kdray-trace: %s: %d %s\n", path, err.status, err.detail);
+    else
+        fprintf(stderr, "kdray-trace: %s: core error %s\n", path, kdr_strerror(rc));
+    kdr_buf_free(&out);
+    free(body);
+    return rc ? 1 : 0;
+}
+
 int main(int argc, char **argv) {
     cli c;
     if (parse_cli(&c, argc, argv)) return usage();
-    size_t len = 0;
-    char *body = read_file(c.request, &len);
-    if (!body) {
-        perror(c.request);
-        return 1;
-    }
     kdr_scene *scene = load_scene(c.scene_path);
     kdr_pool *pool = kdr_pool_create(c.threads - 1);
-    int rc = 1;
-    if (scene && pool) {
-        job j = {.scene = scene, .fast = c.fast};
-        atomic_init(&j.rc, 0);
-        kdr_buf out;
-        kdr_buf_init(&out);
-        kdr_proto_error err = {0};
-        rc = dispatch(pool, &j, &c, body, len, &out, &err);
-        if (rc == 0)
-            fwrite(out.data, 1, out.len, stdout);
-        else if (err.status)
-            fprintf(stderr, "kdray-trace: %d %s\n", err.status, err.detail);
-        else
-            fprintf(stderr, "kdray-trace: core error %s\n", kdr_strerror(rc));
-        rc = rc ? 1 : 0;
-        kdr_buf_free(&out);
-    }
+    int rc = !scene || !pool;
+    for (int i = 0; i < c.nrequests && !rc; i++)
+        rc = answer_one(pool, scene, c, c.requests[i]);
     kdr_pool_destroy(pool);
     kdr_scene_free(scene);
-    free(body);
     return rc;
 }
