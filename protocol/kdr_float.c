@@ -175,7 +175,7 @@ static size_t put_exponent(char *p, int e) {
 
 /* Lays out c * 10^q in plain or scientific notation. */
 static size_t layout(uint64_t c, int q, char *p) {
-    char dig[24];
+    char dig[24] = {0}; /* initialised: gcc -fsanitize cannot see put_digits fill it */
     while (c % 10 == 0) {
         c /= 10;
         q++;
