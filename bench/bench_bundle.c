@@ -38,7 +38,7 @@
 #define AO_RADIUS 0.1f  /* of the scene diagonal */
 #define AO_OFFSET 1e-4f /* origin offset along the normal, of the diagonal */
 #define RANDOM_RAYS 131072
-#define REPEATS 3       /* best of */
+#define REPEATS 5       /* best of, interleaved */
 
 static const char *const ENGINE_GLB =
     "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
@@ -288,7 +288,8 @@ static size_t count_hits(const rayset *r, const outbuf *o) {
     return h;
 }
 
-/* mode < 0: the internal 4/8-wide drivers without the fallback. */
+/* mode < 0: the internal 8-wide driver with flags -mode - 8 (0: in order,
+ * no fallback; KB_SORT: regrouped, no fallback). */
 static double run_kd(const bscene *s, const rayset *r, int mode, outbuf *o,
                      kdr_trav_stats *st) {
     const float tmin = 0.0f;
@@ -301,10 +302,8 @@ static double run_kd(const bscene *s, const rayset *r, int mode, outbuf *o,
                            &tmin, 0, &r->tmax, 0};
         kdr_hits h = {o->t + first, o->prim + first, o->u + first,
                       o->v + first, o->hit + first};
-        if (mode == -4)
-            kd_bundle4_trace(s->kd, &b, 0, g, r->query, 0, &h, st);
-        else if (mode == -8)
-            kd_bundle8_trace(s->kd, &b, 0, g, r->query, 0, &h, st);
+        if (mode < 0)
+            kd_bundle8_trace(s->kd, &b, 0, g, r->query, -mode - 8, &h, st);
         else
             kdr_trace_batch(s->kd, &b, 0, g, r->query, (kdr_trav_mode)mode, &h, st);
     }
@@ -391,7 +390,7 @@ static double run_embree_packets(const bscene *s, const rayset *r, int W,
 enum { E_SINGLE, E_B4, E_B8, E_AUTO, E_RAW4, E_RAW8, E_EMB1, E_EMB4, E_EMB8, E_N };
 static const char *const engine_names[E_N] = {
     "kd single", "kd bundle4", "kd bundle8", "kd auto",
-    "kd raw4 (no fallback)", "kd raw8 (no fallback)",
+    "kd sort8 (no fallback)", "kd raw8 (no fallback)",
     "embree rtcIntersect1", "embree rtcIntersect4 coh", "embree rtcIntersect8 coh"};
 
 /* Command-line filters (-s SET, -e ENGINE: substrings), for profiling. */
@@ -400,7 +399,8 @@ static const char *g_only_set, *g_only_engine;
 static double run_engine(const bscene *s, const rayset *r, int e, outbuf *o,
                          kdr_trav_stats *st) {
     static const int modes[6] = {KDR_TRAV_SINGLE, KDR_TRAV_BUNDLE4,
-                                 KDR_TRAV_BUNDLE8, KDR_TRAV_AUTO, -4, -8};
+                                 KDR_TRAV_BUNDLE8, KDR_TRAV_AUTO,
+                                 -8 - KB_SORT, -8};
     memset(st, 0, sizeof *st);
     if (e <= E_RAW8)
         return run_kd(s, r, modes[e], o, st);
@@ -409,31 +409,41 @@ static double run_engine(const bscene *s, const rayset *r, int e, outbuf *o,
     return run_embree_packets(s, r, e == E_EMB4 ? 4 : 8, o);
 }
 
+static int engine_wanted(int e) {
+    if ((e == E_B8 || e == E_RAW4 || e == E_RAW8) && !kdr_cpu_has_avx2())
+        return 0;
+    return !g_only_engine || strstr(engine_names[e], g_only_engine) != NULL;
+}
+
+/* Engines run interleaved, best of REPEATS each, so that load from other
+ * processes hits them alike. */
 static void bench_set(const bscene *s, const rayset *r) {
     outbuf o = {malloc(r->n * 4), malloc(r->n * 4), malloc(r->n * 4),
                 malloc(r->n * 4), malloc(r->n)};
-    double mrays[E_N];
+    double best[E_N], mrays[E_N];
+    size_t hits[E_N];
+    kdr_trav_stats st[E_N];
+    for (int e = 0; e < E_N; e++)
+        best[e] = 1e30, mrays[e] = 0.0;
+    for (int rep = 0; rep < REPEATS; rep++)
+        for (int e = 0; e < E_N; e++) {
+            if (!engine_wanted(e))
+                continue;
+            double t = run_engine(s, r, e, &o, &st[e]);
+            best[e] = t < best[e] ? t : best[e];
+            hits[e] = count_hits(r, &o);
+        }
     printf("\n%s: %s, %zu rays (%s)\n", s->name, r->name, r->n,
            r->query == KDR_ANY ? "any hit" : "closest hit");
     for (int e = 0; e < E_N; e++) {
-        mrays[e] = 0.0;
-        if ((e == E_B8 || e == E_RAW8) && !kdr_cpu_has_avx2())
+        if (!engine_wanted(e))
             continue;
-        if (g_only_engine && !strstr(engine_names[e], g_only_engine))
-            continue;
-        double best = 1e30;
-        kdr_trav_stats st;
-        for (int rep = 0; rep < REPEATS; rep++) {
-            double t = run_engine(s, r, e, &o, &st);
-            best = t < best ? t : best;
-        }
-        mrays[e] = (double)r->n / best * 1e-6;
-        printf("  %-26s %8.2f Mrays/s  hits %7zu", engine_names[e], mrays[e],
-               count_hits(r, &o));
+        mrays[e] = (double)r->n / best[e] * 1e-6;
+        printf("  %-26s %8.2f Mrays/s  hits %7zu", engine_names[e], mrays[e], hits[e]);
         if (e <= E_RAW8)
             printf("  nodes/ray %6.1f  fallbacks %llu",
-                   (double)st.nodes_visited / (double)r->n,
-                   (unsigned long long)st.fallbacks);
+                   (double)st[e].nodes_visited / (double)r->n,
+                   (unsigned long long)st[e].fallbacks);
         printf("\n");
     }
     printf("  ratios: bundle4/single %.2f  bundle8/single %.2f  auto/single %.2f"

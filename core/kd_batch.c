@@ -5,6 +5,7 @@
  * AoS batch with stride-0 sharing, and tracing one ray alone (rays a bundle
  * cannot take, and incoherent stretches).
  */
+#include <math.h>
 #include <stddef.h>
 
 #include "kd_internal.h"
@@ -51,6 +52,79 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
     out->v[i] = h.v;
 }
 
+/* Direction key: octant (3 bits) above a 4+4-bit Morton code of the
+ * direction's L1-normalised |x| and |y| (its position within the octant). */
+static uint32_t dir_key(const float *d) {
+    const float ax = fabsf(d[0]), ay = fabsf(d[1]), az = fabsf(d[2]);
+    const float l1 = ax + ay + az;
+    float a = ax / l1, b = ay / l1; /* NaN for bad rays: any key will do */
+    uint32_t qa = a >= 0.0f && a <= 1.0f ? (uint32_t)(a * 15.99f) : 0;
+    uint32_t qb = b >= 0.0f && b <= 1.0f ? (uint32_t)(b * 15.99f) : 0;
+    uint32_t m = 0;
+    for (int i = 0; i < 4; i++)
+        m |= ((qa >> i) & 1u) << (2 * i + 1) | ((qb >> i) & 1u) << (2 * i);
+    const uint32_t oct = (uint32_t)(signbit(d[0]) != 0) << 2 |
+                         (uint32_t)(signbit(d[1]) != 0) << 1 |
+                         (uint32_t)(signbit(d[2]) != 0);
+    return oct << 8 | m;
+}
+
+#define KEY_PASS 6 /* keys have 11 bits: two counting-sort passes */
+
+/* One stable counting-sort pass of ids by bits [shift, shift+KEY_PASS). */
+static void sort_pass(const uint32_t *key, const size_t *in, size_t *out,
+                      size_t n, size_t first, int shift) {
+    size_t count[1u << KEY_PASS] = {0};
+    const uint32_t mask = (1u << KEY_PASS) - 1;
+    for (size_t i = 0; i < n; i++)
+        count[(key[in[i] - first] >> shift) & mask]++;
+    size_t sum = 0;
+    for (uint32_t k = 0; k <= mask; k++) {
+        size_t c = count[k];
+        count[k] = sum;
+        sum += c;
+    }
+    for (size_t i = 0; i < n; i++)
+        out[count[(key[in[i] - first] >> shift) & mask]++] = in[i];
+}
+
+/* Mean spread of the L1-normalised directions over consecutive groups of 8
+ * rays (sum over axes of max - min): ~0 for camera tiles, ~2 for random
+ * hemisphere or sphere directions. */
+static float order_spread(const kdr_ray_batch *b, size_t first, size_t count) {
+    float total = 0.0f;
+    size_t groups = 0;
+    for (size_t g = 0; g + 8 <= count; g += 8, groups++) {
+        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (size_t i = g; i < g + 8; i++) {
+            const float *d = b->dir + 3 * (first + i);
+            const float r1 = 1.0f / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]));
+            for (int k = 0; k < 3; k++) {
+                const float x = d[k] * r1;
+                lo[k] = x < lo[k] ? x : lo[k]; /* NaN (bad ray) ignored */
+                hi[k] = x > hi[k] ? x : hi[k];
+            }
+        }
+        for (int k = 0; k < 3; k++)
+            total += hi[k] > lo[k] ? hi[k] - lo[k] : 0.0f;
+    }
+    return groups ? total / (float)groups : 0.0f;
+}
+
+void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
+                    int sort, size_t *ids) {
+    for (size_t i = 0; i < count; i++)
+        ids[i] = first + i;
+    if (!sort || count <= 8 || order_spread(b, first, count) < KB_SORT_SPREAD)
+        return;
+    uint32_t key[KB_CHUNK];
+    size_t tmp[KB_CHUNK];
+    for (size_t i = 0; i < count; i++)
+        key[i] = dir_key(b->dir + 3 * (first + i));
+    sort_pass(key, ids, tmp, count, first, 0);
+    sort_pass(key, tmp, ids, count, first, KEY_PASS);
+}
+
 static int batch_args_ok(const kdr_ray_batch *b, size_t first, size_t count,
                          kdr_query q, const kdr_hits *out) {
     if (!b || !out || !b->org || !b->dir)
@@ -79,10 +153,12 @@ int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
         mode = KDR_TRAV_SINGLE; /* nothing to bundle over */
     switch (mode) {
     case KDR_TRAV_BUNDLE8:
-        kd_bundle8_trace(scene, batch, first, count, query, 1, out, stats);
+        kd_bundle8_trace(scene, batch, first, count, query, KB_FALLBACK | KB_SORT,
+                         out, stats);
         break;
     case KDR_TRAV_BUNDLE4:
-        kd_bundle4_trace(scene, batch, first, count, query, 1, out, stats);
+        kd_bundle4_trace(scene, batch, first, count, query, KB_FALLBACK | KB_SORT,
+                         out, stats);
         break;
     default:
         for (size_t i = first; i < first + count; i++)

@@ -42,14 +42,15 @@
 #include "kd_traverse.h"
 
 /* Batch drivers: same contract as kdr_trace_batch (arguments checked by the
- * caller). With adaptive == 0 every bundle is traced as a bundle (tests use
- * this to exercise the SIMD path on incoherent rays). kd_bundle8_trace needs
+ * caller); flags are KB_FALLBACK | KB_SORT below. With flags == 0 every
+ * bundle is traced as a bundle in the caller's ray order (tests use this to
+ * put every adversarial ray through the SIMD path). kd_bundle8_trace needs
  * AVX2. */
 void kd_bundle4_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
-                      size_t count, kdr_query q, int adaptive, kdr_hits *out,
+                      size_t count, kdr_query q, int flags, kdr_hits *out,
                       kdr_trav_stats *stats);
 void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
-                      size_t count, kdr_query q, int adaptive, kdr_hits *out,
+                      size_t count, kdr_query q, int flags, kdr_hits *out,
                       kdr_trav_stats *stats);
 
 /* Loads ray i of a batch; 0 if it must be traced alone (NaN or infinite
@@ -60,12 +61,25 @@ int kd_batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r);
 void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
                      kdr_query q, kdr_hits *out, kdr_trav_stats *stats);
 
+/* Orders rays [first, first+count) (count <= KB_CHUNK) for bundling: when
+ * consecutive rays are incoherent (mean direction spread per 8 rays over
+ * KB_SORT_SPREAD) and sort != 0, by direction octant, then by a coarse
+ * Morton code of the direction, stable (kd_batch.c); else unchanged. */
+#define KB_CHUNK 256
+#define KB_SORT_SPREAD 0.5f
+void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
+                    int sort, size_t *ids);
+
+/* Driver flags (the `adaptive` argument of kd_bundle*_trace). */
+#define KB_FALLBACK 1 /* incoherent stretches go ray by ray */
+#define KB_SORT 2     /* regroup each chunk of rays by direction */
+
 /* Tuning: a bundle whose average lane occupancy (active lanes per node
  * step / width) falls under KB_OCC_MIN is incoherent; the next
  * KB_FALLBACK_RUN bundles of the batch are then traced ray by ray, after
  * which one bundle probes again. */
-#define KB_OCC_MIN 0.45
-#define KB_FALLBACK_RUN 8
+#define KB_OCC_MIN 0.3
+#define KB_FALLBACK_RUN 32
 
 #endif /* KD_TRAVERSE_BUNDLE_DECL */
 
@@ -76,11 +90,10 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
 
 /* One bundle: the lanes' rays in SoA and their best hits. */
 typedef struct KB(bundle) {
-    _Alignas(32) float org[3][KB_W], inv_dir[3][KB_W], dt[3][KB_W];
-    _Alignas(32) float tmin[KB_W], t_near[KB_W], t_far[KB_W];
+    _Alignas(32) float org[3][KB_W], dir[3][KB_W], tmin[KB_W];
     _Alignas(32) float best_t[KB_W], best_u[KB_W], best_v[KB_W];
     _Alignas(32) int32_t best_prim[KB_W];
-    kd_ray_pre pre[KB_W];
+    float scene_mag;  /* largest root-box coordinate magnitude */
     int lanes;        /* lanes traced by the bundle */
     int hit;          /* any-hit: lanes that hit */
     uint64_t steps;   /* node steps of the bundle */
@@ -303,66 +316,116 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
     }
 }
 
-/* Loads rays [base, base+n) into the bundle; lanes that must be traced
- * alone are returned in *alone, rays that miss the root box get a miss. */
-KB_FN void KB(load)(const kdr_scene *s, const kdr_ray_batch *rb, size_t base,
-                    int n, KB(bundle) *b, int *alone) {
+/* Copies the rays ids[0..n) into the bundle's lanes (SoA). Lanes that
+ * must be traced alone are returned in *alone; they and unused lanes hold
+ * a harmless ray. */
+KB_FN void KB(gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
+                      KB(bundle) *b, int *alone) {
     b->lanes = 0;
     *alone = 0;
     for (int j = 0; j < KB_W; j++) {
-        kdr_ray r = {{0, 0, 0}, {1, 1, 1}, 0.0f, 0.0f};
-        float tn = INFINITY, tf = -INFINITY;
-        if (j < n && !kd_batch_ray(rb, base + (size_t)j, &r))
-            *alone |= 1 << j;
-        float inv[3] = {1.0f / r.dir[0], 1.0f / r.dir[1], 1.0f / r.dir[2]}, dt[3];
-        kd_ray_slack_dt(s, r.org, r.dir, inv, dt);
-        if (j < n && !((*alone >> j) & 1) &&
-            kd_clip_root_dt(s, r.org, r.dir, inv, dt, r.tmin, r.tmax, &tn, &tf))
+        const kdr_ray dummy = {{0, 0, 0}, {1, 1, 1}, 0.0f, 0.0f};
+        kdr_ray r = dummy;
+        if (j < n && kd_batch_ray(rb, ids[j], &r))
             b->lanes |= 1 << j;
+        else if (j < n)
+            *alone |= 1 << j, r = dummy;
         for (int k = 0; k < 3; k++) {
             b->org[k][j] = r.org[k];
-            b->inv_dir[k][j] = inv[k];
-            b->dt[k][j] = dt[k];
+            b->dir[k][j] = r.dir[k];
         }
         b->tmin[j] = r.tmin;
-        b->t_near[j] = (b->lanes >> j) & 1 ? tn : INFINITY;
-        b->t_far[j] = (b->lanes >> j) & 1 ? tf : -INFINITY;
         b->best_t[j] = r.tmax;
         b->best_u[j] = b->best_v[j] = 0.0f;
         b->best_prim[j] = -1;
-        kd_ray_precompute(r.org, r.dir, &b->pre[j]);
     }
 }
 
-/* Traces the loaded lanes of a bundle. */
+/* kd_ray_slack_dt's scene part (a max, so its order does not matter). */
+static inline float KB(scene_mag)(const kdr_scene *s) {
+    float m = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        const float a = fabsf(s->root.min[k]), c = fabsf(s->root.max[k]);
+        m = a > m ? a : m;
+        m = c > m ? c : m;
+    }
+    return m;
+}
+
+/*
+ * kd_ray_slack_dt and kd_clip_root_dt for all lanes at once (the same float
+ * operations and comparisons, so the same bits). Lanes that miss the root
+ * box leave b->lanes; the others get their root interval.
+ */
+KB_FN void KB(clip)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
+                    const VF dir[3], VF *t_near, VF *t_far) {
+    const VF absm = V(seti)(0x7fffffff), zero = V(set1)(0.0f);
+    VF m = V(set1)(b->scene_mag);
+    for (int k = 0; k < 3; k++)
+        m = V(max)(m, V(and)(st->org[k], absm));
+    const VF slack = V(mul)(m, V(set1)(KD_SLACK_REL));
+    VF tn = st->tmin, tf = V(load)(b->best_t), ok = V(bitmask)(b->lanes);
+    for (int k = 0; k < 3; k++) {
+        const VF flat = V(eq)(dir[k], zero), o = st->org[k];
+        const VF lo_b = V(set1)(s->root.min[k]), hi_b = V(set1)(s->root.max[k]);
+        st->dt[k] = V(andnot)(flat, V(mul)(slack, V(and)(st->inv_dir[k], absm)));
+        const VF t0 = V(mul)(V(sub)(lo_b, o), st->inv_dir[k]);
+        const VF t1 = V(mul)(V(sub)(hi_b, o), st->inv_dir[k]);
+        const VF sw = V(gt)(t0, t1);
+        const VF lo = V(sub)(V(sel)(sw, t1, t0), st->dt[k]);
+        const VF hi = V(add)(V(sel)(sw, t0, t1), st->dt[k]);
+        tn = V(sel)(V(andnot)(flat, V(gt)(lo, tn)), lo, tn);
+        tf = V(sel)(V(andnot)(flat, V(lt)(hi, tf)), hi, tf);
+        /* a flat axis only rejects origins outside the slab */
+        ok = V(andnot)(V(and)(flat, V(or)(V(lt)(o, lo_b), V(gt)(o, hi_b))), ok);
+    }
+    ok = V(and)(ok, V(le)(tn, tf));
+    b->lanes = V(bits)(ok);
+    *t_near = V(sel)(ok, tn, V(set1)(INFINITY));
+    *t_far = V(sel)(ok, tf, V(set1)(-INFINITY));
+}
+
+/* Vector set-up of the traversal state from the gathered lanes. */
+KB_FN void KB(setup)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
+                     VF *t_near, VF *t_far) {
+    VF dir[3];
+    for (int k = 0; k < 3; k++) {
+        st->org[k] = V(load)(b->org[k]);
+        dir[k] = V(load)(b->dir[k]);
+        st->inv_dir[k] = V(div)(V(set1)(1.0f), dir[k]);
+    }
+    st->tmin = V(load)(b->tmin);
+    KB(clip)(s, b, st, dir, t_near, t_far);
+    if (!b->lanes)
+        return;
+    KB(tri_pre_setup)(&st->tp, st->org, dir, b->lanes);
+    const int ref = __builtin_ctz((unsigned)b->lanes);
+    st->shared = 1;
+    for (int k = 0; k < 3; k++) {
+        st->sorg[k] = b->org[k][ref];
+        VF same = V(eq)(st->org[k], V(set1)(st->sorg[k]));
+        st->shared &= (V(bits)(same) & b->lanes) == b->lanes;
+    }
+}
+
+/* Traces the gathered lanes of a bundle. */
 KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
     KB(state) st;
+    VF t_near, t_far;
     b->hit = 0;
     b->steps = b->lane_steps = b->tri_tests = 0;
     if (!b->lanes)
         return;
-    const int ref = __builtin_ctz((unsigned)b->lanes);
-    KB(tri_pre_init)(&st.tp, b->pre, b->lanes, ref);
-    st.shared = 1;
-    for (int k = 0; k < 3; k++) {
-        st.sorg[k] = b->org[k][ref];
-        for (int j = 0; j < KB_W; j++)
-            if ((b->lanes >> j) & 1)
-                st.shared &= memcmp(&b->org[k][j], &st.sorg[k], 4) == 0;
-    }
-    for (int k = 0; k < 3; k++) {
-        st.org[k] = V(load)(b->org[k]);
-        st.inv_dir[k] = V(load)(b->inv_dir[k]);
-        st.dt[k] = V(load)(b->dt[k]);
-    }
-    st.tmin = V(load)(b->tmin);
+    KB(setup)(s, b, &st, &t_near, &t_far);
+    if (!b->lanes)
+        return;
     st.best_t = V(load)(b->best_t);
     st.best_u = st.best_v = V(set1)(0.0f);
     st.best_prim = V(seti)(-1);
     st.live = V(bitmask)(b->lanes);
     st.any = any;
     KB(update_limit)(&st);
-    KB(walk)(s, &st, V(load)(b->t_near), V(load)(b->t_far), b);
+    KB(walk)(s, &st, t_near, t_far, b);
     V(store)(b->best_t, st.best_t);
     V(store)(b->best_u, st.best_u);
     V(store)(b->best_v, st.best_v);
@@ -371,10 +434,10 @@ KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
 }
 
 /* Writes the results of rays [base, base+n) except the `alone` lanes. */
-KB_FN void KB(store)(const KB(bundle) *b, size_t base, int n, int alone,
+KB_FN void KB(store)(const KB(bundle) *b, const size_t *ids, int n, int alone,
                      kdr_query q, kdr_hits *out) {
     for (int j = 0; j < n; j++) {
-        const size_t i = base + (size_t)j;
+        const size_t i = ids[j];
         if ((alone >> j) & 1)
             continue;
         if (q == KDR_ANY) {
@@ -398,34 +461,49 @@ KB_FN void KB(stats_add)(kdr_trav_stats *stats, const KB(bundle) *b, int n,
     stats->tri_tests += b->tri_tests;
 }
 
-/* The batch driver: consecutive rays in bundles of KB_W, incoherent
- * stretches ray by ray (see KB_OCC_MIN). */
-KB_FN void KB(run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
-                   size_t count, kdr_query q, int adaptive, kdr_hits *out,
-                   kdr_trav_stats *stats) {
+/* Traces one chunk of rays (ids) in bundles of KB_W; *skip carries the
+ * incoherence fallback from chunk to chunk. */
+KB_FN void KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
+                     const size_t *ids, int m, kdr_query q, int flags,
+                     int *skip, kdr_hits *out, kdr_trav_stats *stats) {
     KB(bundle) b;
-    int skip = 0;
-    for (size_t base = first; base < first + count; base += KB_W) {
-        const size_t left = first + count - base;
-        const int n = left < KB_W ? (int)left : KB_W;
-        if (skip > 0) {
-            skip--;
+    for (int g = 0; g < m; g += KB_W) {
+        const int n = m - g < KB_W ? m - g : KB_W;
+        if (*skip > 0) {
+            --*skip;
             for (int j = 0; j < n; j++)
-                kd_batch_single(s, rb, base + (size_t)j, q, out, stats);
+                kd_batch_single(s, rb, ids[g + j], q, out, stats);
             if (stats)
                 stats->fallbacks++;
             continue;
         }
         int alone;
-        KB(load)(s, rb, base, n, &b, &alone);
+        KB(gather)(rb, ids + g, n, &b, &alone);
+        b.scene_mag = KB(scene_mag)(s);
         KB(trace)(s, &b, q == KDR_ANY);
-        KB(store)(&b, base, n, alone, q, out);
+        KB(store)(&b, ids + g, n, alone, q, out);
         KB(stats_add)(stats, &b, n, alone);
         for (int j = 0; j < n; j++)
             if ((alone >> j) & 1)
-                kd_batch_single(s, rb, base + (size_t)j, q, out, stats);
-        if (adaptive && b.steps && (double)b.lane_steps < KB_OCC_MIN * KB_W * (double)b.steps)
-            skip = KB_FALLBACK_RUN;
+                kd_batch_single(s, rb, ids[g + j], q, out, stats);
+        if ((flags & KB_FALLBACK) && b.steps &&
+            (double)b.lane_steps < KB_OCC_MIN * KB_W * (double)b.steps)
+            *skip = KB_FALLBACK_RUN;
+    }
+}
+
+/* The batch driver: chunks of KB_CHUNK rays, regrouped by direction, then
+ * bundles of KB_W; incoherent stretches ray by ray (see KB_OCC_MIN). */
+KB_FN void KB(run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
+                   size_t count, kdr_query q, int flags, kdr_hits *out,
+                   kdr_trav_stats *stats) {
+    size_t ids[KB_CHUNK];
+    int skip = 0;
+    for (size_t base = first; base < first + count; base += KB_CHUNK) {
+        const size_t left = first + count - base;
+        const int m = left < KB_CHUNK ? (int)left : KB_CHUNK;
+        kd_batch_order(rb, base, (size_t)m, (flags & KB_SORT) != 0, ids);
+        KB(chunk)(s, rb, ids, m, q, flags, &skip, out, stats);
     }
 }
 #endif /* KB_W */

@@ -13,7 +13,7 @@
 #include "kd_traverse_bundle.h"
 
 void kd_bundle4_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
-                      size_t count, kdr_query q, int adaptive, kdr_hits *out,
+                      size_t count, kdr_query q, int flags, kdr_hits *out,
                       kdr_trav_stats *stats) {
-    kb4_run(s, b, first, count, q, adaptive, out, stats);
+    kb4_run(s, b, first, count, q, flags, out, stats);
 }

@@ -16,7 +16,7 @@
 
 KD_AVX2 void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b,
                               size_t first, size_t count, kdr_query q,
-                              int adaptive, kdr_hits *out,
+                              int flags, kdr_hits *out,
                               kdr_trav_stats *stats) {
-    kb8_run(s, b, first, count, q, adaptive, out, stats);
+    kb8_run(s, b, first, count, q, flags, out, stats);
 }

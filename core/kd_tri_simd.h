@@ -79,6 +79,58 @@ KB_FN void KB(tri_pre_init)(KB(tri_pre) *p, const kd_ray_pre *pre, int used,
     p->kz = pre[ref].kz;
 }
 
+/* Lanes' value of axis k where m0 / m1 flag k == 0 / k == 1 (else 2). */
+KB_FN VF KB(tri_axis)(VF m0, VF m1, VF x, VF y, VF z) {
+    return V(sel)(m0, x, V(sel)(m1, y, z));
+}
+
+/*
+ * kd_ray_precompute for all lanes at once, from SoA origins and directions
+ * (divisions and selects only, so every lane gets the scalar bits). `used`
+ * lanes decide `uniform`; the others must hold finite, non-zero directions.
+ */
+KB_FN void KB(tri_pre_setup)(KB(tri_pre) *p, const VF org[3], const VF dir[3],
+                             int used) {
+    const VF absm = V(seti)(0x7fffffff);
+    const VF ax = V(and)(dir[0], absm), ay = V(and)(dir[1], absm),
+             az = V(and)(dir[2], absm);
+    /* the dominant axis, first one on ties (kd_ray_precompute's order) */
+    const VF ge_xy = V(le)(ay, ax);
+    const VF z0 = V(and)(ge_xy, V(le)(az, ax));
+    const VF z1 = V(andnot)(ge_xy, V(le)(az, ay));
+    const VF z2 = V(andnot)(V(or)(z0, z1), V(seti)(-1));
+    const VF dkz = KB(tri_axis)(z0, z1, dir[0], dir[1], dir[2]);
+    const VF swap = V(lt)(dkz, V(set1)(0.0f));
+    /* kx = kz + 1, ky = kz + 2 (mod 3), exchanged when dir[kz] < 0 */
+    p->kx0 = V(sel)(swap, z1, z2), p->kx1 = V(sel)(swap, z2, z0);
+    p->ky0 = V(sel)(swap, z2, z1), p->ky1 = V(sel)(swap, z0, z2);
+    p->kz0 = z0, p->kz1 = z1;
+    p->ox = KB(tri_axis)(p->kx0, p->kx1, org[0], org[1], org[2]);
+    p->oy = KB(tri_axis)(p->ky0, p->ky1, org[0], org[1], org[2]);
+    p->oz = KB(tri_axis)(z0, z1, org[0], org[1], org[2]);
+    p->sx = V(div)(KB(tri_axis)(p->kx0, p->kx1, dir[0], dir[1], dir[2]), dkz);
+    p->sy = V(div)(KB(tri_axis)(p->ky0, p->ky1, dir[0], dir[1], dir[2]), dkz);
+    p->sz = V(div)(V(set1)(1.0f), dkz);
+#if KB_W == 8
+    for (int c = 0; c < 3; c++) {
+        const VF m0 = c == 0 ? p->kx0 : c == 1 ? p->ky0 : z0;
+        const VF m1 = c == 0 ? p->kx1 : c == 1 ? p->ky1 : z1;
+        p->idx[c] = KB(tri_axis)(m0, m1, V(seti)(0), V(seti)(1), V(seti)(2));
+        p->idx[3 + c] = KB(tri_axis)(m0, m1, V(seti)(3), V(seti)(4), V(seti)(5));
+        p->idx[6 + c] = KB(tri_axis)(m0, m1, V(seti)(5), V(seti)(6), V(seti)(7));
+    }
+#endif
+    /* uniform: every used lane has the same kz and the same swap */
+    const int b0 = V(bits)(z0) & used, b1 = V(bits)(z1) & used,
+              bs = V(bits)(swap) & used;
+    p->uniform = (b0 == 0 || b0 == used) && (b1 == 0 || b1 == used) &&
+                 (bs == 0 || bs == used);
+    const int kz = b0 ? 0 : b1 ? 1 : 2, sw = bs != 0;
+    p->kz = kz;
+    p->kx = sw ? (kz + 2) % 3 : (kz + 1) % 3;
+    p->ky = sw ? (kz + 1) % 3 : (kz + 2) % 3;
+}
+
 /* Component k of vertex v, per lane, where m0/m1 flag k == 0 / k == 1. */
 KB_FN VF KB(tri_pick)(VF m0, VF m1, const float *v) {
     return V(sel)(m0, V(set1)(v[0]), V(sel)(m1, V(set1)(v[1]), V(set1)(v[2])));
