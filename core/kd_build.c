@@ -96,6 +96,17 @@ static inline uint32_t ev_tri(kd_event e) { return (uint32_t)e & 0x3fffffffu; }
 static inline unsigned ev_type(kd_event e) { return (unsigned)(e >> 30) & 3u; }
 static inline uint32_t ev_key(kd_event e) { return (uint32_t)(e >> 32); }
 
+/* Inputs are finite, so plain compares do; fminf/fmaxf are library calls
+ * without -ffast-math. */
+static inline float min3(float a, float b, float c) {
+    float m = a < b ? a : b;
+    return m < c ? m : c;
+}
+static inline float max3(float a, float b, float c) {
+    float m = a > b ? a : b;
+    return m > c ? m : c;
+}
+
 static void ev_free(ev_list *l) {
     for (int k = 0; k < 3; k++) {
         free(l->e[k]);
@@ -200,8 +211,8 @@ static int clip_bounds(const float *tri, const kdr_bounds *box, kdr_bounds *out)
         buf[0][i].exact = 7u;
     }
     for (int k = 0; k < 3 && n > 0; k++) {
-        const float lo = fminf(tri[k], fminf(tri[3 + k], tri[6 + k]));
-        const float hi = fmaxf(tri[k], fmaxf(tri[3 + k], tri[6 + k]));
+        const float lo = min3(tri[k], tri[3 + k], tri[6 + k]);
+        const float hi = max3(tri[k], tri[3 + k], tri[6 + k]);
         if (lo < box->min[k]) {
             n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->min[k], 1.0);
             cur ^= 1;
@@ -239,8 +250,8 @@ static int tri_box_bounds(const float *tri, const kdr_bounds *box,
     if (clip_bounds(tri, box, out))
         return 1;
     for (int k = 0; k < 3; k++) {
-        float lo = fminf(tri[k], fminf(tri[3 + k], tri[6 + k]));
-        float hi = fmaxf(tri[k], fmaxf(tri[3 + k], tri[6 + k]));
+        float lo = min3(tri[k], tri[3 + k], tri[6 + k]);
+        float hi = max3(tri[k], tri[3 + k], tri[6 + k]);
         out->min[k] = lo > box->min[k] ? lo : box->min[k];
         out->max[k] = hi < box->max[k] ? hi : box->max[k];
         if (out->min[k] > out->max[k])
@@ -661,8 +672,8 @@ static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev) {
             continue;
         kdr_bounds bb;
         for (int k = 0; k < 3; k++) {
-            bb.min[k] = fminf(t[k], fminf(t[3 + k], t[6 + k]));
-            bb.max[k] = fmaxf(t[k], fmaxf(t[3 + k], t[6 + k]));
+            bb.min[k] = min3(t[k], t[3 + k], t[6 + k]);
+            bb.max[k] = max3(t[k], t[3 + k], t[6 + k]);
         }
         ev_add(ev->e, ev->n, &bb, (uint32_t)i);
     }
