@@ -10,10 +10,10 @@
  *    also stored in err->status together with a detail naming the field and
  *    element at fault ("directions[17]: not a finite number"). On failure the
  *    request struct holds nothing to free (freeing it is still harmless).
- *  - err and out must not be NULL. The fast path may allocate up to about
- *    twice the body size in floats before a 413 is known (bodies are
- *    limited by the server); nothing is allocated for a 413 decided from
- *    array lengths alone.
+ *  - err and out must not be NULL. Flat JSON number arrays are converted
+ *    while the body is walked, so up to about twice the body size in floats
+ *    may be allocated before a 413 is known (bodies are limited by the
+ *    server); base64 arrays are decoded only after the limit check.
  *  - Parsed requests own their arrays; the embedded core structs
  *    (kdr_ray_batch, kdr_shadow_query) point into them. Do not copy a request
  *    struct by value and free both copies; free exactly once.
