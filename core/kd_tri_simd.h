@@ -219,8 +219,10 @@ KB_FN VF KB(tri_test_raw)(const KB(tri_pre) *p, const float *tri, VF act,
     VF ok = V(andnot)(V(and)(neg, pos), act);
     const VF det = V(add)(V(add)(U, Vv), W);
     ok = V(andnot)(V(eq)(det, zero), ok);
-    if (!V(bits)(ok))
+    if (!V(bits)(ok)) {
+        *t_out = *V_out = *W_out = *det_out = zero;
         return ok;
+    }
     const VF az = V(mul)(p->sz, Az0), bz = V(mul)(p->sz, Bz0), cz = V(mul)(p->sz, Cz0);
     const VF T = V(add)(V(add)(V(mul)(U, az), V(mul)(Vv, bz)), V(mul)(W, cz));
     const VF t = V(div)(T, det);
@@ -237,6 +239,7 @@ KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
                       VF tmax, VF *t_out, VF *u_out, VF *v_out) {
     VF Vv, W, det;
     VF ok = KB(tri_test_raw)(p, tri, act, tmin, tmax, t_out, &Vv, &W, &det);
+    *u_out = *v_out = V(set1)(0.0f);
     if (V(bits)(ok)) {
         *u_out = V(div)(Vv, det);
         *v_out = V(div)(W, det);
