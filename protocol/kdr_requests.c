@@ -1,8 +1,9 @@
 /*
  * kdr_requests.c — the three query bodies of shared/API.md (bundle,
  * cone-shadow, frustum) turned into the core's query structs. Each parser
- * checks shapes and limits before allocating anything (so a 413 costs no
- * memory), then reads the arrays, then checks the geometry a core call would
+ * checks shapes and limits before it allocates or decodes a request array
+ * (so a 413 costs no more than the parse), then reads the arrays, then
+ * checks the geometry a core call would
  * otherwise reject (zero directions, points inside lights, degenerate
  * cameras), so the server only ever hands the core valid queries.
  */
