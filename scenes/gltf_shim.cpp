@@ -29,6 +29,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 #include "kdr_gltf.h"
 
 namespace {
@@ -39,6 +41,13 @@ constexpr int kMaxNodeDepth = 1024;
 
 /* tinygltf takes 32-bit lengths, and GLB caps files at 4 GiB. */
 constexpr size_t kMaxFileBytes = 0xFFFFFFF0u;
+
+/* glTF itself nests about 6 deep; extras may nest more, but not this much. */
+constexpr int kMaxJsonDepth = 256;
+
+/* The triangle array may use at most this fraction of physical memory: an
+ * instancing bomb must fail with a message, not wake the OOM killer. */
+constexpr double kMaxMemoryFraction = 0.5;
 
 /* Extensions that change where positions live; if a file requires one of
  * them, the plain accessors are not the geometry. */
@@ -193,7 +202,8 @@ View checked_view(const tinygltf::Model &m, int acc_idx, const Where &w, const c
                  "stride %zu) exceeds bufferView %d (%zu bytes)", w.node, w.mesh, w.prim,
                  what, acc_idx, a.byteOffset, v.count, v.stride, a.bufferView, room);
     }
-    v.base = data.data() + bv.byteOffset + a.byteOffset;
+    static const unsigned char none = 0;
+    v.base = v.count ? data.data() + bv.byteOffset + a.byteOffset : &none;
     return v;
 }
 
@@ -537,7 +547,28 @@ void check_object(const json &o, const Field *schema, const std::string &path) {
     }
 }
 
+/* nlohmann parses any depth, but tinygltf converts `extras` recursively and
+ * a deep enough nesting would overflow the stack: refuse it first. */
+void check_nesting(const std::string &text) {
+    int depth = 0;
+    bool in_string = false, escaped = false;
+    for (char c : text) {
+        if (in_string) {
+            if (escaped) escaped = false;
+            else if (c == '\\') escaped = true;
+            else if (c == '"') in_string = false;
+        } else if (c == '"') {
+            in_string = true;
+        } else if (c == '[' || c == '{') {
+            if (++depth > kMaxJsonDepth) fail("JSON nested deeper than %d levels", kMaxJsonDepth);
+        } else if (c == ']' || c == '}') {
+            depth--;
+        }
+    }
+}
+
 void check_schema(const std::string &text) {
+    check_nesting(text);
     json root;
     try {
         root = json::parse(text);
@@ -630,12 +661,23 @@ void parse(const char *path, tinygltf::Model &m) {
         fail("glTF version \"%s\" is not supported (need 2.x)", m.asset.version.c_str());
 }
 
+void check_memory(size_t ntris) {
+    long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || page <= 0) return;
+    double need = (double)ntris * 9 * sizeof(float);
+    double have = (double)pages * (double)page;
+    if (need > kMaxMemoryFraction * have)
+        fail("%zu triangles need %.1f GiB, more than %.0f%% of this machine's %.1f GiB",
+             ntris, need / 1073741824.0, kMaxMemoryFraction * 100, have / 1073741824.0);
+}
+
 void flatten(const tinygltf::Model &m, kdr_gltf_scene *out) {
     check_extensions(m);
     Planner plan(m);
     for (int root : m.scenes[(size_t)default_scene(m)].nodes)
         plan.visit(root, mat_identity(), 0);
     size_t nt = plan.total, nr = plan.jobs.size();
+    check_memory(nt);
     out->tris = (float *)malloc(nt ? nt * 9 * sizeof(float) : 1);
     out->ranges = (kdr_mesh_range *)malloc(nr ? nr * sizeof(kdr_mesh_range) : 1);
     if (!out->tris || !out->ranges) fail("out of memory for %zu triangles", nt);

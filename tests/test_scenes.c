@@ -575,6 +575,33 @@ static void test_errors_views(void) {
     CHECK(kdr_gltf_load("x", NULL, NULL, 0) == -1, "NULL output");
 }
 
+/* Files built to exhaust the stack or memory must fail with a message. */
+static void test_errors_limits(void) {
+    char path[256];
+    snprintf(path, sizeof path, "%s/deep.gltf", tmpdir);
+    enum { DEPTH = 100000 };
+    static char deep[2 * DEPTH + 64];
+    int n = snprintf(deep, sizeof deep, "{\"asset\":{\"version\":\"2.0\"},\"extras\":");
+    memset(deep + n, '[', DEPTH);
+    memset(deep + n + DEPTH, ']', DEPTH);
+    deep[n + 2 * DEPTH] = '}';
+    write_bytes(path, deep, (size_t)n + 2 * DEPTH + 1);
+    LOAD_FAILS(path, "nested deeper");
+
+    /* 2^30 triangles (the count limit itself): 36 GiB of floats, which the
+     * loader must refuse on any machine with less than 72 GiB. */
+    long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+    if (pages > 0 && page > 0 && (double)pages * (double)page < 72.0 * 1073741824.0) {
+        model m = {0};
+        add_positions(&m, kTri, 3);
+        /* positions: 3 * 2^30 zero vertices, an accessor without bufferView */
+        add_acc(&m, -1, 0, 5126, (size_t)3 << 30, "VEC3", 0);
+        const char *rest = "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":1}}]}],"
+                           "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
+        LOAD_FAILS(write_model(&m, "bomb.gltf", AS_DATA_URI, rest), "GiB");
+    }
+}
+
 /* Every proper prefix of a .glb fails cleanly; so does garbage. */
 static void test_truncation_garbage(void) {
     model m = {0};
@@ -673,6 +700,7 @@ int main(void) {
     test_errors_structure();
     test_errors_geometry();
     test_errors_views();
+    test_errors_limits();
     test_truncation_garbage();
     test_mutations();
     remove_tmpdir();
