@@ -10,8 +10,8 @@
  * in every bundle), distinct random origins, +0/-0 direction components,
  * origins placed exactly on split planes read from the tree (some rays
  * lying in the plane), odd intervals (tmax < tmin, tmin == tmax, finite
- * tmax, negative tmin, NaN/inf inputs), each cut into calls of 1, 3, 5, 7,
- * 9 and 13 rays. The 4- and 8-wide drivers are also called directly with
+ * tmax, negative tmin, NaN/inf inputs), rays aimed at vertices and edge
+ * midpoints, each cut into calls of 1, 3, 5, 7, 9, 13 and 64 rays. The 4- and 8-wide drivers are also called directly with
  * the incoherence fallback off, so the SIMD path sees every adversarial ray.
  */
 #include <math.h>
@@ -22,6 +22,7 @@
 #include "kd_internal.h"
 #include "kd_traverse_bundle.h"
 #include "kdray.h"
+#include "ladder.h"
 
 #define NRAYS 1536
 #define PI 3.14159265358979323846
@@ -504,9 +505,37 @@ static void check_api(void) {
     kdr_scene_free(s);
 }
 
-int main(void) {
+/* The real-scene ladder of scenes/fetch: every ray set on every scene. */
+static int check_ladder(const char *dir) {
+    ladder_entry *e = NULL;
+    char err[256];
+    int n = ladder_read(dir, &e, err, sizeof err);
+    if (n < 0) {
+        printf("skipped: %s\n", err);
+        return 77;
+    }
+    for (int i = 0; i < n; i++) {
+        scene_src src = {e[i].name, NULL, 0};
+        if (ladder_load(&e[i], &src.tris, &src.ntris, err, sizeof err) != 0) {
+            fprintf(stderr, "FAIL: %s\n", err);
+            g_failures++;
+            continue;
+        }
+        if (src.ntris > 0)
+            check_scene(&src, 0);
+        free(src.tris);
+    }
+    free(e);
+    printf("%s: %d mismatches\n", g_failures ? "FAILED" : "passed", g_failures);
+    return g_failures ? 1 : 0;
+}
+
+/* No argument: generated scenes. One argument: the ladder directory. */
+int main(int argc, char **argv) {
     printf("AVX2: %s\n", kdr_cpu_has_avx2() ? "yes (4- and 8-wide tested)"
                                             : "no (8-wide skipped)");
+    if (argc > 1)
+        return check_ladder(argv[1]);
     check_api();
     scene_src scenes[] = {make_soup(3000), make_lattice(6, 0.3f),
                           make_sphere(24, 48)};
