@@ -15,12 +15,13 @@
  * rays/s by less than the run-to-run noise; empty_bonus <= 0.2 grows the
  * tree 5x (perfect splits then keep cutting straddlers) and is slower; a
  * depth limit below pbrt's 8 + 1.3 log2 N halves build time on the engine
- * but costs 10-30% on the 1M sphere, so the default stays.
+ * but costs 10-30% on the 1M sphere, so the default stays. Leaves of up to
+ * 3 triangles (pbrt: 1) build ~15% faster with equal or better rays/s.
  */
 #define KD_ISECT_COST 80.0f
 #define KD_TRAV_COST 1.0f
 #define KD_EMPTY_BONUS 0.5f
-#define KD_LEAF_SIZE 1
+#define KD_LEAF_SIZE 3
 
 const char *kdr_strerror(int status) {
     switch (status) {
