@@ -142,8 +142,9 @@ int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
 
 /* Bundle / frustum results for rays [0, n): closest ->
  * {"count":N,"t":[...],"prim":[...],"u":[...],"v":[...]}, any ->
- * {"count":N,"hit":[0|1,...]}. A ray with prim < 0 is written as a miss
- * (t = -1, u = v = 0) whatever the other arrays hold. */
+ * {"count":N,"hit":[0|1,...]}. closest reads t, prim, u, v; any reads hit.
+ * A ray with prim < 0 is written as a miss (t = -1, u = v = 0) whatever the
+ * other arrays hold. */
 int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
                           kdr_encoding enc, kdr_buf *out);
 
