@@ -12,28 +12,35 @@
  *  1. each lane visits the child on its ORIGIN's side of the split plane
  *     first (front) and the other second (back), whatever its direction;
  *  2. a negative plane distance (the ray moves away from the plane; -0.0
- *     from an underflow counts as negative) becomes +infinity, so the back
- *     child's interval is empty and the front child keeps the whole one.
- * d = (split - org) * inv_dir, the single-ray formula of kd_traverse.h.
- * A lane whose origin is ON the plane (split - org == 0) has d = +-0 and no
- * side of its own: its front is the child its direction points away from,
- * which it sees over the point interval [t_near, 0] (exactly as the
- * single-ray walk does, so a triangle lying in the plane at t = 0 is found
- * whichever child holds it), and its back child gets the rest. A lane lying
- * in the plane (dist == 0, dir == +-0) gets d = NaN, and the min/max operand
- * order (NaN yields the second operand) gives it both children over its
- * whole interval.
+ *     from an underflow counts as negative) becomes +infinity for the
+ *     front child, which then keeps the whole interval.
+ * d = (split - org) * inv_dir and the slack dt are those of kd_traverse.h,
+ * so every lane sees exactly the child intervals of the single-ray walk
+ * (front [t_near, min(d + dt, t_far)], back [max(d - dt, t_near), t_far],
+ * and for negative d the back child only up to d + dt): same leaves, same
+ * triangle tests, same answer. See KB(spans) for the rule in one place.
+ * A lane whose origin is ON the plane (split - org == 0) has no side of its
+ * own: its front is the child its direction leaves, seen over
+ * [t_near, dt] as in the single-ray walk, and its back child gets the rest.
+ * A lane lying in the plane (dist == 0, dir == +-0) gets d = NaN, and the
+ * min/max operand order (NaN yields the second operand) gives it both
+ * children over its whole interval.
  *
- * Origins: lanes may have different origins. Every lane computes the
- * intervals of the below and above children from its own origin side, so
- * each lane's intervals are always exact; the bundle then enters first the
- * child that is front for most active lanes and stacks the other. With a
- * shared origin (or all origins on the same side) this is exactly the
- * paper's order; with origins on both sides of a plane the minority lanes
- * see their back child first, which costs pruning but not correctness.
+ * Origins: lanes may have different origins. When every lane has the same
+ * origin (a camera, hemisphere rays from a surface point) and it is off the
+ * plane, one scalar distance decides front and back for the whole bundle:
+ * the paper's listing (KB(step_shared)). Otherwise every lane computes its
+ * below/above intervals from its own origin side, so each lane's intervals
+ * stay exact; the bundle enters first the child that is front for most
+ * active lanes and stacks the other (KB(step_general)). Lanes whose origins
+ * lie on different sides of a plane therefore never need a split bundle;
+ * the minority lanes see their back child first, which costs pruning but
+ * not correctness.
  *
  * Lanes are active while t_near <= t_far and t_near <= kd_term_bound(best_t)
  * (any-hit lanes leave once they hit); a bundle pops when no lane is active.
+ * Rays a bundle cannot take (NaN/inf input, zero direction, tmin < 0 where
+ * "negative means behind" breaks, tmax < tmin) are traced alone.
  */
 #ifndef KD_TRAVERSE_BUNDLE_DECL
 #define KD_TRAVERSE_BUNDLE_DECL
