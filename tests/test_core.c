@@ -176,9 +176,17 @@ static size_t compare_many(const soup *sp, const kdr_scene *s, size_t nrays,
     return bad;
 }
 
+/* Leaf size for the scenes below: 1 gives the deepest trees and the most
+ * straddler clipping; 0 means the defaults. */
+static int g_leaf_size;
+
 static kdr_scene *build_or_die(const soup *sp) {
     kdr_scene *s = NULL;
-    int err = kdr_scene_build(sp->t, sp->n, NULL, NULL, NULL, &s);
+    kdr_build_opts o;
+    kdr_build_opts_default(&o);
+    if (g_leaf_size > 0)
+        o.leaf_size = g_leaf_size;
+    int err = kdr_scene_build(sp->t, sp->n, &o, NULL, NULL, &s);
     CHECK(err == KDR_OK);
     if (err != KDR_OK) {
         fprintf(stderr, "build failed: %s\n", kdr_strerror(err));
@@ -382,9 +390,11 @@ int main(void) {
     test_small_scenes();
     test_build_options();
     test_log_and_stats();
-    test_random_soups();
-    test_box_grid();
-    test_huge_offsets();
+    for (g_leaf_size = 0; g_leaf_size <= 1; g_leaf_size++) {
+        test_random_soups();
+        test_box_grid();
+        test_huge_offsets();
+    }
     if (g_failures)
         fprintf(stderr, "test_core: %d failures\n", g_failures);
     else
