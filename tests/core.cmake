@@ -14,3 +14,11 @@ if(TARGET kdray_scenes AND EXISTS ${KDRAY_CORE_ENGINE})
                    ${KDRAY_CORE_ENGINE})
   set_tests_properties(test_core_scene PROPERTIES LABELS slow)
 endif()
+
+# test_core_perf: a measurement tool, not a test (never add_test it): kd
+# build time and single-ray rays/s against Embree in the same run.
+find_package(embree 3.13 QUIET)
+if(TARGET kdray_scenes AND TARGET embree)
+  add_executable(test_core_perf ${CMAKE_CURRENT_SOURCE_DIR}/test_core_perf.c)
+  target_link_libraries(test_core_perf PRIVATE kdray_core kdray_scenes embree)
+endif()
