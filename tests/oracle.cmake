@@ -23,10 +23,19 @@ add_test(NAME embree_ref COMMAND test_embree_ref)
 # kdr_intersect1 / kdr_occluded1 vs Embree ray by ray.
 add_executable(test_embree ${CMAKE_CURRENT_SOURCE_DIR}/test_embree.c)
 target_link_libraries(test_embree PRIVATE kdray_testsupport)
-# Real scenes: the rungs up to 200K triangles always (5000 rays per kind),
-# every rung with 20000 rays per kind in the slow (non-sanitizer) pass.
-add_test(NAME embree_ladder COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 200000 5000)
-add_test(NAME embree_ladder_all COMMAND test_embree ladder ${KDRAY_SCENE_DIR})
+# Real scenes: the rungs up to 200K triangles always (3000 rays per kind),
+# every rung with 10000 rays per kind in the slow (non-sanitizer) pass.
+add_test(NAME embree_ladder COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 200000 3000)
+add_test(NAME embree_ladder_all COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 2000000 10000)
 set_tests_properties(embree_ladder embree_ladder_all PROPERTIES
                      FIXTURES_REQUIRED scenes_fetch SKIP_RETURN_CODE 77)
 set_tests_properties(embree_ladder_all PROPERTIES LABELS slow)
+
+# Every query kind vs Embree, single rays and watertightness (issue 7).
+add_executable(test_accuracy ${CMAKE_CURRENT_SOURCE_DIR}/test_accuracy.c)
+target_link_libraries(test_accuracy PRIVATE kdray_testsupport)
+add_executable(kdray_accuracy_report ${CMAKE_CURRENT_SOURCE_DIR}/test_accuracy_report.c)
+target_link_libraries(kdray_accuracy_report PRIVATE kdray_testsupport)
+foreach(kind frustum_multi4 frustum_single cone_shadow)
+  add_test(NAME accuracy_${kind} COMMAND test_accuracy ${kind})
+endforeach()

@@ -57,8 +57,8 @@ static void run_set(const char *label, const stress_scene *s,
         double e;
         kdr_intersect1(kd, r, &kh, NULL);
         const int eh_hit = oracle_intersect1(o, r, &eh);
-        cmp_tally_add(&c, r, cmp_closest(s->tris, s->ntris, r, &kh, &eh, &e),
-                      e, eh_hit);
+        const cmp_class cl = cmp_closest(s->tris, s->ntris, r, &kh, &eh, &e);
+        cmp_tally_add(&c, r, cl, e, eh_hit);
         const int ka = kdr_occluded1(kd, r, NULL), ea = oracle_occluded1(o, r);
         cmp_tally_add(&a, r,
                       cmp_occluded(s->tris, s->ntris, r, ka, ea, &kh, &eh),

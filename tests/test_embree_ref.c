@@ -34,9 +34,9 @@ static int check_scene(stress_scene_kind kind, cmp_tally *all) {
             double e;
             ref_intersect1(s.tris, s.ntris, &rays[i], &ref);
             int h = oracle_intersect1(o, &rays[i], &em);
-            cmp_tally_add(&t, &rays[i],
-                          cmp_closest(s.tris, s.ntris, &rays[i], &ref, &em, &e),
-                          e, h);
+            const cmp_class c =
+                cmp_closest(s.tris, s.ntris, &rays[i], &ref, &em, &e);
+            cmp_tally_add(&t, &rays[i], c, e, h);
         }
         snprintf(label, sizeof label, "%s/%s", stress_scene_name(kind),
                  stress_ray_name((stress_ray_kind)rk));

@@ -1,0 +1,55 @@
+/*
+ * test_accuracy.c — the accuracy gate (ctest): every query kind given on
+ * the command line (default: all) on the stress corpus, with zero tolerated
+ * unexplained disagreements with Embree, zero answers differing from the
+ * single-ray ones, zero watertightness failures, zero API errors, and cone
+ * visibilities equal to the fraction of unblocked samples. A kind whose
+ * function is missing or returns an error fails.
+ *
+ *   test_accuracy [KIND...]   KIND: single bundle4 bundle8 frustum_multi4
+ *                             frustum_single cone_shadow
+ */
+#include <stdio.h>
+#include <string.h>
+
+#include "accuracy.h"
+
+static int wanted(int argc, char **argv, acc_kind k) {
+    if (argc < 2)
+        return 1;
+    for (int i = 1; i < argc; i++)
+        if (strcmp(argv[i], acc_kind_name(k)) == 0)
+            return 1;
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    acc_opts opt;
+    acc_opts_default(&opt);
+    int fail = 0, ran = 0;
+    acc_result res[ACC_NKINDS];
+    memset(res, 0, sizeof res);
+    for (int k = 0; k < ACC_NKINDS; k++) {
+        if (!wanted(argc, argv, (acc_kind)k))
+            continue;
+        ran++;
+        if (acc_run((acc_kind)k, &opt, &res[k]) != 0) {
+            printf("%s: a stress scene could not be built\n",
+                   acc_kind_name((acc_kind)k));
+            fail = 1;
+        }
+        fail |= acc_failures(&res[k]) != 0;
+    }
+    acc_print_header(stdout);
+    for (int k = 0; k < ACC_NKINDS; k++)
+        if (wanted(argc, argv, (acc_kind)k))
+            acc_print_row(stdout, (acc_kind)k, &res[k]);
+    for (int k = 0; k < ACC_NKINDS; k++)
+        if (wanted(argc, argv, (acc_kind)k) && acc_failures(&res[k]))
+            acc_print_details(stdout, (acc_kind)k, &res[k]);
+    if (ran == 0) {
+        printf("no such query kind\n");
+        return 2;
+    }
+    return fail;
+}
