@@ -286,6 +286,8 @@ static int take_leaf(const kdr_scene *scene, const kd_cone *c,
 /* Sorts and drops duplicates (a triangle straddling splits sits in several
  * leaves). */
 static void cand_unique(kd_cand_list *cl) {
+    if (cl->n < 2) /* also: qsort must not see the NULL of an empty list */
+        return;
     qsort(cl->v, cl->n, sizeof *cl->v, cmp_u32);
     size_t out = 0;
     for (size_t j = 0; j < cl->n; j++) {
