@@ -155,10 +155,11 @@ int kdr_frustum_trace(const kdr_scene *scene, const kdr_camera *cam,
         return rc;
     kd_camera_basis b;
     kd_camera_basis_init(cam, &b);
-    if (mode != KDR_FRUSTUM_RAYS)
-        return kd_frustum_trace_tiles(scene, cam, &b, tile, first_tile, count,
-                                      query, mode == KDR_FRUSTUM_MULTI4 ? 4 : 1,
-                                      out, stats);
+    if (mode != KDR_FRUSTUM_RAYS) {
+        const int lanes = mode == KDR_FRUSTUM_MULTI4 ? 4 : 1;
+        return (kdr_cpu_has_avx2() ? kd_frustum_trace_tiles8 : kd_frustum_trace_tiles4)(
+            scene, cam, &b, tile, first_tile, count, query, lanes, out, stats);
+    }
     for (size_t k = first_tile; k < first_tile + count; k++)
         trace_tile_rays(scene, cam, &b, tile, k, query, out, stats);
     return KDR_OK;

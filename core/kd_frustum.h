@@ -48,12 +48,17 @@ static inline void kd_camera_dir(const kd_camera_basis *b, uint32_t px,
 
 /*
  * Traces tiles [first, first+count) with interval frusta, `lanes` tiles
- * per traversal (1 or 4) (kd_frustum_trav.c). Arguments are checked by the
- * caller; returns KDR_OK or KDR_ENOMEM.
+ * per traversal (1 or 4), rays in groups of 4 (SSE2) or 8 (AVX2: call
+ * only when kdr_cpu_has_avx2()) (kd_frustum_trav.h). Arguments are checked
+ * by the caller; returns KDR_OK or KDR_ENOMEM.
  */
-int kd_frustum_trace_tiles(const kdr_scene *s, const kdr_camera *cam,
-                           const kd_camera_basis *b, uint32_t tile, size_t first,
-                           size_t count, kdr_query q, int lanes, kdr_hits *out,
-                           kdr_trav_stats *stats);
+int kd_frustum_trace_tiles4(const kdr_scene *s, const kdr_camera *cam,
+                            const kd_camera_basis *b, uint32_t tile, size_t first,
+                            size_t count, kdr_query q, int lanes, kdr_hits *out,
+                            kdr_trav_stats *stats);
+int kd_frustum_trace_tiles8(const kdr_scene *s, const kdr_camera *cam,
+                            const kd_camera_basis *b, uint32_t tile, size_t first,
+                            size_t count, kdr_query q, int lanes, kdr_hits *out,
+                            kdr_trav_stats *stats);
 
 #endif /* KD_FRUSTUM_H */

@@ -1,8 +1,9 @@
 /*
  * test_frustum.c — frustum queries must answer exactly like single rays:
  * for every pixel, t, u, v (bit patterns), prim and the any-hit flag of
- * kdr_frustum_trace in MULTI4 and SINGLE mode equal kdr_intersect1 /
- * kdr_occluded1 of kdr_camera_ray.
+ * kdr_frustum_trace in MULTI4 and SINGLE mode (and of the SSE2 group code
+ * called directly, which AVX2 machines would otherwise never run) equal
+ * kdr_intersect1 / kdr_occluded1 of kdr_camera_ray.
  *
  * Scenes: every adversarial kind of the stress generator (shared faces,
  * triangles in split planes, closed meshes, slivers, far offsets, mixed
@@ -22,6 +23,7 @@
 #include <string.h>
 
 #include "compare.h"
+#include "kd_frustum.h"
 #include "kd_internal.h"
 #include "kdray.h"
 #include "ladder.h"
@@ -121,6 +123,23 @@ static void compare(const char *what, const kdr_camera *cam, uint32_t tile,
     }
 }
 
+/* Variants beyond the public modes: the 4-wide (SSE2) group code called
+ * directly, so it is tested on AVX2 machines too (lanes 4 and 1). */
+#define VARIANT_SSE_MULTI4 10
+#define VARIANT_SSE_SINGLE 11
+
+static int trace_range(const kdr_scene *s, const kdr_camera *cam, uint32_t tile,
+                       size_t first, size_t n, kdr_query q, int mode,
+                       kdr_hits *out) {
+    if (mode < VARIANT_SSE_MULTI4)
+        return kdr_frustum_trace(s, cam, tile, first, n, q, (kdr_frustum_mode)mode,
+                                 out, NULL);
+    kd_camera_basis b;
+    kd_camera_basis_init(cam, &b);
+    return kd_frustum_trace_tiles4(s, cam, &b, tile, first, n, q,
+                                   mode == VARIANT_SSE_MULTI4 ? 4 : 1, out, NULL);
+}
+
 /* Traces the whole image in chunks of 1..7 tiles. */
 static void trace_chunked(const kdr_scene *s, const kdr_camera *cam,
                           uint32_t tile, int mode, kdr_query q, image *got) {
@@ -130,8 +149,7 @@ static void trace_chunked(const kdr_scene *s, const kdr_camera *cam,
         size_t n = 1 + (size_t)(stress_rng_next(&g_rng) % 7);
         if (n > ntiles - k)
             n = ntiles - k;
-        int rc = kdr_frustum_trace(s, cam, tile, k, n, q, (kdr_frustum_mode)mode,
-                                   &out, NULL);
+        int rc = trace_range(s, cam, tile, k, n, q, mode, &out);
         if (rc != KDR_OK) {
             FAIL("kdr_frustum_trace returned %d\n", rc);
             return;
@@ -143,7 +161,8 @@ static void trace_chunked(const kdr_scene *s, const kdr_camera *cam,
 static void check_camera(const char *what, const kdr_scene *s,
                          const kdr_camera *cam) {
     static const uint32_t tiles[] = {4, 5, 8, 16, 64};
-    static const int modes[] = {KDR_FRUSTUM_MULTI4, KDR_FRUSTUM_SINGLE};
+    static const int modes[] = {KDR_FRUSTUM_MULTI4, KDR_FRUSTUM_SINGLE,
+                                VARIANT_SSE_MULTI4, VARIANT_SSE_SINGLE};
     const size_t n = (size_t)cam->width * cam->height;
     image ref, got;
     if (kdr_camera_validate(cam) != KDR_OK)
@@ -152,7 +171,7 @@ static void check_camera(const char *what, const kdr_scene *s,
     image_alloc(&got, n);
     reference(s, cam, &ref);
     for (size_t ti = 0; ti < sizeof tiles / sizeof *tiles; ti++) {
-        for (int m = 0; m < 2; m++) {
+        for (int m = 0; m < 4; m++) {
             for (int q = 0; q < 2; q++) {
                 image_poison(&got, n);
                 trace_chunked(s, cam, tiles[ti], modes[m], (kdr_query)q, &got);

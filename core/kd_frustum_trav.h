@@ -1,0 +1,646 @@
+/*
+ * kd_frustum_trav.h — interval frustum traversal (technique 3 of Tsakok,
+ * Bishop and Kennings): up to four tiles of primary rays walk the kd-tree
+ * together, one tile per SSE lane.
+ *
+ * A tile's rays share the eye, so the tile is bounded by the interval
+ * [dmin, dmax] of its ray directions on each axis (min/max over ALL its
+ * float rays, so rounding cannot put a ray outside). At a split plane at
+ * distance dist = split - eye[axis], the rays that reach the plane do so at
+ * t in dist / [dmin, dmax]; a ray moving away from the plane (or parallel
+ * to it) never reaches it, which the paper's rule "negative distance means
+ * +infinity" expresses. So per lane
+ *   hi = latest crossing (+inf if some ray never crosses): the front child
+ *        (the eye's side) is needed over [t_near, min(t_far, hi)];
+ *   lo = earliest crossing (+inf if none): the back child is needed over
+ *        [max(t_near, lo), t_far].
+ * Every lane sees the same eye, so front and back are the same for all
+ * lanes; an eye exactly on the plane visits both children whole. The t
+ * bounds are padded by KF_REL_PAD so that they contain the exact real
+ * interval of every ray: the frustum then reaches every leaf that holds a
+ * ray's closest hit, whatever the rounding, and answers equal the single
+ * ray traversal's.
+ *
+ * A lane stops when t_near exceeds the largest kd_term_bound(best_t) of its
+ * still-searching rays (any-hit: when all have hit). At a leaf, the rays
+ * of the lanes that reached it are tested in groups of KB_W (2x2 pixel
+ * blocks with SSE, 4x2 with AVX2): first against the leaf's box (absolute
+ * padding KF_ABS_PAD), then against its triangles with the SIMD watertight
+ * test of kd_tri_simd.h, bit-identical to kd_tri.h.
+ *
+ * This is a template, instantiated once per group width by
+ * kd_frustum_trav4.c (SSE2) and kd_frustum_trav8.c (AVX2); it expects the
+ * lane layer macros of kd_tri_simd.h (KB_W, VF, V, KB, KB_FN) plus KF_FN
+ * (qualifiers of every function here) and KF_ENTRY (the exported name).
+ * The four frusta themselves always ride in SSE lanes (f4).
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kd_frustum.h"
+#include "kd_internal.h"
+#include "kd_tri_simd.h"
+
+/* all lanes of a group */
+#define KF_FULL ((1 << KB_W) - 1)
+/* a group is a KF_BW x 2 pixel block */
+#define KF_BW (KB_W / 2)
+
+/* Relative padding of split-plane distances: rounding in split - eye and
+ * in the division is below 2^-22; this is far above and still negligible. */
+#define KF_REL_PAD 0x1p-20f
+/* Absolute padding of leaf and root boxes, relative to the magnitude of
+ * the coordinates involved (eye and scene box). */
+#define KF_ABS_PAD 0x1p-20f
+/* Frusta per traversal in KDR_FRUSTUM_MULTI4 mode (the SSE width). */
+#define KF_LANES 4
+/* "No hit yet" prim: larger than any prim, so the tie rule needs no
+ * unsigned compare. */
+#define KF_NO_PRIM INT32_MAX
+
+/* min/max without libm's NaN rules (no NaN reaches them). */
+static inline float kf_minf(float a, float b) { return b < a ? b : a; }
+static inline float kf_maxf(float a, float b) { return b > a ? b : a; }
+
+/* The rays of a KF_BW x 2 pixel block and their best hits. */
+typedef struct kf_group {
+    KB(tri_pre) pre;
+    _Alignas(32) float inv[3][KB_W]; /* 1 / dir, for box tests */
+    _Alignas(32) float t[KB_W], u[KB_W], v[KB_W];
+    _Alignas(32) int32_t prim[KB_W];
+    int32_t pix[KB_W];            /* output index; -1 for padding lanes */
+    int live;                     /* lanes still searching (bit mask) */
+    float term;                   /* max kd_term_bound(t) over live lanes */
+} kf_group;
+
+/* One tile: its groups and its bounding interval frustum. */
+typedef struct kf_tile {
+    size_t g0, ng;
+    float dmin[3], dmax[3];
+    float tn, tf; /* root interval; tn > tf when no ray meets the root */
+    float term;
+    uint32_t nrays;
+} kf_tile;
+
+typedef struct kf_ctx {
+    const kdr_scene *s;
+    const kdr_camera *cam;
+    const kd_camera_basis *b;
+    uint32_t tile;
+    kdr_query q;
+    float pad;          /* absolute box padding */
+    kf_group *groups;   /* KF_LANES tiles' worth */
+    size_t gpt;         /* groups per tile: lane l owns [l*gpt, (l+1)*gpt) */
+    float *sx_tab, *sy_tab; /* kd_camera_sx per column, kd_camera_sy per row */
+    uint32_t *sel;      /* groups selected at a leaf */
+    int *selbits;
+    kf_tile ft[KF_LANES];
+    int nlanes;
+    uint64_t tri_tests;
+    uint64_t lane_steps[KF_LANES];
+} kf_ctx;
+
+/* Traversal stack entry: a node, the lanes' intervals and the node's box. */
+typedef struct kf_entry {
+    f4 tn, tf;
+    float lo[3], hi[3];
+    uint32_t node;
+} kf_entry;
+
+/* ---- tile set-up ---------------------------------------------------------- */
+
+static size_t kf_groups_per_tile(uint32_t tile) {
+    return (size_t)((tile + KF_BW - 1) / KF_BW) * ((tile + 1) / 2);
+}
+
+/* Lanes set in 4- or 8-bit masks. */
+static inline int kf_popcount(int bits) {
+    return (int)((0x4332322132212110ull >> (4 * (bits & 15))) & 15) +
+           (int)((0x4332322132212110ull >> (4 * ((bits >> 4) & 15))) & 15);
+}
+
+/* a < b on int32 lanes carried in float vectors */
+KF_FN VF kf_ilt(VF a, VF b) {
+#if KB_W == 8
+    return _mm256_castsi256_ps(
+        _mm256_cmpgt_epi32(_mm256_castps_si256(b), _mm256_castps_si256(a)));
+#else
+    return _mm_castsi128_ps(_mm_cmplt_epi32(_mm_castps_si128(a), _mm_castps_si128(b)));
+#endif
+}
+
+/* The shear of kd_ray_precompute for a whole group at once, when its rays
+ * share the dominant axis and its sign (nearly always in a small block):
+ * the same divisions, so the same bits. Returns 0 when lanes disagree. */
+KF_FN int kf_pre_uniform(const kf_ctx *c, kf_group *g, const VF d[3]) {
+    const VF sign = V(set1)(-0.0f), zero = V(set1)(0.0f);
+    const VF ax = V(andnot)(sign, d[0]), ay = V(andnot)(sign, d[1]),
+             az = V(andnot)(sign, d[2]);
+    const VF ge_xy = V(le)(ay, ax);
+    const int b0 = V(bits)(V(and)(ge_xy, V(le)(az, ax)));
+    const int b1 = V(bits)(V(andnot)(ge_xy, V(le)(az, ay)));
+    const int kz = b0 == KF_FULL ? 0 : b1 == KF_FULL ? 1 : (b0 | b1) == 0 ? 2 : -1;
+    if (kz < 0)
+        return 0;
+    int kx = kz + 1 == 3 ? 0 : kz + 1, ky = kx + 1 == 3 ? 0 : kx + 1;
+    const int neg = V(bits)(V(lt)(d[kz], zero));
+    if (neg != 0 && neg != KF_FULL)
+        return 0;
+    if (neg) {
+        const int tmp = kx;
+        kx = ky;
+        ky = tmp;
+    }
+    KB(tri_pre) *p = &g->pre;
+    p->ox = V(set1)(c->b->eye[kx]);
+    p->oy = V(set1)(c->b->eye[ky]);
+    p->oz = V(set1)(c->b->eye[kz]);
+    p->sx = V(div)(d[kx], d[kz]);
+    p->sy = V(div)(d[ky], d[kz]);
+    p->sz = V(div)(V(set1)(1.0f), d[kz]);
+    p->kx0 = V(seti)(kx == 0 ? -1 : 0);
+    p->kx1 = V(seti)(kx == 1 ? -1 : 0);
+    p->ky0 = V(seti)(ky == 0 ? -1 : 0);
+    p->ky1 = V(seti)(ky == 1 ? -1 : 0);
+    p->kz0 = V(seti)(kz == 0 ? -1 : 0);
+    p->kz1 = V(seti)(kz == 1 ? -1 : 0);
+    p->uniform = 1;
+    p->kx = kx;
+    p->ky = ky;
+    p->kz = kz;
+    return 1;
+}
+
+/* Per-lane scalar precomputation, for blocks whose rays shear differently. */
+KF_FN void kf_pre_mixed(const kf_ctx *c, kf_group *g, const VF d[3]) {
+    _Alignas(32) float dd[3][KB_W];
+    kd_ray_pre pre[KB_W];
+    for (int a = 0; a < 3; a++)
+        V(store)(dd[a], d[a]);
+    for (int j = 0; j < KB_W; j++) {
+        const float dir[3] = {dd[0][j], dd[1][j], dd[2][j]};
+        kd_ray_precompute(c->b->eye, dir, &pre[j]);
+    }
+    KB(tri_pre_init)(&g->pre, pre, KF_FULL, 0);
+}
+
+/* Fills group g with the KF_BW x 2 block at (x, y), clipped to [.., x1) x
+ * [.., y1): clipped-off lanes repeat a pixel of the block (so the block
+ * still shears uniformly) but are never live nor written. Widens the
+ * tile's direction interval. */
+KF_FN void kf_group_init(kf_ctx *c, kf_group *g, uint32_t x, uint32_t y,
+                         uint32_t x1, uint32_t y1, VF dmin[3], VF dmax[3]) {
+    _Alignas(32) float sxa[KB_W], sya[KB_W];
+    const size_t W = c->cam->width;
+    g->live = 0;
+    for (int j = 0; j < KB_W; j++) {
+        const uint32_t px = x + (uint32_t)(j % KF_BW), py = y + (uint32_t)(j / KF_BW);
+        const int in = px < x1 && py < y1;
+        const uint32_t cx = px < x1 ? px : x1 - 1, cy = py < y1 ? py : y1 - 1;
+        sxa[j] = c->sx_tab[cx];
+        sya[j] = c->sy_tab[cy];
+        g->pix[j] = in ? (int32_t)((size_t)py * W + px) : -1;
+        g->live |= in << j;
+    }
+    const VF sx = V(load)(sxa), sy = V(load)(sya);
+    VF d[3];
+    for (int a = 0; a < 3; a++) {
+        d[a] = V(add)(V(add)(V(set1)(c->b->f[a]), V(mul)(sx, V(set1)(c->b->r[a]))),
+                      V(mul)(sy, V(set1)(c->b->u[a])));
+        dmin[a] = V(min)(dmin[a], d[a]);
+        dmax[a] = V(max)(dmax[a], d[a]);
+        V(store)(g->inv[a], V(div)(V(set1)(1.0f), d[a]));
+    }
+    if (!kf_pre_uniform(c, g, d))
+        kf_pre_mixed(c, g, d);
+    V(store)(g->t, V(set1)(INFINITY));
+    V(store)(g->u, V(set1)(0.0f));
+    V(store)(g->v, V(set1)(0.0f));
+    V(store)((float *)g->prim, V(seti)(KF_NO_PRIM));
+    g->term = INFINITY;
+}
+
+/* Box [lo, hi] relative to the eye, padded outward and never 0 (a zero
+ * times an infinite 1/dir would give NaN). */
+static void kf_rel_box(const kf_ctx *c, const float lo[3], const float hi[3],
+                       float rlo[3], float rhi[3]) {
+    for (int a = 0; a < 3; a++) {
+        rlo[a] = (lo[a] - c->b->eye[a]) - c->pad;
+        rhi[a] = (hi[a] - c->b->eye[a]) + c->pad;
+        if (rlo[a] == 0.0f)
+            rlo[a] = -FLT_MIN;
+        if (rhi[a] == 0.0f)
+            rhi[a] = FLT_MIN;
+    }
+}
+
+/* Slab test of a group's rays against a relative box, over t >= 0: the
+ * lanes whose ray may meet it, with their entry and exit distances. */
+KF_FN int kf_group_box(const kf_group *g, const float rlo[3],
+                       const float rhi[3], VF *tnear, VF *tfar) {
+    VF tn = V(set1)(0.0f), tf = V(set1)(INFINITY);
+    for (int a = 0; a < 3; a++) {
+        const VF inv = V(load)(g->inv[a]);
+        const VF t0 = V(mul)(V(set1)(rlo[a]), inv);
+        const VF t1 = V(mul)(V(set1)(rhi[a]), inv);
+        tn = V(max)(tn, V(min)(t0, t1));
+        tf = V(min)(tf, V(max)(t0, t1));
+    }
+    *tnear = tn;
+    *tfar = tf;
+    return V(bits)(V(le)(tn, tf));
+}
+
+/* kd_term_bound of four t values, same operations. */
+KF_FN VF kf_termv(VF t) {
+    const VF abs_t = V(andnot)(V(set1)(-0.0f), t);
+    return V(add)(V(add)(t, V(mul)(abs_t, V(set1)(0x1p-18f))), V(set1)(FLT_MIN));
+}
+
+KF_FN void kf_group_update_term(kf_ctx *c, kf_group *g) {
+    _Alignas(32) float tb[KB_W];
+    float m = -INFINITY;
+    if (c->q == KDR_ANY) {
+        g->term = g->live ? INFINITY : -INFINITY;
+        return;
+    }
+    V(store)(tb, kf_termv(V(load)(g->t)));
+    for (int j = 0; j < KB_W; j++)
+        if ((g->live >> j) & 1)
+            m = kf_maxf(m, tb[j]);
+    g->term = m;
+}
+
+KF_FN void kf_tile_update_term(kf_ctx *c, kf_tile *ft) {
+    float m = -INFINITY;
+    for (size_t k = 0; k < ft->ng; k++)
+        m = kf_maxf(m, c->groups[ft->g0 + k].term);
+    ft->term = m;
+}
+
+KF_FN float kf_hmin(VF v) {
+    _Alignas(32) float x[KB_W];
+    V(store)(x, v);
+    float m = x[0];
+    for (int j = 1; j < KB_W; j++)
+        m = kf_minf(m, x[j]);
+    return m;
+}
+KF_FN float kf_hmax(VF v) {
+    _Alignas(32) float x[KB_W];
+    V(store)(x, v);
+    float m = x[0];
+    for (int j = 1; j < KB_W; j++)
+        m = kf_maxf(m, x[j]);
+    return m;
+}
+
+/* Builds tile k's groups in lane l; clips its rays to the root box (rays
+ * that miss it stop searching: every triangle lies inside). */
+KF_FN void kf_tile_init(kf_ctx *c, int l, size_t k) {
+    kf_tile *ft = &c->ft[l];
+    const uint32_t T = c->tile, W = c->cam->width, H = c->cam->height;
+    const size_t tiles_x = ((size_t)W + T - 1) / T;
+    const uint32_t x0 = (uint32_t)(k % tiles_x) * T, y0 = (uint32_t)(k / tiles_x) * T;
+    const uint32_t x1 = W - x0 < T ? W : x0 + T, y1 = H - y0 < T ? H : y0 + T;
+    VF dmin[3], dmax[3], tn = V(set1)(INFINITY), tf = V(set1)(-INFINITY);
+    float rlo[3], rhi[3];
+    for (int a = 0; a < 3; a++) {
+        dmin[a] = V(set1)(INFINITY);
+        dmax[a] = V(set1)(-INFINITY);
+    }
+    ft->g0 = (size_t)l * c->gpt;
+    ft->ng = 0;
+    ft->nrays = (x1 - x0) * (y1 - y0);
+    kf_rel_box(c, c->s->root.min, c->s->root.max, rlo, rhi);
+    for (uint32_t y = y0; y < y1; y += 2) {
+        for (uint32_t x = x0; x < x1; x += KF_BW) {
+            kf_group *g = &c->groups[ft->g0 + ft->ng++];
+            VF vn, vf;
+            kf_group_init(c, g, x, y, x1, y1, dmin, dmax);
+            g->live &= kf_group_box(g, rlo, rhi, &vn, &vf);
+            const VF live = V(bitmask)(g->live);
+            tn = V(min)(tn, V(sel)(live, vn, V(set1)(INFINITY)));
+            tf = V(max)(tf, V(sel)(live, vf, V(set1)(-INFINITY)));
+            if (!g->live)
+                g->term = -INFINITY;
+        }
+    }
+    for (int a = 0; a < 3; a++) {
+        ft->dmin[a] = kf_hmin(dmin[a]);
+        ft->dmax[a] = kf_hmax(dmax[a]);
+    }
+    ft->tn = kf_hmin(tn);
+    ft->tf = kf_hmax(tf);
+    kf_tile_update_term(c, ft);
+}
+
+/* ---- leaves ----------------------------------------------------------------- */
+
+/* Tests triangle prim against the selected lanes of group g. */
+KF_FN void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim) {
+    const float *tri = c->s->tris + 9 * (size_t)prim;
+    VF t = V(set1)(0.0f), u = t, v = t; /* set by tri_test on a hit */
+    const VF hit = KB(tri_test)(&g->pre, tri, V(bitmask)(*bits), V(set1)(0.0f),
+                                V(set1)(INFINITY), &t, &u, &v);
+    c->tri_tests += (uint64_t)kf_popcount(*bits);
+    if (!V(bits)(hit))
+        return;
+    const VF pv = V(seti)(prim), best_p = V(load)((const float *)g->prim);
+    const VF best_t = V(load)(g->t);
+    if (c->q == KDR_ANY) {
+        const int h = V(bits)(hit);
+        V(store)((float *)g->prim, V(sel)(hit, pv, best_p));
+        g->live &= ~h;
+        *bits &= ~h;
+        return;
+    }
+    const VF better = V(and)(hit, V(or)(V(lt)(t, best_t),
+                                        V(and)(V(eq)(t, best_t), kf_ilt(pv, best_p))));
+    if (!V(bits)(better))
+        return;
+    V(store)(g->t, V(sel)(better, t, best_t));
+    V(store)(g->u, V(sel)(better, u, V(load)(g->u)));
+    V(store)(g->v, V(sel)(better, v, V(load)(g->v)));
+    V(store)((float *)g->prim, V(sel)(better, pv, best_p));
+}
+
+/* Selects the groups of lane l whose rays may still meet box [rlo, rhi]
+ * before their termination bound. */
+KF_FN size_t kf_select(kf_ctx *c, const kf_tile *ft, float tn, const float rlo[3],
+                        const float rhi[3], size_t nsel) {
+    for (size_t k = 0; k < ft->ng; k++) {
+        kf_group *g = &c->groups[ft->g0 + k];
+        if (!g->live || g->term < tn)
+            continue;
+        VF vn, vf;
+        int bits = g->live & kf_group_box(g, rlo, rhi, &vn, &vf);
+        if (c->q == KDR_CLOSEST)
+            bits &= V(bits)(V(le)(vn, kf_termv(V(load)(g->t))));
+        if (!bits)
+            continue;
+        c->sel[nsel] = (uint32_t)(ft->g0 + k);
+        c->selbits[nsel++] = bits;
+    }
+    return nsel;
+}
+
+/* Intersects the rays of the lanes in `lanes` that may meet leaf n. */
+KF_FN void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const float tn[4],
+                    const float lo[3], const float hi[3]) {
+    const uint32_t cnt = kd_count(n);
+    float rlo[3], rhi[3];
+    size_t nsel = 0;
+    if (cnt == 0)
+        return;
+    kf_rel_box(c, lo, hi, rlo, rhi);
+    for (int l = 0; l < c->nlanes; l++)
+        if ((lanes >> l) & 1)
+            nsel = kf_select(c, &c->ft[l], tn[l], rlo, rhi, nsel);
+    if (nsel == 0)
+        return;
+    const uint32_t *refs = c->s->refs + n->u.first;
+    for (uint32_t r = 0; r < cnt; r++)
+        for (size_t k = 0; k < nsel; k++)
+            if (c->selbits[k])
+                kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r]);
+    /* a lane's bound can only fall when a group holding it fell */
+    int dirty = 0;
+    for (size_t k = 0; k < nsel; k++) {
+        kf_group *g = &c->groups[c->sel[k]];
+        const int l = (int)(c->sel[k] / c->gpt);
+        const float old = g->term;
+        kf_group_update_term(c, g);
+        if (old >= c->ft[l].term && g->term < old)
+            dirty |= 1 << l;
+    }
+    for (int l = 0; l < c->nlanes; l++)
+        if ((dirty >> l) & 1)
+            kf_tile_update_term(c, &c->ft[l]);
+}
+
+/* ---- traversal -------------------------------------------------------------- */
+
+/* Split-plane crossing interval of each lane: lo = earliest crossing, hi =
+ * latest (+inf: none, resp. some ray never crosses), both padded. */
+static inline void kf_cross(float dist, f4 r_near, f4 r_far, f4 *lo, f4 *hi) {
+    const f4 inf = f4_set1(INFINITY), vd = f4_set1(dist);
+    f4 a = f4_mul(vd, r_near), b = f4_mul(vd, r_far);
+    a = f4_sel(f4_signmask(a), inf, a);
+    b = f4_sel(f4_signmask(b), inf, b);
+    *lo = f4_mul(a, f4_set1(1.0f - KF_REL_PAD));
+    *hi = f4_mul(b, f4_set1(1.0f + KF_REL_PAD));
+}
+
+static inline f4 kf_active(f4 tn, f4 tf, f4 term) {
+    return f4_and(f4_le(tn, tf), f4_le(tn, term));
+}
+
+static f4 kf_lane_terms(const kf_ctx *c) {
+    _Alignas(16) float t[4] = {-INFINITY, -INFINITY, -INFINITY, -INFINITY};
+    for (int l = 0; l < c->nlanes; l++)
+        t[l] = c->ft[l].term;
+    return f4_load(t);
+}
+
+/* Walks the tree with the lanes' frusta, front to back from the eye. */
+KF_FN void kf_traverse(kf_ctx *c) {
+    const kd_node *nodes = c->s->nodes;
+    _Alignas(16) float tn0[4], tf0[4], rmin[3][4], rmax[3][4];
+    kf_entry stack[KD_MAX_DEPTH + 2];
+    int sp = 0;
+    for (int l = 0; l < 4; l++) {
+        const kf_tile *ft = &c->ft[l < c->nlanes ? l : 0];
+        tn0[l] = l < c->nlanes ? ft->tn : INFINITY;
+        tf0[l] = l < c->nlanes ? ft->tf : -INFINITY;
+        for (int a = 0; a < 3; a++) {
+            rmin[a][l] = 1.0f / ft->dmin[a];
+            rmax[a][l] = 1.0f / ft->dmax[a];
+        }
+    }
+    kf_entry cur = {.tn = f4_load(tn0), .tf = f4_load(tf0), .node = 0};
+    memcpy(cur.lo, c->s->root.min, sizeof cur.lo);
+    memcpy(cur.hi, c->s->root.max, sizeof cur.hi);
+    f4 term = kf_lane_terms(c);
+    __m128i steps = _mm_setzero_si128();
+    for (;;) {
+        const f4 act = kf_active(cur.tn, cur.tf, term);
+        if (!f4_bits(act)) {
+            if (sp == 0)
+                break;
+            cur = stack[--sp];
+            continue;
+        }
+        steps = _mm_sub_epi32(steps, _mm_castps_si128(act));
+        const kd_node *n = &nodes[cur.node];
+        if (kd_is_leaf(n)) {
+            _Alignas(16) float tn[4];
+            f4_store(tn, cur.tn);
+            kf_leaf(c, n, f4_bits(act), tn, cur.lo, cur.hi);
+            term = kf_lane_terms(c);
+            cur.tn = f4_set1(INFINITY); /* pop */
+            continue;
+        }
+        const int axis = kd_axis(n);
+        const float split = n->u.split, dist = split - c->b->eye[axis];
+        const uint32_t below = cur.node + 1, above = kd_above(n);
+        if (dist == 0.0f) { /* eye on the plane: both children, whole */
+            stack[sp] = cur;
+            stack[sp].node = above;
+            stack[sp++].lo[axis] = split;
+            cur.node = below;
+            cur.hi[axis] = split;
+            continue;
+        }
+        f4 lo, hi;
+        if (dist > 0.0f)
+            kf_cross(dist, f4_load(rmax[axis]), f4_load(rmin[axis]), &lo, &hi);
+        else
+            kf_cross(dist, f4_load(rmin[axis]), f4_load(rmax[axis]), &lo, &hi);
+        const f4 fm = f4_and(act, f4_le(cur.tn, hi));
+        const f4 bm = f4_and(act, f4_le(lo, cur.tf));
+        kf_entry back = cur;
+        back.node = dist > 0.0f ? above : below;
+        back.tn = f4_sel(bm, f4_max(cur.tn, lo), f4_set1(INFINITY));
+        if (dist > 0.0f)
+            back.lo[axis] = split;
+        else
+            back.hi[axis] = split;
+        if (!f4_bits(fm)) {
+            cur = back;
+            continue;
+        }
+        if (f4_bits(bm))
+            stack[sp++] = back;
+        cur.node = dist > 0.0f ? below : above;
+        cur.tn = f4_sel(fm, cur.tn, f4_set1(INFINITY));
+        cur.tf = f4_min(cur.tf, hi);
+        if (dist > 0.0f)
+            cur.hi[axis] = split;
+        else
+            cur.lo[axis] = split;
+    }
+    _Alignas(16) int32_t st[4];
+    _mm_store_si128((__m128i *)st, steps);
+    for (int l = 0; l < c->nlanes; l++)
+        c->lane_steps[l] += (uint64_t)st[l] * c->ft[l].nrays;
+}
+
+/* ---- output ----------------------------------------------------------------- */
+
+KF_FN void kf_write(const kf_ctx *c, kdr_hits *out) {
+    for (int l = 0; l < c->nlanes; l++) {
+        const kf_tile *ft = &c->ft[l];
+        for (size_t k = 0; k < ft->ng; k++) {
+            const kf_group *g = &c->groups[ft->g0 + k];
+            for (int j = 0; j < KB_W; j++) {
+                const int32_t i = g->pix[j];
+                const int hit = g->prim[j] != KF_NO_PRIM;
+                if (i < 0)
+                    continue;
+                if (c->q == KDR_ANY) {
+                    out->hit[i] = (uint8_t)hit;
+                    continue;
+                }
+                out->t[i] = hit ? g->t[j] : -1.0f;
+                out->prim[i] = hit ? g->prim[j] : -1;
+                out->u[i] = hit ? g->u[j] : 0.0f;
+                out->v[i] = hit ? g->v[j] : 0.0f;
+            }
+        }
+    }
+}
+
+/* Walks the tiles of [first, end) in 2x2 blocks of tiles, so that the
+ * four frusta of one traversal form a square whenever the range allows. */
+typedef struct kf_order {
+    size_t first, end, tiles_x;
+    size_t bx, by; /* current block */
+    int j;         /* next tile within it */
+} kf_order;
+
+static int kf_next_tile(kf_order *o, size_t *k) {
+    for (;;) {
+        if (2 * o->by * o->tiles_x >= o->end)
+            return 0;
+        const size_t tx = 2 * o->bx + (size_t)(o->j & 1);
+        const size_t ty = 2 * o->by + (size_t)(o->j >> 1);
+        if (++o->j == 4) {
+            o->j = 0;
+            if (2 * ++o->bx >= o->tiles_x) {
+                o->bx = 0;
+                o->by++;
+            }
+        }
+        const size_t idx = ty * o->tiles_x + tx;
+        if (tx < o->tiles_x && idx >= o->first && idx < o->end) {
+            *k = idx;
+            return 1;
+        }
+    }
+}
+
+/* The box padding: a small fraction of the largest coordinate magnitude
+ * among the eye and the root box, so it dwarfs rounding in (box - eye). */
+static float kf_pad(const kdr_scene *s, const kd_camera_basis *b) {
+    float m = 0.0f;
+    for (int a = 0; a < 3; a++) {
+        m = kf_maxf(m, fabsf(b->eye[a]));
+        m = kf_maxf(m, fabsf(s->root.min[a]));
+        m = kf_maxf(m, fabsf(s->root.max[a]));
+    }
+    return m * KF_ABS_PAD + FLT_MIN;
+}
+
+KF_FN_EXPORT int KF_ENTRY(const kdr_scene *s, const kdr_camera *cam,
+                          const kd_camera_basis *b, uint32_t tile, size_t first,
+                          size_t count, kdr_query q, int lanes, kdr_hits *out,
+                          kdr_trav_stats *stats) {
+    const size_t gpt = kf_groups_per_tile(tile);
+    kf_ctx c = {.s = s, .cam = cam, .b = b, .tile = tile, .q = q, .gpt = gpt};
+    c.groups = aligned_alloc(32, (size_t)KF_LANES * gpt * sizeof *c.groups);
+    c.sel = malloc((size_t)KF_LANES * gpt * sizeof *c.sel);
+    c.selbits = malloc((size_t)KF_LANES * gpt * sizeof *c.selbits);
+    c.sx_tab = malloc(((size_t)cam->width + cam->height) * sizeof *c.sx_tab);
+    if (!c.groups || !c.sel || !c.selbits || !c.sx_tab) {
+        free(c.sx_tab);
+        free(c.groups);
+        free(c.sel);
+        free(c.selbits);
+        return KDR_ENOMEM;
+    }
+    c.pad = kf_pad(s, b);
+    c.sy_tab = c.sx_tab + cam->width;
+    for (uint32_t x = 0; x < cam->width; x++)
+        c.sx_tab[x] = kd_camera_sx(b, x);
+    for (uint32_t y = 0; y < cam->height; y++)
+        c.sy_tab[y] = kd_camera_sy(b, y);
+    uint64_t rays = 0;
+    kf_order o = {first, first + count, ((size_t)cam->width + tile - 1) / tile, 0, 0, 0};
+    o.by = first / o.tiles_x / 2;
+    for (;;) {
+        size_t k;
+        c.nlanes = 0;
+        while (c.nlanes < lanes && kf_next_tile(&o, &k)) {
+            kf_tile_init(&c, c.nlanes, k);
+            rays += c.ft[c.nlanes++].nrays;
+        }
+        if (c.nlanes == 0)
+            break;
+        if (s->nodes && s->nnodes)
+            kf_traverse(&c);
+        kf_write(&c, out);
+    }
+    if (stats) {
+        stats->rays += rays;
+        stats->tri_tests += c.tri_tests;
+        for (int l = 0; l < KF_LANES; l++)
+            stats->nodes_visited += c.lane_steps[l];
+    }
+    free(c.groups);
+    free(c.sel);
+    free(c.selbits);
+    free(c.sx_tab);
+    return KDR_OK;
+}
