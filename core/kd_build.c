@@ -200,36 +200,43 @@ static inline float step_down(float f) {
     return f;
 }
 
-/* Bounds of tri clipped to box, conservative; 0 when the part is empty.
- * Only the planes the triangle's own bounds cross are clipped against. */
-static int clip_bounds(const float *tri, const kdr_bounds *box, kdr_bounds *out) {
-    cvert buf[2][16];
+/* Clips tri to box (only against the planes its bounds cross) into out[];
+ * returns the vertex count, 0 when nothing is left. */
+static int clip_to_box(const float *tri, const kdr_bounds *box, cvert out[16]) {
+    cvert tmp[16];
+    cvert *buf[2] = {out, tmp};
     int n = 3, cur = 0;
     for (int i = 0; i < 3; i++) {
         for (int k = 0; k < 3; k++)
-            buf[0][i].p[k] = tri[3 * i + k];
-        buf[0][i].exact = 7u;
+            out[i].p[k] = tri[3 * i + k];
+        out[i].exact = 7u;
     }
     for (int k = 0; k < 3 && n > 0; k++) {
-        const float lo = min3(tri[k], tri[3 + k], tri[6 + k]);
-        const float hi = max3(tri[k], tri[3 + k], tri[6 + k]);
-        if (lo < box->min[k]) {
+        if (min3(tri[k], tri[3 + k], tri[6 + k]) < box->min[k]) {
             n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->min[k], 1.0);
             cur ^= 1;
         }
-        if (n > 0 && hi > box->max[k]) {
+        if (n > 0 && max3(tri[k], tri[3 + k], tri[6 + k]) > box->max[k]) {
             n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->max[k], -1.0);
             cur ^= 1;
         }
     }
+    if (cur)
+        memcpy(out, tmp, (size_t)n * sizeof *out);
+    return n;
+}
+
+/* Bounds of a clipped polygon, computed coordinates rounded outward, cut
+ * to box; 0 when empty. */
+static int poly_bounds(const cvert *v, int n, const kdr_bounds *box,
+                       kdr_bounds *out) {
     if (n == 0)
         return 0;
     for (int k = 0; k < 3; k++) {
         float lo = INFINITY, hi = -INFINITY;
         for (int i = 0; i < n; i++) {
-            const cvert *v = &buf[cur][i];
-            const float f = (float)v->p[k];
-            const int ex = (v->exact >> k) & 1u;
+            const float f = (float)v[i].p[k];
+            const int ex = (v[i].exact >> k) & 1u;
             const float flo = ex ? f : step_down(f);
             const float fhi = ex ? f : -step_down(-f);
             lo = flo < lo ? flo : lo;
@@ -243,12 +250,10 @@ static int clip_bounds(const float *tri, const kdr_bounds *box, kdr_bounds *out)
     return 1;
 }
 
-/* Conservative bounds of tri inside box, falling back to the triangle's
- * bounds cut to the box when double clipping loses a sliver. */
-static int tri_box_bounds(const float *tri, const kdr_bounds *box,
-                          kdr_bounds *out) {
-    if (clip_bounds(tri, box, out))
-        return 1;
+/* Fallback when double clipping loses a sliver: the triangle's bounds cut
+ * to the box (still conservative). */
+static int tri_bounds_in_box(const float *tri, const kdr_bounds *box,
+                             kdr_bounds *out) {
     for (int k = 0; k < 3; k++) {
         float lo = min3(tri[k], tri[3 + k], tri[6 + k]);
         float hi = max3(tri[k], tri[3 + k], tri[6 + k]);
@@ -424,14 +429,22 @@ static void sort_events(kd_event *a, size_t n) {
 }
 
 /* Clips the straddlers to both child boxes; their new events go to
- * add[0..2] (left) and add[3..5] (right), sorted. */
-static void clip_both(builder *b, size_t nboth, const kdr_bounds cbox[2],
+ * add[0..2] (left) and add[3..5] (right), sorted. Each triangle is clipped
+ * to the node's box once, then that polygon to either side of the plane. */
+static void clip_both(builder *b, size_t nboth, const kdr_bounds *box,
+                      const kd_split *s, const kdr_bounds cbox[2],
                       kd_event *add[6], size_t nadd[6], size_t ntri[2]) {
     for (size_t i = 0; i < nboth; i++) {
         const float *tri = b->tris + 9 * (size_t)b->both[i];
+        cvert poly[16], half[16];
+        const int n = clip_to_box(tri, box, poly);
         for (int side = 0; side < 2; side++) {
             kdr_bounds bb;
-            if (tri_box_bounds(tri, &cbox[side], &bb)) {
+            const int m = n ? clip_plane(poly, n, half, s->axis, s->pos,
+                                         side ? 1.0 : -1.0)
+                            : 0;
+            if (poly_bounds(half, m, &cbox[side], &bb) ||
+                tri_bounds_in_box(tri, &cbox[side], &bb)) {
                 ev_add(add + 3 * side, nadd + 3 * side, &bb, b->both[i]);
                 ntri[side]++;
             }
@@ -445,7 +458,8 @@ static void clip_both(builder *b, size_t nboth, const kdr_bounds cbox[2],
  * branch-free) and merges in the straddlers' new events. The children live
  * in this depth's scratch buffer: a subtree only writes deeper buffers. */
 static int split_events(builder *b, const ev_list *ev, const kd_split *s,
-                        const kdr_bounds cbox[2], int depth, ev_list ch[2]) {
+                        const kdr_bounds *box, const kdr_bounds cbox[2],
+                        int depth, ev_list ch[2]) {
     const size_t nboth = classify(b, ev, s);
     if (nboth == (size_t)-1)
         return KDR_ENOMEM;
@@ -456,7 +470,7 @@ static int split_events(builder *b, const ev_list *ev, const kd_split *s,
     size_t nadd[6] = {0, 0, 0, 0, 0, 0}, ntri[2] = {0, 0};
     for (int k = 0; k < 6; k++)
         add[k] = b->add + (size_t)k * stride;
-    clip_both(b, nboth, cbox, add, nadd, ntri);
+    clip_both(b, nboth, box, s, cbox, add, nadd, ntri);
     size_t need = 0;
     for (int k = 0; k < 3; k++)
         need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
@@ -559,7 +573,7 @@ static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
     cbox[0].max[s->axis] = cbox[1].min[s->axis] = s->pos;
     ev_list ch[2];
     size_t idx = 0;
-    int err = split_events(b, ev, s, cbox, depth, ch);
+    int err = split_events(b, ev, s, box, cbox, depth, ch);
     if (err == KDR_OK)
         err = push_node(b, &idx);
     if (err != KDR_OK) {
