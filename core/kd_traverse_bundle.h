@@ -82,7 +82,7 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 
 /* Tuning: a bundle whose average lane occupancy (active lanes per node
- * step / width) falls under KB_OCC_MIN is incoherent; the next
+ * step / lanes that entered the tree) falls under KB_OCC_MIN is incoherent; the next
  * KB_FALLBACK_RUN bundles of the batch are then traced ray by ray, after
  * which one bundle probes again. */
 #define KB_OCC_MIN 0.3
@@ -493,8 +493,11 @@ KB_FN void KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
         for (int j = 0; j < n; j++)
             if ((alone >> j) & 1)
                 kd_batch_single(s, rb, ids[g + j], q, out, stats);
+        /* occupancy among the lanes that entered the tree: lanes that
+         * missed the scene (camera rays past a silhouette) cost nothing */
+        const int entered = kd_lane_count(b.lanes);
         if ((flags & KB_FALLBACK) && b.steps &&
-            (double)b.lane_steps < KB_OCC_MIN * KB_W * (double)b.steps)
+            (double)b.lane_steps < KB_OCC_MIN * entered * (double)b.steps)
             *skip = KB_FALLBACK_RUN;
     }
 }
