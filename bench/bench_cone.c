@@ -34,7 +34,8 @@
 #define BENCH_RES 64             /* camera is RES x RES points */
 #define BENCH_MAX_SAMPLES 256
 #define BENCH_REF_SAMPLES 4096
-#define BENCH_MIN_SECONDS 0.05   /* repeat a measurement at least this long */
+#define BENCH_MIN_SECONDS 0.15   /* all methods' passes at one sample count */
+#define BENCH_MIN_ROUNDS 3
 #define BENCH_EPSILON 1e-4f
 #define BENCH_LADDER_SCENE "2CylinderEngine"
 #define BENCH_FALLBACK_ENGINE \
@@ -147,27 +148,46 @@ static int run_once(int method, const kdr_scene *s, RTCScene es,
                             vis, st);
 }
 
+/* Times one pass of a method (best so far kept in *out) and scores it. */
 static int measure(int method, const kdr_scene *s, RTCScene es,
                    const kdr_shadow_query *q, const float *ref, float *vis,
                    run_result *out) {
     kdr_shadow_stats st = {0};
-    const double t0 = now_s();
-    double best = INFINITY, t1 = t0;
-    do { /* the fastest pass: the machine may be shared */
-        memset(&st, 0, sizeof st);
-        const double ts = now_s();
-        if (run_once(method, s, es, q, vis, &st) != 0)
-            return -1;
-        t1 = now_s();
-        best = fmin(best, t1 - ts);
-    } while (t1 - t0 < BENCH_MIN_SECONDS);
+    const double ts = now_s();
+    if (run_once(method, s, es, q, vis, &st) != 0)
+        return -1;
+    const double sec = now_s() - ts;
+    if (sec >= out->seconds)
+        return 0;
     double se = 0.0;
     for (size_t i = 0; i < q->n; i++)
         se += ((double)vis[i] - ref[i]) * ((double)vis[i] - ref[i]);
-    out->seconds = best;
+    out->seconds = sec;
     out->rmse = sqrt(se / (double)q->n);
     out->rays = method == M_EMBREE ? (uint64_t)q->n * q->samples : st.rays_traced;
     out->decided = st.cones_decided;
+    return 0;
+}
+
+/* The methods take turns, pass after pass, until each has run
+ * BENCH_MIN_ROUNDS passes and BENCH_MIN_SECONDS in all; each keeps its
+ * fastest pass. Interleaving matters on a shared machine whose load drifts. */
+static int measure_all(const kdr_scene *s, RTCScene es, const kdr_shadow_query *q,
+                       const float *ref, float *vis, run_result *res) {
+    const double t0 = now_s();
+    for (int m = 0; m < M_COUNT; m++)
+        res[m] = (run_result){INFINITY, 1.0, 0, 0};
+    for (int round = 0; round < BENCH_MIN_ROUNDS || now_s() - t0 < BENCH_MIN_SECONDS;
+         round++) {
+        for (int m = 0; m < M_COUNT; m++) {
+            if (((method_mask >> m) & 1) &&
+                measure(m, s, es, q, ref, vis, &res[m]) != 0)
+                return -1;
+        }
+    }
+    for (int m = 0; m < M_COUNT; m++)
+        if (!((method_mask >> m) & 1))
+            res[m].seconds = 1.0;
     return 0;
 }
 
@@ -242,12 +262,11 @@ static int bench_config(const char *name, const kdr_scene *s, RTCScene es,
     int nrows = 0;
     for (int n = 1; n <= max_samples; n *= 2, nrows++) {
         q.samples = (uint32_t)n;
+        run_result row[M_COUNT];
+        if (measure_all(s, es, &q, ref, vis, row) != 0)
+            return -1;
         for (int m = 0; m < M_COUNT; m++) {
-            res[m][nrows] = (run_result){1.0, 1.0, 0, 0};
-            if (!((method_mask >> m) & 1))
-                continue;
-            if (measure(m, s, es, &q, ref, vis, &res[m][nrows]) != 0)
-                return -1;
+            res[m][nrows] = row[m];
             const run_result *r = &res[m][nrows];
             fprintf(bo->csv, "%s,%s,%s,%d,%.6g,%.6g,%llu,%llu,%zu\n", name, lname,
                     method_name[m], n, r->seconds, r->rmse,
