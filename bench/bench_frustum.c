@@ -1,7 +1,8 @@
 /*
  * bench_frustum.c — single-threaded throughput of full-frame primary rays:
  * per-ray kd traversal, 4-wide omni-directional bundles (shared origin,
- * pixels in 2x2 blocks), single-frustum and four-frustum traversal, and
+ * pixels in 2x2 blocks), single-frustum and four-frustum traversal (ray
+ * groups of 4x2 with AVX2, else 2x2), and
  * Embree 3 rtcIntersect1 / rtcIntersect8 (coherent context, 4x2 pixel
  * packets), all on the same camera rays in the same run. Prints Mrays/s,
  * nodes visited per ray (kd), a tile-size sweep of both frustum modes, and
@@ -228,6 +229,9 @@ typedef struct method {
 enum { M_RAYS, M_BUNDLE4, M_FR1, M_FR4, M_EMB1, M_EMB8, M_EMB1_FAST, M_COUNT };
 
 static int g_frustum_only; /* --frustum-only: for profiling */
+/* tile sweep 4..64: sums of log Mrays/s, [tile][single, multi4] */
+#define NSWEEP 5
+static double g_sweep[NSWEEP][2];
 
 static void bench_scene(const char *name, const float *tris, size_t ntris,
                         uint32_t size, method *m, int *ncams) {
@@ -292,10 +296,13 @@ static void bench_scene(const char *name, const float *tris, size_t ntris,
                r[M_FR4].mrays / r[M_FR1].mrays, r[M_FR4].mrays / r[M_EMB1].mrays,
                r[M_FR4].mrays / r[M_EMB8].mrays);
         printf("  tile sweep (Mrays/s, 1-frustum / 4-frustum):");
-        for (uint32_t tile = 4; tile <= 64; tile *= 2) {
+        for (int ti = 0; ti < NSWEEP; ti++) {
+            const uint32_t tile = 4u << ti;
             result a = run_frustum(&f, tile, KDR_FRUSTUM_SINGLE);
             result c = run_frustum(&f, tile, KDR_FRUSTUM_MULTI4);
             printf("  %u: %.1f/%.1f", tile, a.mrays, c.mrays);
+            g_sweep[ti][0] += log(a.mrays);
+            g_sweep[ti][1] += log(c.mrays);
         }
         printf("\n");
         ++*ncams;
@@ -354,5 +361,12 @@ int main(int argc, char **argv) {
            exp((m[M_FR4].sum_log - m[M_EMB1].sum_log) / ncams));
     printf("  4-frustum / embree rtcIntersect8: %.2fx\n",
            exp((m[M_FR4].sum_log - m[M_EMB8].sum_log) / ncams));
+    printf("  tile sweep, 4-frustum / 1-frustum at the same tile:");
+    for (int ti = 0; ti < NSWEEP; ti++)
+        printf("  %u: %.2fx", 4u << ti, exp((g_sweep[ti][1] - g_sweep[ti][0]) / ncams));
+    printf("\n  same rays per traversal, 4-frustum tile T / 1-frustum tile 2T:");
+    for (int ti = 0; ti + 1 < NSWEEP; ti++)
+        printf("  %u: %.2fx", 4u << ti, exp((g_sweep[ti][1] - g_sweep[ti + 1][0]) / ncams));
+    printf("\n");
     return 0;
 }
