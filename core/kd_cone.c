@@ -44,6 +44,10 @@
  * any successful walk resets the back-off. Answers are the same either way. */
 #define WALK_BACKOFF_MAX 15u
 #define NO_PRIM UINT32_MAX
+/* Samples of a point going through the tree above which closest hits are
+ * spent to learn blockers first (learn_blockers), and how many. */
+#define LEARN_MIN 8u
+#define LEARN_ROUNDS 3u
 
 /* Per light, carried from point to point (points arrive in image order). */
 typedef struct light_state {
@@ -136,6 +140,33 @@ static uint32_t filter_by_last(const kdr_scene *scene, shadow_ws *ws,
     const uint32_t kept = filter_by_list(scene, ws, idx, n, &cand, 1, last);
     ws->st.rays_traced -= n; /* counted when they are decided */
     return kept;
+}
+
+/* Before many samples of one point go through the tree: the closest hit of
+ * the first pending one becomes the last blocker and removes every sample
+ * it blocks (in umbra the others then cost one triangle test each); this
+ * repeats up to LEARN_ROUNDS times and stops at the first sample that is
+ * lit, which is then settled too. Returns the samples still pending. */
+static uint32_t learn_blockers(const kdr_scene *scene, shadow_ws *ws,
+                               uint32_t *idx, uint32_t n, uint32_t *last,
+                               uint32_t *lit) {
+    for (uint32_t round = 0; round < LEARN_ROUNDS && n >= LEARN_MIN; round++) {
+        kdr_hit h;
+        kdr_trav_stats ts = {0};
+        const int hit = kdr_intersect1(scene, &ws->rays[idx[0]], &h, &ts);
+        ws->st.nodes_visited += ts.nodes_visited;
+        ws->st.rays_traced++;
+        if (!hit) {
+            ++*lit;
+            idx[0] = idx[--n];
+            break;
+        }
+        *last = (uint32_t)h.prim; /* blocks idx[0] too: same test, same interval */
+        const uint32_t before = n;
+        n = filter_by_last(scene, ws, idx, n, last);
+        ws->st.rays_traced += before - n - 1;
+    }
+    return n;
 }
 
 /* ---- packets of neighbouring samples ------------------------------------------ */
@@ -292,9 +323,11 @@ static int lit_after_walk(const kdr_scene *scene, const kd_shadow_frame *f,
     const uint32_t width = ws->wide ? 8u : 4u;
     /* a packet covers about width/n of the light's disc */
     if (asin(f->sin_a) * sqrt((double)width / n) > GROUP_MAX_ANGLE) {
+        *lit = 0;
         n = filter_by_last(scene, ws, ws->idx, n, last);
-        *lit = lit_by_tree(scene, ws, ws->idx, n);
         ws->st.rays_traced += n0 - n;
+        n = learn_blockers(scene, ws, ws->idx, n, last, lit);
+        *lit += lit_by_tree(scene, ws, ws->idx, n);
         return KDR_OK;
     }
     sort_pending(f, ws, n);
