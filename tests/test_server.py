@@ -466,6 +466,34 @@ def test_sigterm_in_flight(t):
     t.check("received SIGTERM" in d.log_text(), "shutdown logged")
 
 
+def test_startup_503_and_two_scenes(t, default_path):
+    """The port answers 503 while a scene is still loading (its path is a
+    FIFO we have not written yet), then both scenes serve the same answers."""
+    tmp = lib.tempfile.mkdtemp(prefix="kdray-fifo-")
+    fifo = os.path.join(tmp, "scene.glb")
+    os.mkfifo(fifo)
+    d = lib.Daemon(KDRAYD, ["--scene", "a=" + fifo, "--scene", "b=" + default_path],
+                   wait_ready=False, default_scene=False)
+    try:
+        c = Client(d.url)
+        p = expect_problem(t, c.request("GET", "/v1/health"), 503, "health while loading")
+        t.check("0 of 2" in p["detail"], "starting detail: " + p["detail"])
+        expect_problem(t, post(c, "/v1/scenes/b/bundle", {}), 503, "query while loading")
+        expect_problem(t, c.request("GET", "/v1/scenes"), 503, "scenes while loading")
+        t.eq(metric(c.metrics(), "kdray_ready"), 0.0, "metrics answer while loading")
+        with open(default_path, "rb") as src, open(fifo, "wb") as dst:
+            dst.write(src.read())
+        d.wait_healthy()
+        t.eq(c.health(), {"status": "ok", "scenes": 2}, "health with two scenes")
+        t.eq([s["name"] for s in c.scenes()], ["a", "b"], "scenes in flag order")
+        o, dirs = lib.rays_into_box(c.scene("a")["bounds"], 500, 3)
+        t.eq(c.bundle("a", o, dirs), c.bundle("b", o, dirs), "same file, same answers")
+    finally:
+        t.eq(d.stop(), 0, "exit 0")
+        os.unlink(fifo)
+        os.rmdir(tmp)
+
+
 def test_flags(t):
     def run(*args):
         return subprocess.run([KDRAYD] + list(args), capture_output=True, text=True,
@@ -505,6 +533,8 @@ def main():
         t.failures.append("exit status")
     for fn in (test_limits, test_sigterm_in_flight, test_flags):
         t.run(fn)
+    loaded = [l for l in d.log if "scene default: loading " in l]
+    t.run(test_startup_503_and_two_scenes, loaded[0].split("loading ", 1)[1])
     return t.finish()
 
 

@@ -29,8 +29,9 @@ LISTEN_RE = re.compile(r"listening on (http://[^ ]+)")
 class Daemon:
     """A running kdrayd; its stderr is collected in .log (list of lines)."""
 
-    def __init__(self, kdrayd, args=(), wait_ready=True):
+    def __init__(self, kdrayd, args=(), wait_ready=True, default_scene=True):
         scene = ["--scene", "default=" + SCENE_PATH] if SCENE_PATH else []
+        scene = scene if default_scene else []
         self.proc = subprocess.Popen(
             [kdrayd, "--listen", "127.0.0.1:0"] + scene + list(args),
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
