@@ -116,7 +116,9 @@ typedef struct KB(entry) {
 /* Live traversal state of one bundle. */
 typedef struct KB(state) {
     KB(tri_pre) tp;
-    VF org[3], inv_dir[3], dt[3], tmin;
+    VF org[3], inv_dir[3], tmin;
+    VF ss[3];  /* the ray's slack signed like inv_dir (kd_signed_slack) */
+    VF sgn[3]; /* lanes with inv_dir < 0 (sign bit): above is near */
     VF best_t, best_u, best_v, best_prim;
     float sorg[3]; /* the origin, when every lane has the same one */
     int shared;
@@ -199,41 +201,45 @@ typedef struct KB(span) {
 } KB(span);
 
 /*
- * The front and back intervals of every lane at a split plane, from the
- * distance d = (split - org) * inv_dir and the slack dt of kd_traverse.h:
- *   front [t_near, min(d + dt, t_far)]        (d negative: [t_near, t_far])
- *   back  [max(d - dt, t_near), t_far]        (d negative: up to d + dt)
- * "Negative" is the paper's rule (d as +inf for the front); d + dt still
- * bounds the back child of a ray leaving a plane closer than its slack,
- * exactly as the single-ray walk sees it. min/max take d's expressions
- * first: a NaN d (a lane lying in the plane) yields the lane's own t_far /
- * t_near, i.e. both children over the whole interval.
+ * The front and back intervals of every lane at a split plane. t_lo and
+ * t_hi are where the ray crosses split -/+ its slack, computed exactly as
+ * the single-ray walk does (kd_traverse.h); `away` flags lanes moving away
+ * from the plane (the paper's negative distance). Then
+ *   front [t_near, min(t_hi, t_far)]     away: [t_near, t_far] (d as +inf)
+ *   back  [max(t_lo, t_near), t_far]     away: up to min(t_hi, t_far)
+ * which are the single walk's near/far intervals: a lane leaving a plane
+ * closer than its slack still looks at the other side, as the single walk
+ * does. min/max take t_lo/t_hi first: a NaN (a lane in the plane) yields the
+ * lane's own t_far / t_near, i.e. both children over the whole interval.
  */
-KB_FN void KB(spans)(VF d, VF dt, VF neg, VF t_near, VF t_far, KB(span) *f,
-                     KB(span) *b) {
-    const VF inf = V(set1)(INFINITY), hi = V(add)(d, dt);
+KB_FN void KB(spans)(VF t_lo, VF t_hi, VF away, VF t_near, VF t_far,
+                     KB(span) *f, KB(span) *b) {
+    const VF inf = V(set1)(INFINITY);
     f->t_near = t_near;
-    f->t_far = V(min)(V(sel)(neg, inf, hi), t_far);
-    b->t_near = V(max)(V(sub)(d, dt), t_near);
-    b->t_far = V(min)(V(sel)(neg, hi, inf), t_far);
+    f->t_far = V(min)(V(sel)(away, inf, t_hi), t_far);
+    b->t_near = V(max)(t_lo, t_near);
+    b->t_far = V(min)(V(sel)(away, t_hi, inf), t_far);
 }
 
 /*
  * Interior node, shared origin strictly off the plane: one front child for
  * every lane, the paper's listing. Returns 0 when no lane enters either
- * child. d cannot be NaN (dist != 0): its sign bit alone says "negative"
- * (-0.0 from an underflow included).
+ * child. A lane moves away from the plane when its direction points from
+ * the plane to the origin's side.
  */
-KB_FN int KB(step_shared)(const KB(state) *st, const kd_node *n, float dist,
+KB_FN int KB(step_shared)(const KB(state) *st, const kd_node *n, float a,
                           KB(cursor) *c, KB(entry) *stack, int *sp) {
     const int axis = kd_axis(n);
-    const VF d = V(mul)(V(set1)(dist), st->inv_dir[axis]);
+    const VF av = V(set1)(a), inv = st->inv_dir[axis];
+    const VF t_lo = V(mul)(V(sub)(av, st->ss[axis]), inv);
+    const VF t_hi = V(mul)(V(add)(av, st->ss[axis]), inv);
+    const VF away = a < 0.0f ? V(andnot)(st->sgn[axis], V(seti)(-1)) : st->sgn[axis];
     KB(span) f, b;
-    KB(spans)(d, st->dt[axis], V(signmask)(d), c->t_near, c->t_far, &f, &b);
+    KB(spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
     const VF f_act = V(and)(c->act, V(le)(f.t_near, f.t_far));
     const VF b_act = V(and)(c->act, KB(active)(st, b.t_near, b.t_far));
-    const uint32_t front = dist < 0.0f ? kd_above(n) : c->node + 1;
-    const uint32_t back = dist < 0.0f ? c->node + 1 : kd_above(n);
+    const uint32_t front = a < 0.0f ? kd_above(n) : c->node + 1;
+    const uint32_t back = a < 0.0f ? c->node + 1 : kd_above(n);
     const int fb = V(bits)(f_act), bb = V(bits)(b_act);
     if (fb && bb)
         KB(push)(stack, sp, back, b.t_near, b.t_far);
@@ -251,21 +257,22 @@ KB_FN int KB(step_shared)(const KB(state) *st, const kd_node *n, float dist,
 /*
  * Interior node, general case: per-lane origins, or a shared origin on the
  * plane. Each lane's below/above intervals come from its own front/back; an
- * origin ON the plane takes as front the child its direction leaves (seen
- * over [t_near, dt], as the single-ray walk does). The child that is front
- * for most active lanes is entered first.
+ * origin ON the plane takes as front the child its direction leaves (the
+ * single walk's near child). The child that is front for most active lanes
+ * is entered first.
  */
 KB_FN int KB(step_general)(const KB(state) *st, const kd_node *n,
                            KB(cursor) *c, KB(entry) *stack, int *sp) {
     const int axis = kd_axis(n);
     const VF zero = V(set1)(0.0f), inv = st->inv_dir[axis];
-    const VF dist = V(sub)(V(set1)(n->u.split), st->org[axis]);
-    const VF on_plane = V(eq)(dist, zero);
-    const VF d = V(mul)(dist, inv);
-    const VF neg = V(andnot)(on_plane, V(and)(V(ord)(d, d), V(signmask)(d)));
-    const VF above_front = V(or)(V(lt)(dist, zero), V(and)(on_plane, V(lt)(inv, zero)));
+    const VF a = V(sub)(V(set1)(n->u.split), st->org[axis]);
+    const VF t_lo = V(mul)(V(sub)(a, st->ss[axis]), inv);
+    const VF t_hi = V(mul)(V(add)(a, st->ss[axis]), inv);
+    const VF on_plane = V(eq)(a, zero), below = V(lt)(a, zero);
+    const VF away = V(andnot)(on_plane, V(xor)(below, st->sgn[axis]));
+    const VF above_front = V(or)(below, V(and)(on_plane, st->sgn[axis]));
     KB(span) f, b;
-    KB(spans)(d, st->dt[axis], neg, c->t_near, c->t_far, &f, &b);
+    KB(spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
     const KB(span) lo = {V(sel)(above_front, b.t_near, f.t_near),
                          V(sel)(above_front, b.t_far, f.t_far)};
     const KB(span) hi = {V(sel)(above_front, f.t_near, b.t_near),
@@ -302,8 +309,8 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
         b->steps++;
         b->lane_steps += (uint64_t)kd_lane_count(V(bits)(c.act));
         if (!kd_is_leaf(n)) {
-            const float dist = n->u.split - st->sorg[kd_axis(n)];
-            if (st->shared && dist != 0.0f ? KB(step_shared)(st, n, dist, &c, stack, &sp)
+            const float a = n->u.split - st->sorg[kd_axis(n)];
+            if (st->shared && a != 0.0f ? KB(step_shared)(st, n, a, &c, stack, &sp)
                                            : KB(step_general)(st, n, &c, stack, &sp))
                 continue;
         } else {
@@ -348,11 +355,11 @@ KB_FN void KB(gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
     }
 }
 
-/* kd_ray_slack_dt's scene part (a max, so its order does not matter). */
+/* kd_ray_slack's scene part (a max, so its order does not matter). */
 static inline float KB(scene_mag)(const kdr_scene *s) {
     float m = 0.0f;
     for (int k = 0; k < 3; k++) {
-        const float a = fabsf(s->root.min[k]), c = fabsf(s->root.max[k]);
+        const float a = -s->root.min[k], c = s->root.max[k];
         m = a > m ? a : m;
         m = c > m ? c : m;
     }
@@ -360,30 +367,31 @@ static inline float KB(scene_mag)(const kdr_scene *s) {
 }
 
 /*
- * kd_ray_slack_dt and kd_clip_root_dt for all lanes at once (the same float
- * operations and comparisons, so the same bits). Lanes that miss the root
- * box leave b->lanes; the others get their root interval.
+ * kd_ray_slack, kd_signed_slack and kd_clip_root_slack for all lanes at
+ * once (the same float operations and comparisons, so the same bits). Lanes
+ * that miss the root box leave b->lanes; the others get their interval.
  */
 KB_FN void KB(clip)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
                     const VF dir[3], VF *t_near, VF *t_far) {
     const VF absm = V(seti)(0x7fffffff), zero = V(set1)(0.0f);
     VF m = V(set1)(b->scene_mag);
     for (int k = 0; k < 3; k++)
-        m = V(max)(m, V(and)(st->org[k], absm));
+        m = V(max)(V(and)(st->org[k], absm), m);
     const VF slack = V(mul)(m, V(set1)(KD_SLACK_REL));
     VF tn = st->tmin, tf = V(load)(b->best_t), ok = V(bitmask)(b->lanes);
     for (int k = 0; k < 3; k++) {
         const VF flat = V(eq)(dir[k], zero), o = st->org[k];
-        const VF lo_b = V(set1)(s->root.min[k]), hi_b = V(set1)(s->root.max[k]);
-        st->dt[k] = V(andnot)(flat, V(mul)(slack, V(and)(st->inv_dir[k], absm)));
+        st->sgn[k] = V(signmask)(st->inv_dir[k]);
+        st->ss[k] = V(xor)(slack, V(and)(st->sgn[k], V(set1)(-0.0f)));
+        const VF lo_b = V(sub)(V(set1)(s->root.min[k]), slack);
+        const VF hi_b = V(add)(V(set1)(s->root.max[k]), slack);
         const VF t0 = V(mul)(V(sub)(lo_b, o), st->inv_dir[k]);
         const VF t1 = V(mul)(V(sub)(hi_b, o), st->inv_dir[k]);
         const VF sw = V(gt)(t0, t1);
-        const VF lo = V(sub)(V(sel)(sw, t1, t0), st->dt[k]);
-        const VF hi = V(add)(V(sel)(sw, t0, t1), st->dt[k]);
+        const VF lo = V(sel)(sw, t1, t0), hi = V(sel)(sw, t0, t1);
         tn = V(sel)(V(andnot)(flat, V(gt)(lo, tn)), lo, tn);
         tf = V(sel)(V(andnot)(flat, V(lt)(hi, tf)), hi, tf);
-        /* a flat axis only rejects origins outside the slab */
+        /* a flat axis only rejects origins outside the (grown) slab */
         ok = V(andnot)(V(and)(flat, V(or)(V(lt)(o, lo_b), V(gt)(o, hi_b))), ok);
     }
     ok = V(and)(ok, V(le)(tn, tf));

@@ -43,6 +43,7 @@ static inline f4 f4_ord(f4 a, f4 b) { return _mm_cmpord_ps(a, b); }
 static inline f4 f4_and(f4 a, f4 b) { return _mm_and_ps(a, b); }
 static inline f4 f4_or(f4 a, f4 b) { return _mm_or_ps(a, b); }
 static inline f4 f4_andnot(f4 m, f4 a) { return _mm_andnot_ps(m, a); }
+static inline f4 f4_xor(f4 a, f4 b) { return _mm_xor_ps(a, b); }
 static inline f4 f4_sel(f4 m, f4 a, f4 b) {
     return _mm_or_ps(_mm_and_ps(m, a), _mm_andnot_ps(m, b));
 }
@@ -89,6 +90,7 @@ KD_AVX2 static inline f8 f8_ord(f8 a, f8 b) { return _mm256_cmp_ps(a, b, _CMP_OR
 KD_AVX2 static inline f8 f8_and(f8 a, f8 b) { return _mm256_and_ps(a, b); }
 KD_AVX2 static inline f8 f8_or(f8 a, f8 b) { return _mm256_or_ps(a, b); }
 KD_AVX2 static inline f8 f8_andnot(f8 m, f8 a) { return _mm256_andnot_ps(m, a); }
+KD_AVX2 static inline f8 f8_xor(f8 a, f8 b) { return _mm256_xor_ps(a, b); }
 KD_AVX2 static inline f8 f8_sel(f8 m, f8 a, f8 b) { return _mm256_blendv_ps(b, a, m); }
 KD_AVX2 static inline int f8_bits(f8 m) { return _mm256_movemask_ps(m); }
 KD_AVX2 static inline f8 f8_signmask(f8 a) {
