@@ -14,17 +14,17 @@
  *  2. a negative plane distance (the ray moves away from the plane; -0.0
  *     from an underflow counts as negative) becomes +infinity for the
  *     front child, which then keeps the whole interval.
- * d = (split - org) * inv_dir and the slack dt are those of kd_traverse.h,
- * so every lane sees exactly the child intervals of the single-ray walk
- * (front [t_near, min(d + dt, t_far)], back [max(d - dt, t_near), t_far],
- * and for negative d the back child only up to d + dt): same leaves, same
- * triangle tests, same answer. See KB(spans) for the rule in one place.
+ * The crossing distances t_lo/t_hi = (split - org -/+ signed slack) * inv_dir
+ * are those of kd_traverse.h, so every lane sees exactly the child
+ * intervals of the single-ray walk (front [t_near, min(t_hi, t_far)], back
+ * [max(t_lo, t_near), t_far]; moving away, the front keeps [t_near, t_far]
+ * and the back only reaches t_hi): same leaves, same triangle tests, same
+ * answer. See KB(spans) for the rule in one place.
  * A lane whose origin is ON the plane (split - org == 0) has no side of its
- * own: its front is the child its direction leaves, seen over
- * [t_near, dt] as in the single-ray walk, and its back child gets the rest.
- * A lane lying in the plane (dist == 0, dir == +-0) gets d = NaN, and the
- * min/max operand order (NaN yields the second operand) gives it both
- * children over its whole interval.
+ * own: its front is the child its direction leaves (the single walk's near
+ * child). A lane lying in the plane (direction component +-0) gets
+ * infinite or NaN crossings, and the min/max operand order (NaN yields the
+ * second operand) gives it both children over its whole interval.
  *
  * Origins: lanes may have different origins. When every lane has the same
  * origin (a camera, hemisphere rays from a surface point) and it is off the
