@@ -26,3 +26,28 @@ if(TARGET kdray_scene_info)
   set_tests_properties(scenes_info PROPERTIES
     PASS_REGULAR_EXPRESSION "triangles: +[1-9][0-9]*.*kd-tree: +[1-9]")
 endif()
+
+# libFuzzer target for the loader, with -DKDRAY_FUZZ=ON (the sanitizer pass
+# of scripts/dev test): the project builds with gcc, so clang++ compiles the
+# harness and the shim (tinygltf included) separately, then runs it for a
+# bounded time on assimp-testmodels' small glTF 2.0 files.
+find_program(KDRAY_CLANGXX NAMES clang++ clang++-14)
+if(KDRAY_FUZZ AND KDRAY_CLANGXX AND EXISTS /usr/share/assimp/models/glTF2)
+  set(KDRAY_FUZZ_GLTF_BIN ${CMAKE_CURRENT_BINARY_DIR}/fuzz_gltf)
+  add_custom_command(
+    OUTPUT ${KDRAY_FUZZ_GLTF_BIN}
+    COMMAND ${KDRAY_CLANGXX} -g -O1 -fsanitize=fuzzer,address,undefined
+            -fno-sanitize-recover=all -ffp-contract=off -I${PROJECT_SOURCE_DIR}/scenes
+            -x c ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes_fuzz.c
+            -x c++ ${PROJECT_SOURCE_DIR}/scenes/gltf_shim.cpp
+            -o ${KDRAY_FUZZ_GLTF_BIN}
+    DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes_fuzz.c
+            ${PROJECT_SOURCE_DIR}/scenes/gltf_shim.cpp ${PROJECT_SOURCE_DIR}/scenes/kdr_gltf.h
+    COMMENT "Building the glTF loader fuzzer with clang++"
+    VERBATIM)
+  add_custom_target(fuzz_gltf ALL DEPENDS ${KDRAY_FUZZ_GLTF_BIN})
+  add_test(NAME scenes_fuzz
+           COMMAND ${CMAKE_COMMAND} -E env ASAN_OPTIONS=detect_leaks=1
+                   sh -c "rm -rf scenes-fuzz-corpus && mkdir scenes-fuzz-corpus && find /usr/share/assimp/models/glTF2 -name '*.gltf' -size -40k -exec cp {} scenes-fuzz-corpus/ \\; && '${KDRAY_FUZZ_GLTF_BIN}' -max_total_time=20 -rss_limit_mb=2048 -max_len=20000 -timeout=10 scenes-fuzz-corpus; rc=$?; rm -f scenes-fuzz-input-*; exit $rc"
+           WORKING_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR})
+endif()
