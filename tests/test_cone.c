@@ -15,7 +15,9 @@
 #include <string.h>
 
 #include "compare.h"
+#include "kd_cone.h"
 #include "kd_internal.h"
+#include "kd_tri.h"
 #include "kdray.h"
 #include "oracle.h"
 
@@ -490,6 +492,95 @@ static void test_adversarial(void) {
     free(b.v);
 }
 
+/* The SIMD packet tests (4- and 8-wide, whatever the CPU the suite runs
+ * on would pick) against the scalar triangle test, lane by lane. */
+static void test_packets(void) {
+    rng_state = 4242;
+    tri_buf b = {0};
+    tb_soup(&b, 600, 4.0f, 0.8f);
+    kdr_scene *s = build(&b);
+    const float pts[3] = {2.0f, 2.0f, -1.0f};
+    const kdr_sphere_light li = {{2.0f, 2.0f, 7.0f}, 1.5f};
+    kdr_shadow_query q = make_query(pts, 1, &li, 1, 8);
+    kd_shadow_frame f;
+    CHECK(kd_shadow_frame_init(s, &q, 0, 0, &f) == KDR_OK, "frame");
+    uint32_t cands[600];
+    for (uint32_t j = 0; j < 600; j++)
+        cands[j] = j;
+    const int widths = kdr_cpu_has_avx2() ? 2 : 1;
+    int lanes_total = 0, lanes_blocked = 0;
+    for (uint32_t round = 0; round < 64; round++) {
+        kdr_ray rays[8];
+        const kdr_ray *lanes[8];
+        int want = 0;
+        const int n = 1 + (int)(round % 8);
+        for (int j = 0; j < n; j++) {
+            kd_shadow_frame_ray(&f, (round * 8 + (uint32_t)j) % 512, 512, &rays[j]);
+            lanes[j] = &rays[j];
+            kd_ray_pre pre;
+            kd_ray_precompute(rays[j].org, rays[j].dir, &pre);
+            for (uint32_t c = 0; c < 600; c++) {
+                float t, u, v;
+                if (kd_tri_intersect(&pre, b.v + 9 * c, rays[j].tmin, rays[j].tmax,
+                                     &t, &u, &v)) {
+                    want |= 1 << j;
+                    break;
+                }
+            }
+        }
+        lanes_total += n;
+        for (int j = 0; j < n; j++)
+            lanes_blocked += (want >> j) & 1;
+        for (int w = 0; w < widths; w++) {
+            uint32_t blocker = UINT32_MAX;
+            CHECK(kd_cone_packet_blocked(s, lanes, n, cands, 600, &blocker, w) == want,
+                  "packet list width %d round %u", w ? 8 : 4, round);
+            if (n > (w ? 8 : 4)) /* a 4-wide walk takes at most 4 lanes */
+                continue;
+            kd_cone c;
+            int open = 0;
+            uint64_t visited = 0;
+            kd_cone_init(&c, s, &f, NULL, 0.0);
+            const int got = kd_cone_packet_walk(s, &c, lanes, n, UINT64_MAX, &blocker,
+                                                &visited, &open, w);
+            CHECK(got == want && open == 0, "packet walk width %d round %u: %x vs %x",
+                  w ? 8 : 4, round, got, want);
+        }
+    }
+    CHECK(lanes_blocked > lanes_total / 8 && lanes_blocked < lanes_total - lanes_total / 8,
+          "packet test needs both outcomes: %d of %d blocked", lanes_blocked, lanes_total);
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+/* Any split of the point range gives the same visibilities (the per-light
+ * state carried between points only changes the path, never the answer). */
+static void test_ranges(void) {
+    rng_state = 77;
+    tri_buf b = {0};
+    tb_soup(&b, 1500, 10.0f, 0.8f);
+    kdr_scene *s = build(&b);
+    enum { NP = 40 };
+    float pts[3 * NP];
+    for (int i = 0; i < NP; i++) {
+        pts[3 * i] = (float)(rnd() * 10.0);
+        pts[3 * i + 1] = (float)(rnd() * 10.0);
+        pts[3 * i + 2] = -0.5f;
+    }
+    const kdr_sphere_light lights[3] = {
+        {{5, 5, 14}, 0.4f}, {{5, 5, 13}, 3.0f}, {{-4, 5, 5}, 1.0f}};
+    kdr_shadow_query q = make_query(pts, NP, lights, 3, 40);
+    float whole[3 * NP], parts[3 * NP];
+    kdr_shadow_trace(s, &q, 0, NP, KDR_SHADOW_CONE, whole, NULL);
+    for (size_t first = 0; first < NP; first += 7)
+        kdr_shadow_trace(s, &q, first, first + 7 <= NP ? 7 : NP - first,
+                         KDR_SHADOW_CONE, parts, NULL);
+    CHECK(memcmp(whole, parts, sizeof whole) == 0, "ranges differ");
+    check_modes("soup, three lights", s, &b, &q);
+    kdr_scene_free(s);
+    free(b.v);
+}
+
 int main(void) {
     test_invalid();
     test_ray_definition();
@@ -497,6 +588,8 @@ int main(void) {
     test_normals();
     test_soup_vs_embree();
     test_adversarial();
+    test_packets();
+    test_ranges();
     if (failures) {
         fprintf(stderr, "test_cone: %d failures\n", failures);
         return 1;
