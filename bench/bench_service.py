@@ -7,8 +7,9 @@ in-process rate, measured in the same run. Not a test; bounded to < 1 min.
 For bundle batches of 1, 1K and 64K rays, sent and answered in JSON and in
 base64, wrk (with a Lua script that POSTs the body) drives the daemon over
 loopback for S seconds; the same request file is answered in-process by
-kdray-trace with the daemon's traversal modes and thread count (best of
-several runs). The table gives rays/s both ways and their ratio (HTTP
+kdray-trace with the daemon's traversal modes and thread count (the mean
+rate of several runs: on a shared, loaded machine the best run would
+flatter the core). The table gives rays/s both ways and their ratio (HTTP
 rays/s / in-process rays/s; the gap is parsing, encoding and transport).
 The 1-ray round-trip median comes from wrk --latency with one connection
 and from a plain keep-alive Python loop.
@@ -110,7 +111,7 @@ def core_rate(trace, scene, body_path, threads, n):
     if scene:
         args[1:1] = ["--scene", scene]
     out = subprocess.run(args, capture_output=True, text=True, timeout=300)
-    m = re.search(r"([\d.]+) Mrays/s", out.stderr)
+    m = re.search(r"mean [\d.]+ ms, ([\d.]+) Mrays/s", out.stderr)
     if not m:
         raise SystemExit("kdray-trace: " + out.stderr)
     return float(m.group(1)) * 1e6
