@@ -49,6 +49,7 @@ typedef struct req_state {
     char *body;
     size_t len, cap;
     size_t dropped; /* bytes past the limit, discarded */
+    int queued;     /* an answer was handed to MHD */
 } req_state;
 
 static void log_mhd(void *cls, const char *fmt, va_list ap) {
@@ -80,6 +81,7 @@ static enum MHD_Result queue(kdr_http *h, struct MHD_Connection *c, req_state *r
         MHD_add_response_header(resp, MHD_HTTP_HEADER_CONNECTION, "close");
     enum MHD_Result ok = MHD_queue_response(c, r->status, resp);
     MHD_destroy_response(resp);
+    rs->queued = 1;
     kdr_metrics_request(r->ep, r->status, kdr_now() - rs->start);
     return ok;
 }
@@ -172,6 +174,10 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
                            c, MHD_HEADER_KIND, MHD_HTTP_HEADER_CONTENT_TYPE)};
     req_state *rs = *req_cls;
     if (!rs) return on_first(h, c, &req, req_cls);
+    if (rs->queued) { /* answered early; MHD may still hand us body bytes */
+        *upload_size = 0;
+        return MHD_YES;
+    }
     if (*upload_size) {
         int ok = rs->refused ? (rs->dropped += *upload_size) <= DRAIN_MAX
                              : append(rs, srv->max_body, upload, *upload_size);
