@@ -4,19 +4,25 @@
  * whose segment reaches the light.
  *
  * KDR_SHADOW_RAYS traces every sample through the kd-tree (the reference).
- * KDR_SHADOW_CONE first walks the tree with the cone of the whole light
- * (kd_cone_trav.c). No candidate: visibility 1, no rays (a decided cone).
- * A short list: every sample is tested against the list only. Too many (a
- * wide cone over a busy scene): the samples are sorted along a Morton curve
- * of the light's disc and cut into groups; each group's own narrow cone
- * walks the tree and its samples are tested against that list, or traced
- * through the tree when even the narrow cone is too busy.
+ * KDR_SHADOW_CONE, per (point, light):
+ *  1. if the light's last blocker blocks sample 0 (umbra likely), every
+ *     sample is first tested against that one triangle;
+ *  2. the cone of the whole light walks the tree (kd_cone_trav.c) with a
+ *     budget: no candidate gives visibility 1 with no rays (a decided cone),
+ *     a short list is tested by packets of samples (kd_cone_packet.c);
+ *  3. over budget, with sub-cones narrow enough: the samples are sorted
+ *     along a Morton curve of the light's disc and packets of 4/8
+ *     neighbours walk their own cones, testing leaves on the way;
+ *  4. otherwise: a few closest hits learn blockers, the rest go through
+ *     the tree in bundles (kdr_trace_batch).
+ * A walk over budget makes the next points of that light skip step 2 for a
+ * while (back-off): neighbouring points see the same busy cone.
  *
  * Exactness: every list holds all triangles any of its samples can touch,
  * every test is kd_tri_intersect over [tmin, tmax], and a hit on any
- * triangle is an occlusion whichever way it was found. So the last blocker
- * (kept per light, across samples and points) is always tried first, and
- * the visibility equals KDR_SHADOW_RAYS bit for bit.
+ * triangle is an occlusion whichever way it was found (so a blocker
+ * learned at one point may be tried at any other). The visibility equals
+ * KDR_SHADOW_RAYS bit for bit, whichever path was taken.
  */
 #include <stdlib.h>
 
