@@ -4,26 +4,29 @@
  * convention, and the degenerate-triangle predicate the build uses (so that
  * brute-force oracles in tests can skip exactly the same triangles).
  *
- * Split-plane convention (single rays; bundles, cones and frusta mirror it):
- *   t_split = (split - org[axis]) * inv_dir[axis], inv_dir = 1.0f / dir,
- *   t_lo = t_split - dt[axis], t_hi = t_split + dt[axis] (kd_ray_slack_dt).
- * The child the ray is in for t < t_split is the "near" child: below when
- * inv_dir[axis] > 0 (including dir = +0.0), above when it is negative
- * (including dir = -0.0). The near child is visited over
- * [tnear, min(tfar, t_hi)], the far child over [max(tnear, t_lo), tfar],
- * each only when that interval is not empty (a single point counts). This
- * holds for every sign of t_split, so the origin may lie on either side or
- * on the plane. A NaN (origin on the plane and direction component 0: the
- * ray lies in the plane) visits both children with the full interval.
+ * Split-plane convention (single rays; bundles, cones and frusta must be at
+ * least as conservative). With a = split - org[axis], inv = 1.0f / dir and
+ * the ray's positional slack s (kd_ray_slack) signed like inv
+ * (ss = kd_signed_slack):
+ *   t_lo = (a - ss) * inv,  t_hi = (a + ss) * inv
+ * are where the ray crosses the planes split -/+ s. The child the ray is in
+ * for small t is the "near" child: below when inv > 0 (including
+ * dir = +0.0), above when inv < 0 (including dir = -0.0). The near child is
+ * visited over [tnear, min(tfar, t_hi)], the far child over
+ * [max(tnear, t_lo), tfar], each only when that interval is not empty (a
+ * single point counts). This holds for every sign of a, so the origin may
+ * lie on either side or on the plane. Along an axis where the direction is
+ * 0, t_lo and t_hi are infinities: the ray visits the origin's side, and
+ * both sides (full interval) when the origin is within s of the plane. A NaN
+ * (a = +-ss with dir 0) also visits both children with the full interval.
  *
- * Why the slack dt: kd_tri_intersect is watertight for the triangle as seen
- * after rounding the translation and shear, which can move it a few ulps of
- * |vertex - origin|. A ray aimed at a vertex lying in a split plane may
- * pass that vertex a hair on the wrong side and still "hit" the triangle, so
- * every leaf within `slack` (a small multiple of the scene's and origin's
- * magnitude) of the ray must be visited for answers to equal brute force.
- * Along an axis where the direction is 0 the test is exact in that
- * coordinate (no shear term), so dt is 0 there.
+ * Why the slack: kd_tri_intersect is watertight for the triangle as seen
+ * after rounding the translation, shear and edge products, which can move
+ * it a few ulps of |vertex - origin|, even along an axis where the ray does
+ * not move. A ray aimed at a vertex lying in a split plane may pass it a
+ * hair on the wrong side and still "hit" the triangle, so every leaf within
+ * s (a small multiple of the scene's and origin's magnitude) of the ray must
+ * be visited for answers to equal brute force.
  */
 #ifndef KD_TRAVERSE_H
 #define KD_TRAVERSE_H
@@ -36,11 +39,10 @@
  * magnitude of the scene or the ray origin (2^-16: ~128 ulps). */
 #define KD_SLACK_REL 0x1p-16f
 
-/* Per-axis slack in t units for a ray (see the comment above). */
-static inline void kd_ray_slack_dt(const struct kdr_scene *s, const float org[3],
-                                   const float dir[3], const float inv_dir[3],
-                                   float dt[3]) {
-    /* plain compares: fmaxf is a library call without -ffast-math */
+/* The ray's positional slack: KD_SLACK_REL times the largest magnitude of
+ * the root box and the origin (plain compares: fmaxf is a library call
+ * without -ffast-math). */
+static inline float kd_ray_slack(const struct kdr_scene *s, const float org[3]) {
     float m = 0.0f;
     for (int k = 0; k < 3; k++) {
         const float a = -s->root.min[k], b = s->root.max[k];
@@ -49,11 +51,14 @@ static inline void kd_ray_slack_dt(const struct kdr_scene *s, const float org[3]
         m = b > m ? b : m;
         m = o > m ? o : m;
     }
-    const float slack = m * KD_SLACK_REL;
-    for (int k = 0; k < 3; k++) {
-        const float ai = inv_dir[k] < 0.0f ? -inv_dir[k] : inv_dir[k];
-        dt[k] = dir[k] == 0.0f ? 0.0f : slack * ai;
-    }
+    return m * KD_SLACK_REL;
+}
+
+/* The slack with the sign of inv_dir per axis (see the convention above). */
+static inline void kd_signed_slack(float slack, const float inv_dir[3],
+                                   float ss[3]) {
+    for (int k = 0; k < 3; k++)
+        ss[k] = signbit(inv_dir[k]) ? -slack : slack;
 }
 
 /* 1 if the ray can be traced: finite origin and direction, non-zero
@@ -69,30 +74,31 @@ static inline int kd_ray_valid(const float org[3], const float dir[3],
 }
 
 /*
- * Clips [tmin, tmax] to the scene's padded root box, widened by dt. An axis with a zero
- * direction component constrains nothing when the origin is inside the slab
- * and rejects the ray otherwise (no 0 * inf). Returns 0 when the ray misses.
+ * Clips [tmin, tmax] to the scene's padded root box grown by slack. An axis
+ * with a zero direction component constrains nothing when the origin is
+ * inside the (grown) slab and rejects the ray otherwise (no 0 * inf).
+ * Returns 0 when the ray misses.
  */
-static inline int kd_clip_root_dt(const struct kdr_scene *s, const float org[3],
-                                  const float dir[3], const float inv_dir[3],
-                                  const float dt[3], float tmin, float tmax,
-                                  float *tnear, float *tfar) {
+static inline int kd_clip_root_slack(const struct kdr_scene *s,
+                                     const float org[3], const float dir[3],
+                                     const float inv_dir[3], float slack,
+                                     float tmin, float tmax, float *tnear,
+                                     float *tfar) {
     float tn = tmin, tf = tmax;
     for (int k = 0; k < 3; k++) {
+        const float lo = s->root.min[k] - slack, hi = s->root.max[k] + slack;
         if (dir[k] == 0.0f) {
-            if (org[k] < s->root.min[k] || org[k] > s->root.max[k])
+            if (org[k] < lo || org[k] > hi)
                 return 0;
             continue;
         }
-        float t0 = (s->root.min[k] - org[k]) * inv_dir[k];
-        float t1 = (s->root.max[k] - org[k]) * inv_dir[k];
+        float t0 = (lo - org[k]) * inv_dir[k];
+        float t1 = (hi - org[k]) * inv_dir[k];
         if (t0 > t1) {
             float tmp = t0;
             t0 = t1;
             t1 = tmp;
         }
-        t0 -= dt[k];
-        t1 += dt[k];
         tn = t0 > tn ? t0 : tn;
         tf = t1 < tf ? t1 : tf;
     }
@@ -106,9 +112,8 @@ static inline int kd_clip_root(const struct kdr_scene *s, const float org[3],
                                const float dir[3], const float inv_dir[3],
                                float tmin, float tmax, float *tnear,
                                float *tfar) {
-    float dt[3];
-    kd_ray_slack_dt(s, org, dir, inv_dir, dt);
-    return kd_clip_root_dt(s, org, dir, inv_dir, dt, tmin, tmax, tnear, tfar);
+    return kd_clip_root_slack(s, org, dir, inv_dir, kd_ray_slack(s, org), tmin,
+                              tmax, tnear, tfar);
 }
 
 /*

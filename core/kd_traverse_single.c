@@ -30,15 +30,16 @@ typedef struct walk_out {
 /* Descends from n to a leaf, pushing far children; returns the leaf. */
 static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
                                      const float org[3], const float inv[3],
-                                     const float dt[3], const unsigned neg[3],
+                                     const float ss[3], const unsigned neg[3],
                                      kd_todo *stack,
                                      int *sp, float *tn, float *tf,
                                      uint64_t *visited) {
     while (!kd_is_leaf(n)) {
         ++*visited;
         const int axis = kd_axis(n);
-        const float t = (n->u.split - org[axis]) * inv[axis];
-        const float t_lo = t - dt[axis], t_hi = t + dt[axis];
+        const float a = n->u.split - org[axis];
+        const float t_lo = (a - ss[axis]) * inv[axis];
+        const float t_hi = (a + ss[axis]) * inv[axis];
         const kd_node *below = n + 1, *above = nodes + kd_above(n);
         const kd_node *nearc = neg[axis] ? above : below;
         const kd_node *farc = neg[axis] ? below : above;
@@ -62,7 +63,7 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
 /* The walk shared by both queries; any != 0 stops at the first hit. */
 static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
                        walk_out *o) {
-    float inv[3], dt[3], tn, tf;
+    float inv[3], ss[3], tn, tf;
     unsigned neg[3];
     if (!s || !s->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax))
         return 0;
@@ -70,8 +71,10 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
         inv[k] = 1.0f / r->dir[k];
         neg[k] = signbit(r->dir[k]) ? 1u : 0u;
     }
-    kd_ray_slack_dt(s, r->org, r->dir, inv, dt);
-    if (!kd_clip_root_dt(s, r->org, r->dir, inv, dt, r->tmin, r->tmax, &tn, &tf))
+    const float slack = kd_ray_slack(s, r->org);
+    kd_signed_slack(slack, inv, ss);
+    if (!kd_clip_root_slack(s, r->org, r->dir, inv, slack, r->tmin, r->tmax, &tn,
+                            &tf))
         return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
@@ -82,7 +85,7 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     int sp = 0;
     const kd_node *n = nodes;
     for (;;) {
-        n = descend(nodes, n, r->org, inv, dt, neg, stack, &sp, &tn, &tf, &o->nodes);
+        n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
         const uint32_t *ref = refs + n->u.first;
         const uint32_t count = kd_count(n);
         o->tests += count;

@@ -265,6 +265,54 @@ static void test_huge_offsets(void) {
     free(sp.t);
 }
 
+/* Extreme magnitudes: far, tiny and subnormal origins, huge and tiny
+ * direction lengths, zero components. Nothing may crash, and answers still
+ * equal brute force. Directions keep their components within ~2^40 of each
+ * other: past that (or with subnormal components) the shear and edge
+ * products of kd_tri_intersect underflow and it reports hits at t = +-0 that
+ * lie at t < 0 or far from the ray, which no traversal can reproduce short
+ * of testing every triangle. */
+static float extreme_org(void) {
+    static const float v[] = {0.0f, -0.0f, 1e-40f, -1e-40f, 1e-30f, -1e-30f,
+                              1e30f, -1e30f, 1e5f, -1e5f, 3.0f, 0.5f};
+    return rng_u32() % 2 ? v[rng_u32() % (sizeof v / sizeof v[0])] : rng_f(-2, 2);
+}
+
+static void extreme_dir(float d[3]) {
+    static const float scale[] = {1e-30f, 1e-6f, 1.0f, 1e5f, 1e30f};
+    const float s = scale[rng_u32() % (sizeof scale / sizeof scale[0])];
+    for (int k = 0; k < 3; k++) {
+        static const float v[] = {0.0f, -0.0f, 1e-6f, -1e-6f, 1e5f, 3.0f, -3.0f};
+        float x = rng_u32() % 2 ? v[rng_u32() % (sizeof v / sizeof v[0])] : rng_f(-2, 2);
+        d[k] = x * s;
+    }
+}
+
+static void test_extreme_rays(void) {
+    soup sp = {0};
+    soup_random(&sp, 800, 0.2f, 0.25f);
+    kdr_scene *s = build_or_die(&sp);
+    size_t bad = 0;
+    for (int i = 0; i < 6000; i++) {
+        kdr_ray r;
+        for (int k = 0; k < 3; k++) {
+            r.org[k] = extreme_org();
+        }
+        extreme_dir(r.dir);
+        if (i % 2) /* aim from a far origin at the scene */
+            for (int k = 0; k < 3; k++)
+                r.dir[k] = rng_f(0, 1) - r.org[k];
+        r.tmin = i % 3 ? 0.0f : -INFINITY;
+        r.tmax = i % 5 ? INFINITY : 1e30f;
+        bad += !compare_ray(s, &r);
+    }
+    if (bad)
+        fprintf(stderr, "extreme rays: %zu mismatches\n", bad);
+    CHECK(bad == 0);
+    kdr_scene_free(s);
+    free(sp.t);
+}
+
 static void expect_miss(const kdr_scene *s, const kdr_ray *r) {
     kdr_hit h;
     CHECK(kdr_intersect1(s, r, &h, NULL) == 0);
@@ -394,6 +442,7 @@ int main(void) {
         test_random_soups();
         test_box_grid();
         test_huge_offsets();
+        test_extreme_rays();
     }
     if (g_failures)
         fprintf(stderr, "test_core: %d failures\n", g_failures);
