@@ -82,11 +82,12 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 
 /* Tuning: a bundle whose average lane occupancy (active lanes per node
- * step / lanes that entered the tree) falls under KB_OCC_MIN is incoherent; the next
- * KB_FALLBACK_RUN bundles of the batch are then traced ray by ray, after
- * which one bundle probes again. */
+ * step / lanes that entered the tree) falls under KB_OCC_MIN is incoherent;
+ * the rest of its chunk and the next KB_FALLBACK_CHUNKS chunks of the batch
+ * are then traced ray by ray, in the caller's order (no regrouping), after
+ * which a bundle probes again. */
 #define KB_OCC_MIN 0.3
-#define KB_FALLBACK_RUN 32
+#define KB_FALLBACK_CHUNKS 4
 
 #endif /* KD_TRAVERSE_BUNDLE_DECL */
 
@@ -476,25 +477,27 @@ KB_FN void KB(stats_add)(kdr_trav_stats *stats, const KB(bundle) *b, int n,
     stats->tri_tests += b->tri_tests;
 }
 
-/* Traces one chunk of rays (ids) in bundles of KB_W; *skip carries the
- * incoherence fallback from chunk to chunk. */
-KB_FN void KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
-                     const size_t *ids, int m, kdr_query q, int flags,
-                     int *skip, kdr_hits *out, kdr_trav_stats *stats) {
+/* Traces rays ids[0..m) one by one: one fallback per bundle-sized group. */
+KB_FN void KB(alone)(const kdr_scene *s, const kdr_ray_batch *rb,
+                     const size_t *ids, int m, kdr_query q, kdr_hits *out,
+                     kdr_trav_stats *stats) {
+    for (int i = 0; i < m; i++)
+        kd_batch_single(s, rb, ids[i], q, out, stats);
+    if (stats)
+        stats->fallbacks += (uint64_t)((m + KB_W - 1) / KB_W);
+}
+
+/* Traces one chunk of rays (ids) in bundles of KB_W. Returns 1 when a
+ * bundle turned out incoherent (the rest of the chunk then went alone). */
+KB_FN int KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
+                    const size_t *ids, int m, kdr_query q, int flags,
+                    kdr_hits *out, kdr_trav_stats *stats) {
     KB(bundle) b;
+    b.scene_mag = KB(scene_mag)(s);
     for (int g = 0; g < m; g += KB_W) {
         const int n = m - g < KB_W ? m - g : KB_W;
-        if (*skip > 0) {
-            --*skip;
-            for (int j = 0; j < n; j++)
-                kd_batch_single(s, rb, ids[g + j], q, out, stats);
-            if (stats)
-                stats->fallbacks++;
-            continue;
-        }
         int alone;
         KB(gather)(rb, ids + g, n, &b, &alone);
-        b.scene_mag = KB(scene_mag)(s);
         KB(trace)(s, &b, q == KDR_ANY);
         KB(store)(&b, ids + g, n, alone, q, out);
         KB(stats_add)(stats, &b, n, alone);
@@ -505,9 +508,12 @@ KB_FN void KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
          * missed the scene (camera rays past a silhouette) cost nothing */
         const int entered = kd_lane_count(b.lanes);
         if ((flags & KB_FALLBACK) && b.steps &&
-            (double)b.lane_steps < KB_OCC_MIN * entered * (double)b.steps)
-            *skip = KB_FALLBACK_RUN;
+            (double)b.lane_steps < KB_OCC_MIN * entered * (double)b.steps) {
+            KB(alone)(s, rb, ids + g + n, m - g - n, q, out, stats);
+            return 1;
+        }
     }
+    return 0;
 }
 
 /* The batch driver: chunks of KB_CHUNK rays, regrouped by direction, then
@@ -520,8 +526,15 @@ KB_FN void KB(run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
     for (size_t base = first; base < first + count; base += KB_CHUNK) {
         const size_t left = first + count - base;
         const int m = left < KB_CHUNK ? (int)left : KB_CHUNK;
+        if (skip > 0) {
+            skip--;
+            kd_batch_order(rb, base, (size_t)m, 0, ids);
+            KB(alone)(s, rb, ids, m, q, out, stats);
+            continue;
+        }
         kd_batch_order(rb, base, (size_t)m, (flags & KB_SORT) != 0, ids);
-        KB(chunk)(s, rb, ids, m, q, flags, &skip, out, stats);
+        if (KB(chunk)(s, rb, ids, m, q, flags, out, stats))
+            skip = KB_FALLBACK_CHUNKS;
     }
 }
 #endif /* KB_W */
