@@ -16,9 +16,9 @@
  * high quality) and, for the record, also without ROBUST; FTZ/DAZ off for
  * both sides.
  *
- * Usage: kdray_bench_frustum [--size N] [scene.glb ...]
- *   (default: the bundled default scene when present and 2CylinderEngine
- *   from assimp-testmodels)
+ * Usage: kdray_bench_frustum [bench.h flags: --dir, --rays N (pixels per
+ *   frame, default 1000000 → 1000x1000), --only SCENE, --repeat R, --csv]
+ *   over the scene ladder (bench.h).
  */
 #define _POSIX_C_SOURCE 200809L
 #include <embree3/rtcore.h>
@@ -28,18 +28,15 @@
 #include <string.h>
 #include <time.h>
 
-#include "kdr_gltf.h"
+#include "bench.h"
 #include "kdray.h"
 #include "oracle.h"
 
 /* Workload tuning, in one place. */
-#define IMAGE_SIZE 1024 /* square frames */
-#define REPEATS 2       /* best of */
 #define DEFAULT_TILE 8
-#define NCAMS 3
 
-static const char *const ENGINE_GLB =
-    "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
+static int g_repeat = BENCH_DEFAULT_REPEAT; /* best of; set from bench.h --repeat */
+#define NCAMS 3
 
 static double now_s(void) {
     struct timespec ts;
@@ -75,7 +72,7 @@ static result run_frustum(frame *f, uint32_t tile, kdr_frustum_mode mode) {
     kdr_hits out = {f->t, f->prim, f->u, f->v, NULL};
     result r = {0, 0, 0, 0};
     double best = 1e30;
-    for (int rep = 0; rep < REPEATS; rep++) {
+    for (int rep = 0; rep < g_repeat; rep++) {
         kdr_trav_stats st = {0};
         const double t0 = now_s();
         kdr_frustum_trace(f->s, f->cam, tile, 0, kdr_frustum_tile_count(f->cam, tile),
@@ -110,7 +107,7 @@ static result run_bundle(frame *f, kdr_trav_mode mode) {
     kdr_hits out = {f->t, f->prim, f->u, f->v, NULL};
     result r = {0, 0, 0, 0};
     double best = 1e30;
-    for (int rep = 0; rep < REPEATS; rep++) {
+    for (int rep = 0; rep < g_repeat; rep++) {
         kdr_trav_stats st = {0};
         const double t0 = now_s();
         kdr_trace_batch(f->s, &b, 0, f->n, KDR_CLOSEST, mode, &out, &st);
@@ -131,7 +128,7 @@ static result run_embree1(frame *f, RTCScene scene) {
     struct RTCIntersectContext ctx;
     result r = {0, 0, 0, 0};
     double best = 1e30;
-    for (int rep = 0; rep < REPEATS; rep++) {
+    for (int rep = 0; rep < g_repeat; rep++) {
         const double t0 = now_s();
         rtcInitIntersectContext(&ctx);
         ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
@@ -163,7 +160,7 @@ static result run_embree8(frame *f, RTCScene scene) {
     double best = 1e30;
     for (int j = 0; j < 8; j++)
         valid[j] = -1;
-    for (int rep = 0; rep < REPEATS; rep++) {
+    for (int rep = 0; rep < g_repeat; rep++) {
         const double t0 = now_s();
         rtcInitIntersectContext(&ctx);
         ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
@@ -228,31 +225,41 @@ typedef struct method {
 
 enum { M_RAYS, M_BUNDLE4, M_FR1, M_FR4, M_EMB1, M_EMB8, M_EMB1_FAST, M_COUNT };
 
-static int g_frustum_only; /* --frustum-only: for profiling */
 /* tile sweep 4..64: sums of log Mrays/s, [tile][single, multi4] */
 #define NSWEEP 5
 static double g_sweep[NSWEEP][2];
+static method g_m[M_COUNT] = {{"kd per ray", 0, 0},           {"kd bundle4 (2x2)", 0, 0},
+                              {"kd 1-frustum", 0, 0},         {"kd 4-frustum", 0, 0},
+                              {"embree rtcIntersect1", 0, 0}, {"embree rtcIntersect8", 0, 0},
+                              {"embree 1 (not robust)", 0, 0}};
+static int g_ncams;
 
-static void bench_scene(const char *name, const float *tris, size_t ntris,
-                        uint32_t size, method *m, int *ncams) {
-    kdr_scene *s = NULL;
+static const char *const g_metric[M_COUNT] = {"rays", "bundle4", "frustum1", "frustum4",
+                                              "embree1", "embree8", "embree1_fast"};
+
+/* One ladder scene: square frames of about opts->rays pixels. */
+static int frustum_section(const bench_scene *sc, const bench_opts *opts,
+                           bench_csv *csv) {
+    const kdr_scene *s = sc->kd;
+    const uint32_t size = (uint32_t)sqrt((double)opts->rays) & ~7u;
+    method *m = g_m;
     oracle_opts oo;
     kdr_bounds b;
-    if (kdr_scene_build(tris, ntris, NULL, NULL, NULL, &s) != KDR_OK) {
-        fprintf(stderr, "%s: build failed\n", name);
-        return;
-    }
+    g_repeat = opts->repeat;
+    if (size < 8)
+        return 1;
     oracle_opts_default(&oo);
-    oo.device_config = "threads=1";
-    oracle *emb = oracle_create(tris, ntris, &oo);
+    oo.device_config = BENCH_EMBREE_CONFIG;
+    oracle *emb = oracle_create(sc->tris, sc->ntris, &oo);
     oo.robust = 0;
-    oracle *emb_fast = oracle_create(tris, ntris, &oo);
+    oracle *emb_fast = oracle_create(sc->tris, sc->ntris, &oo);
     if (!emb || !emb_fast) {
-        kdr_scene_free(s);
-        return;
+        oracle_free(emb);
+        oracle_free(emb_fast);
+        return 1;
     }
     kdr_scene_bounds(s, &b);
-    printf("\n== %s: %zu triangles, %ux%u, tile %d unless noted\n", name, ntris,
+    printf("\n== %s: %zu triangles, %ux%u, tile %d unless noted\n", sc->name, sc->ntris,
            size, size, DEFAULT_TILE);
     frame f = {.s = s, .n = (size_t)size * size};
     f.t = malloc(f.n * sizeof *f.t);
@@ -265,14 +272,6 @@ static void bench_scene(const char *name, const float *tris, size_t ntris,
         result r[M_COUNT];
         make_camera(&b, k, size, &cam);
         f.cam = &cam;
-        if (g_frustum_only) {
-            r[M_FR4] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_MULTI4);
-            r[M_RAYS] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_RAYS);
-            printf("camera %d: 4-frustum %.2f Mrays/s %.1f tris/ray; per ray %.2f Mrays/s "
-                   "%.1f tris/ray %.1f nodes/ray\n", k, r[M_FR4].mrays, r[M_FR4].tris_per_ray,
-                   r[M_RAYS].mrays, r[M_RAYS].tris_per_ray, r[M_RAYS].nodes_per_ray);
-            continue;
-        }
         r[M_RAYS] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_RAYS);
         r[M_FR1] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_SINGLE);
         r[M_FR4] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_MULTI4);
@@ -291,6 +290,9 @@ static void bench_scene(const char *name, const float *tris, size_t ntris,
             printf("  (hits checksum %.0f)\n", r[j].hit_checksum);
             m[j].sum_log += log(r[j].mrays);
             m[j].sum_nodes += r[j].nodes_per_ray;
+            char metric[64];
+            snprintf(metric, sizeof metric, "cam%d_%s_mrays", k, g_metric[j]);
+            bench_csv_row(csv, "frustum", sc, metric, r[j].mrays);
         }
         printf("  4-frustum / 1-frustum %.2fx, 4-frustum / embree1 %.2fx, / embree8 %.2fx\n",
                r[M_FR4].mrays / r[M_FR1].mrays, r[M_FR4].mrays / r[M_EMB1].mrays,
@@ -305,7 +307,7 @@ static void bench_scene(const char *name, const float *tris, size_t ntris,
             g_sweep[ti][1] += log(c.mrays);
         }
         printf("\n");
-        ++*ncams;
+        ++g_ncams;
     }
     free(f.t);
     free(f.u);
@@ -314,44 +316,16 @@ static void bench_scene(const char *name, const float *tris, size_t ntris,
     free(f.dirs);
     oracle_free(emb);
     oracle_free(emb_fast);
-    kdr_scene_free(s);
+    return 0;
 }
 
 int main(int argc, char **argv) {
-    method m[M_COUNT] = {{"kd per ray", 0, 0},      {"kd bundle4 (2x2)", 0, 0},
-                         {"kd 1-frustum", 0, 0},    {"kd 4-frustum", 0, 0},
-                         {"embree rtcIntersect1", 0, 0}, {"embree rtcIntersect8", 0, 0},
-                         {"embree 1 (not robust)", 0, 0}};
-    uint32_t size = IMAGE_SIZE;
-    const char *paths[16];
-    int npaths = 0, ncams = 0;
-    for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--frustum-only"))
-            g_frustum_only = 1;
-        else if (!strcmp(argv[i], "--size") && i + 1 < argc)
-            size = (uint32_t)atoi(argv[++i]);
-        else if (npaths < 16)
-            paths[npaths++] = argv[i];
-    }
-    if (npaths == 0) {
-#ifdef KDRAY_DEFAULT_SCENE
-        paths[npaths++] = KDRAY_DEFAULT_SCENE;
-#endif
-        paths[npaths++] = ENGINE_GLB;
-    }
-    for (int i = 0; i < npaths; i++) {
-        kdr_gltf_scene g;
-        char err[256];
-        if (kdr_gltf_load(paths[i], &g, err, sizeof err) != 0) {
-            fprintf(stderr, "skipping %s\n", err);
-            continue;
-        }
-        const char *base = strrchr(paths[i], '/');
-        bench_scene(base ? base + 1 : paths[i], g.tris, g.ntris, size, m, &ncams);
-        kdr_gltf_free(&g);
-    }
+    static const bench_section sections[] = {{"frustum", frustum_section}};
+    const int rc = bench_main(argc, argv, sections, 1);
+    const method *m = g_m;
+    const int ncams = g_ncams;
     if (ncams == 0)
-        return g_frustum_only ? 0 : 1;
+        return rc ? rc : 1;
     printf("\n== geometric means over %d cameras\n", ncams);
     for (int j = 0; j < M_COUNT; j++)
         printf("  %-26s %7.2f Mrays/s\n", m[j].name, exp(m[j].sum_log / ncams));
@@ -368,5 +342,5 @@ int main(int argc, char **argv) {
     for (int ti = 0; ti + 1 < NSWEEP; ti++)
         printf("  %u: %.2fx", 4u << ti, exp((g_sweep[ti][1] - g_sweep[ti + 1][0]) / ncams));
     printf("\n");
-    return 0;
+    return rc;
 }
