@@ -3,14 +3,16 @@
  * Havran, "On building fast kd-trees for ray tracing, and on doing that in
  * O(N log N)" (2006).
  *
- * Every node owns three sorted event lists, one per axis. An event is one
+ * Every node has three sorted event lists, one per axis. An event is one
  * 64-bit key: the order-preserving bits of its position (high 32), its type
  * (end < planar < start, bits 30-31) and its triangle (low 30 bits), so that
  * sorting keys sorts events by (position, type, triangle). The lists are
  * sorted once at the root (radix sort); a split then partitions each list
  * in order, and only the triangles that straddle the plane get new events:
- * they are clipped to each child box ("perfect splits") and their few new
- * events are sorted and merged in.
+ * they are clipped to the node's box and then to each side of the plane
+ * ("perfect splits"), and their few new events are sorted and merged in.
+ * The children's lists live in a scratch buffer per depth: the build is
+ * depth-first, so a subtree only ever writes the buffers below it.
  *
  * Clipping runs in double and rounds the bounds of computed points outward,
  * so a triangle is never left out of a box it touches. A triangle lying in

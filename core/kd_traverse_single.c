@@ -60,6 +60,32 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
     return n;
 }
 
+/* Tests every triangle of leaf n over [tmin, best t] and keeps the best by
+ * the tie rule; returns 1 at the first hit when any != 0. */
+static inline int test_leaf(const kdr_scene *s, const kd_node *n,
+                            const kd_ray_pre *pre, float tmin, const int any,
+                            walk_out *o) {
+    const uint32_t *ref = s->refs + n->u.first;
+    const uint32_t count = kd_count(n);
+    o->tests += count;
+    for (uint32_t i = 0; i < count; i++) {
+        float t, u, v;
+        const int32_t prim = (int32_t)ref[i];
+        if (!kd_tri_intersect(pre, s->tris + 9 * (size_t)prim, tmin, o->t, &t,
+                              &u, &v))
+            continue;
+        if (any)
+            return 1;
+        if (kd_hit_better(t, prim, o->t, o->prim)) {
+            o->t = t;
+            o->u = u;
+            o->v = v;
+            o->prim = prim;
+        }
+    }
+    return 0;
+}
+
 /* The walk shared by both queries; any != 0 stops at the first hit. */
 static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
                        walk_out *o) {
@@ -79,31 +105,13 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
     const kd_node *nodes = s->nodes;
-    const uint32_t *refs = s->refs;
-    const float *tris = s->tris;
     kd_todo stack[KD_MAX_DEPTH];
     int sp = 0;
     const kd_node *n = nodes;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
-        const uint32_t *ref = refs + n->u.first;
-        const uint32_t count = kd_count(n);
-        o->tests += count;
-        for (uint32_t i = 0; i < count; i++) {
-            float t, u, v;
-            const int32_t prim = (int32_t)ref[i];
-            if (!kd_tri_intersect(&pre, tris + 9 * (size_t)prim, r->tmin, o->t,
-                                  &t, &u, &v))
-                continue;
-            if (any)
-                return 1;
-            if (kd_hit_better(t, prim, o->t, o->prim)) {
-                o->t = t;
-                o->u = u;
-                o->v = v;
-                o->prim = prim;
-            }
-        }
+        if (test_leaf(s, n, &pre, r->tmin, any, o))
+            return 1;
         const float bound = kd_term_bound(o->t);
         do {
             if (sp == 0)
