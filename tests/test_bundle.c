@@ -377,16 +377,29 @@ static void run_way(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
         g_failures++;
 }
 
-/* Traces the whole set in calls of 1, 3, 5, 7, 9, 13 rays (cycling) and
- * compares each ray with the single-ray reference. */
+static void check_cut(const char *scene, const rayset *rs, const kdr_scene *s,
+                      const kdr_ray_batch *b, const results *ref, kdr_query q,
+                      int way, const size_t *sizes);
+
+/* Traces the whole set in calls of 1, 3, 5, 7, 9, 13, 64 rays (cycling),
+ * then in one call, and compares each ray with the single-ray reference. */
 static void check_way(const char *scene, const rayset *rs, const kdr_scene *s,
                       const kdr_ray_batch *b, const results *ref, kdr_query q,
                       int way) {
     static const size_t sizes[] = {1, 3, 5, 7, 9, 13, 64};
+    for (int whole = 0; whole < 2; whole++)
+        check_cut(scene, rs, s, b, ref, q, way, whole ? NULL : sizes);
+}
+
+/* One pass: calls of sizes[] rays (cycling), or one call for all rays
+ * (several chunks: regrouping and the fallback carry across them). */
+static void check_cut(const char *scene, const rayset *rs, const kdr_scene *s,
+                      const kdr_ray_batch *b, const results *ref, kdr_query q,
+                      int way, const size_t *sizes) {
     results got = res_alloc(b->n);
     size_t first = 0;
     for (int c = 0; first < b->n; c = (c + 1) % 7) {
-        size_t cnt = sizes[c] < b->n - first ? sizes[c] : b->n - first;
+        size_t cnt = !sizes ? b->n : sizes[c] < b->n - first ? sizes[c] : b->n - first;
         run_way(s, b, first, cnt, q, way, &got);
         first += cnt;
     }
@@ -408,8 +421,8 @@ static void check_way(const char *scene, const rayset *rs, const kdr_scene *s,
         }
     }
     if (bad)
-        fprintf(stderr, "FAIL %s/%s %s: %d of %zu rays differ\n", scene,
-                rs->name, way_names[way], bad, b->n);
+        fprintf(stderr, "FAIL %s/%s %s%s: %d of %zu rays differ\n", scene,
+                rs->name, way_names[way], sizes ? "" : " (one call)", bad, b->n);
     g_failures += bad;
     res_free(&got);
 }
