@@ -313,6 +313,33 @@ static void test_extreme_rays(void) {
     free(sp.t);
 }
 
+/* A flat scene (every triangle in z = 0): the root box has no thickness,
+ * every triangle is planar in z; rays come from above, below and inside
+ * the plane. */
+static void test_flat_scene(void) {
+    soup sp = {0};
+    soup_random(&sp, 1500, 0.1f, 0.125f);
+    for (size_t i = 0; i < sp.n; i++)
+        for (int v = 0; v < 3; v++)
+            sp.t[9 * i + 3 * v + 2] = 0.0f;
+    kdr_scene *s = build_or_die(&sp);
+    size_t bad = 0;
+    for (int i = 0; i < 4000; i++) {
+        kdr_ray r;
+        random_ray(&r, -0.5f, 1.5f, 0.125f);
+        if (i % 3 == 0) { /* in the plane */
+            r.org[2] = i % 2 ? 0.0f : -0.0f;
+            r.dir[2] = i % 4 ? 0.0f : -0.0f;
+            if (r.dir[0] == 0 && r.dir[1] == 0)
+                r.dir[0] = 1.0f;
+        }
+        bad += !compare_ray(s, &r);
+    }
+    CHECK(bad == 0);
+    kdr_scene_free(s);
+    free(sp.t);
+}
+
 static void expect_miss(const kdr_scene *s, const kdr_ray *r) {
     kdr_hit h;
     CHECK(kdr_intersect1(s, r, &h, NULL) == 0);
@@ -443,6 +470,7 @@ int main(void) {
         test_box_grid();
         test_huge_offsets();
         test_extreme_rays();
+        test_flat_scene();
     }
     if (g_failures)
         fprintf(stderr, "test_core: %d failures\n", g_failures);
