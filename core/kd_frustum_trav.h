@@ -120,6 +120,16 @@ static inline int kf_popcount(int bits) {
            (int)((0x4332322132212110ull >> (4 * ((bits >> 4) & 15))) & 15);
 }
 
+/* a == b on int32 lanes carried in float vectors */
+KF_FN VF kf_ieq(VF a, VF b) {
+#if KB_W == 8
+    return _mm256_castsi256_ps(
+        _mm256_cmpeq_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)));
+#else
+    return _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_castps_si128(a), _mm_castps_si128(b)));
+#endif
+}
+
 /* a < b on int32 lanes carried in float vectors */
 KF_FN VF kf_ilt(VF a, VF b) {
 #if KB_W == 8
@@ -193,15 +203,25 @@ KF_FN void kf_group_init(kf_ctx *c, kf_group *g, uint32_t x, uint32_t y,
                          uint32_t x1, uint32_t y1, VF dmin[3], VF dmax[3]) {
     _Alignas(32) float sxa[KB_W], sya[KB_W];
     const size_t W = c->cam->width;
-    g->live = 0;
-    for (int j = 0; j < KB_W; j++) {
-        const uint32_t px = x + (uint32_t)(j % KF_BW), py = y + (uint32_t)(j / KF_BW);
-        const int in = px < x1 && py < y1;
-        const uint32_t cx = px < x1 ? px : x1 - 1, cy = py < y1 ? py : y1 - 1;
-        sxa[j] = c->sx_tab[cx];
-        sya[j] = c->sy_tab[cy];
-        g->pix[j] = in ? (int32_t)((size_t)py * W + px) : -1;
-        g->live |= in << j;
+    if (x + KF_BW <= x1 && y + 2 <= y1) { /* whole block: no clipping */
+        for (int j = 0; j < KB_W; j++) {
+            const uint32_t px = x + (uint32_t)(j % KF_BW), py = y + (uint32_t)(j / KF_BW);
+            sxa[j] = c->sx_tab[px];
+            sya[j] = c->sy_tab[py];
+            g->pix[j] = (int32_t)((size_t)py * W + px);
+        }
+        g->live = KF_FULL;
+    } else {
+        g->live = 0;
+        for (int j = 0; j < KB_W; j++) {
+            const uint32_t px = x + (uint32_t)(j % KF_BW), py = y + (uint32_t)(j / KF_BW);
+            const int in = px < x1 && py < y1;
+            const uint32_t cx = px < x1 ? px : x1 - 1, cy = py < y1 ? py : y1 - 1;
+            sxa[j] = c->sx_tab[cx];
+            sya[j] = c->sy_tab[cy];
+            g->pix[j] = in ? (int32_t)((size_t)py * W + px) : -1;
+            g->live |= in << j;
+        }
     }
     const VF sx = V(load)(sxa), sy = V(load)(sya);
     VF d[3];
@@ -529,11 +549,38 @@ KF_FN void kf_traverse(kf_ctx *c) {
 
 /* ---- output ----------------------------------------------------------------- */
 
+/* Stores the two rows of a whole block: lanes [0, KF_BW) at dst + p0,
+ * lanes [KF_BW, KB_W) at dst + p1. */
+KF_FN void kf_store_rows(float *dst, int32_t p0, int32_t p1, VF v) {
+#if KB_W == 8
+    _mm_storeu_ps(dst + p0, _mm256_castps256_ps128(v));
+    _mm_storeu_ps(dst + p1, _mm256_extractf128_ps(v, 1));
+#else
+    _mm_storel_pi((__m64 *)(void *)(dst + p0), v);
+    _mm_storeh_pi((__m64 *)(void *)(dst + p1), v);
+#endif
+}
+
+/* Closest-hit results of a whole block, a vector at a time. */
+KF_FN void kf_write_block(const kf_group *g, kdr_hits *out) {
+    const VF prim = V(load)((const float *)g->prim);
+    const VF nohit = kf_ieq(prim, V(seti)(KF_NO_PRIM));
+    const int32_t p0 = g->pix[0], p1 = g->pix[KF_BW];
+    kf_store_rows(out->t, p0, p1, V(sel)(nohit, V(set1)(-1.0f), V(load)(g->t)));
+    kf_store_rows((float *)out->prim, p0, p1, V(sel)(nohit, V(seti)(-1), prim));
+    kf_store_rows(out->u, p0, p1, V(andnot)(nohit, V(load)(g->u)));
+    kf_store_rows(out->v, p0, p1, V(andnot)(nohit, V(load)(g->v)));
+}
+
 KF_FN void kf_write(const kf_ctx *c, kdr_hits *out) {
     for (int l = 0; l < c->nlanes; l++) {
         const kf_tile *ft = &c->ft[l];
         for (size_t k = 0; k < ft->ng; k++) {
             const kf_group *g = &c->groups[ft->g0 + k];
+            if (c->q == KDR_CLOSEST && g->pix[KB_W - 1] >= 0) { /* whole block */
+                kf_write_block(g, out);
+                continue;
+            }
             for (int j = 0; j < KB_W; j++) {
                 const int32_t i = g->pix[j];
                 const int hit = g->prim[j] != KF_NO_PRIM;
