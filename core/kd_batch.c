@@ -7,6 +7,7 @@
  */
 #include <math.h>
 #include <stddef.h>
+#include <string.h>
 
 #include "kd_internal.h"
 #include "kd_traverse.h"
@@ -69,7 +70,9 @@ static uint32_t dir_key(const float *d) {
     return oct << 8 | m;
 }
 
-#define KEY_PASS 6 /* keys have 11 bits: two counting-sort passes */
+/* Keys: origin run (8 bits) above the direction key (11 bits): three
+ * counting-sort passes of 7 bits. */
+#define KEY_PASS 7
 
 /* One stable counting-sort pass of ids by bits [shift, shift+KEY_PASS). */
 static void sort_pass(const uint32_t *key, const size_t *in, size_t *out,
@@ -117,12 +120,21 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
         ids[i] = first + i;
     if (!sort || count <= 8 || order_spread(b, first, count) < KB_SORT_SPREAD)
         return;
-    uint32_t key[KB_CHUNK];
+    /* rays never leave their run of equal origins (hemisphere rays of one
+     * surface point stay one shared-origin group); the direction orders
+     * them within it */
+    uint32_t key[KB_CHUNK], run = 0;
     size_t tmp[KB_CHUNK];
-    for (size_t i = 0; i < count; i++)
-        key[i] = dir_key(b->dir + 3 * (first + i));
+    for (size_t i = 0; i < count; i++) {
+        const float *o = b->org + b->org_stride * (first + i);
+        if (i > 0 && memcmp(o, o - b->org_stride, 3 * sizeof(float)) != 0)
+            run++;
+        key[i] = (run > 255 ? 255 : run) << 11 | dir_key(b->dir + 3 * (first + i));
+    }
     sort_pass(key, ids, tmp, count, first, 0);
     sort_pass(key, tmp, ids, count, first, KEY_PASS);
+    sort_pass(key, ids, tmp, count, first, 2 * KEY_PASS);
+    memcpy(ids, tmp, count * sizeof *ids);
 }
 
 static int batch_args_ok(const kdr_ray_batch *b, size_t first, size_t count,
