@@ -50,7 +50,7 @@ typedef struct bench_scene {
     const float *tris;
     size_t ntris;
     const kdr_scene *kd;
-    double kd_build_ms; /* wall time of kdr_scene_build */
+    double kd_build_ms; /* CPU time of kdr_scene_build */
 } bench_scene;
 
 typedef int (*bench_section_fn)(const bench_scene *scene,
@@ -67,7 +67,12 @@ int bench_main(int argc, char **argv, const bench_section *sections,
 
 /* ---- timing ---------------------------------------------------------------- */
 
+/* Wall-clock ms. */
 double bench_now_ms(void);
+/* CPU ms of the whole process (all threads). Speeds and build times use
+ * this clock: on a machine shared with other jobs, wall time measures the
+ * neighbours, while kdray and Embree (threads=1) both run on one thread. */
+double bench_cpu_ms(void);
 
 /* ---- rays -------------------------------------------------------------------- */
 

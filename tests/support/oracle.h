@@ -39,6 +39,9 @@ void oracle_free(oracle *o);
 
 /* Wall-clock milliseconds of rtcCommitScene (the BVH build alone). */
 double oracle_build_ms(const oracle *o);
+/* Process CPU milliseconds of the same call (robust on a busy machine when
+ * the device runs one thread). */
+double oracle_build_cpu_ms(const oracle *o);
 /* Bytes Embree allocated for the scene (buffers + BVH), from its device
  * memory monitor; includes the copy of the triangles. */
 int64_t oracle_bytes(const oracle *o);
