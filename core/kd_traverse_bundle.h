@@ -77,7 +77,7 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
 void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
                     int sort, size_t *ids);
 
-/* Driver flags (the `adaptive` argument of kd_bundle*_trace). */
+/* Driver flags (the `flags` argument of kd_bundle*_trace). */
 #define KB_FALLBACK 1 /* incoherent stretches go ray by ray */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 
@@ -169,6 +169,8 @@ KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
         if (st->any) {
             st->live = V(andnot)(hit, st->live);
             act = V(andnot)(hit, act);
+            if (!V(bits)(act))
+                break;
             continue;
         }
         VF better = V(lt)(t, st->best_t);
