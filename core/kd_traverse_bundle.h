@@ -157,7 +157,7 @@ KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
                     KB(bundle) *b) {
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
-    const int nact = kd_lane_count(V(bits)(act));
+    int nact = kd_lane_count(V(bits)(act));
     for (uint32_t r = 0; r < cnt; r++) {
         const int32_t prim = (int32_t)refs[r];
         VF t, Vv, W, det;
@@ -169,7 +169,7 @@ KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
         if (st->any) {
             st->live = V(andnot)(hit, st->live);
             act = V(andnot)(hit, act);
-            if (!V(bits)(act))
+            if (!(nact = kd_lane_count(V(bits)(act))))
                 break;
             continue;
         }
