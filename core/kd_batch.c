@@ -13,10 +13,9 @@
 #include "kd_traverse.h"
 #include "kd_traverse_bundle.h"
 
-int kdr_cpu_has_avx2(void) {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") ? 1 : 0;
-}
+/* libgcc's constructor has run the CPU detection before main; calling
+ * __builtin_cpu_init here again would race between threads. */
+int kdr_cpu_has_avx2(void) { return __builtin_cpu_supports("avx2") ? 1 : 0; }
 
 /* Ray i with stride-0 fields shared; absent tmin/tmax mean 0 / +inf. */
 static void batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
