@@ -36,6 +36,12 @@ add_executable(test_accuracy ${CMAKE_CURRENT_SOURCE_DIR}/test_accuracy.c)
 target_link_libraries(test_accuracy PRIVATE kdray_testsupport)
 add_executable(kdray_accuracy_report ${CMAKE_CURRENT_SOURCE_DIR}/test_accuracy_report.c)
 target_link_libraries(kdray_accuracy_report PRIVATE kdray_testsupport)
-foreach(kind frustum_multi4 frustum_single cone_shadow)
+foreach(kind bundle4 bundle8 frustum_multi4 frustum_single cone_shadow)
   add_test(NAME accuracy_${kind} COMMAND test_accuracy ${kind})
 endforeach()
+# Single rays: kdr_intersect1/kdr_occluded1 vs Embree and vs brute force bit
+# for bit. DISABLED while the core bugs listed in docs/ACCURACY.md ("Known
+# problems found") are open; run by hand: test_embree stress, test_accuracy single.
+add_test(NAME accuracy_single COMMAND test_accuracy single)
+add_test(NAME embree_stress COMMAND test_embree stress)
+set_tests_properties(accuracy_single embree_stress PROPERTIES DISABLED TRUE)

@@ -42,16 +42,19 @@ void acc_judge(const stress_scene *s, const kdr_scene *kd, const oracle *o,
     const cmp_class c = cmp_closest(s->tris, s->ntris, r, kd_closest, &em, &e);
     cmp_tally_add(&res->closest, r, c, e, em_hit);
     const int em_any = oracle_occluded1(o, r);
-    cmp_tally_add(&res->any, r,
-                  cmp_occluded(s->tris, s->ntris, r, kd_any, em_any, kd_closest,
-                               &em),
-                  0.0, em_any);
+    const cmp_class ca = cmp_occluded(s->tris, s->ntris, r, kd_any, em_any,
+                                      kd_closest, &em);
+    cmp_tally_add(&res->any, r, ca, 0.0, em_any);
+    int differs = 1;
     if (check_single) {
         kdr_hit h;
         kdr_intersect1(kd, r, &h, NULL);
-        res->not_single += !hit_same(&h, kd_closest) ||
-                           kdr_occluded1(kd, r, NULL) != kd_any;
+        differs = !hit_same(&h, kd_closest) ||
+                  kdr_occluded1(kd, r, NULL) != kd_any;
+        res->not_single += differs;
     }
+    if (differs && (cmp_is_unexplained(c) || cmp_is_unexplained(ca)))
+        res->own_unexplained++;
 }
 
 /* ---- single rays ---------------------------------------------------------- */
@@ -231,8 +234,8 @@ int acc_run(acc_kind k, const acc_opts *opt, acc_result *res) {
 }
 
 uint64_t acc_failures(const acc_result *r) {
-    return cmp_tally_unexplained(&r->closest) + cmp_tally_unexplained(&r->any) +
-           r->not_single + r->inside_miss + r->errors + r->vis_mismatch;
+    return r->own_unexplained + r->not_single + r->inside_miss + r->errors +
+           r->vis_mismatch;
 }
 
 /* ---- printing -------------------------------------------------------------------- */

@@ -29,6 +29,10 @@ typedef struct acc_result {
     cmp_tally any;         /* vs Embree; for cones: every shadow sample */
     uint64_t not_single;   /* answers not bit-identical to kdr_intersect1 /
                               kdr_occluded1 on the same ray */
+    uint64_t own_unexplained; /* unexplained vs Embree and not inherited
+                                 from the single-ray answer (bundles and
+                                 frusta equal to single rays inherit its
+                                 disagreements: accuracy_single owns them) */
     uint64_t inside, inside_miss; /* watertightness probes and failures */
     uint64_t errors;       /* API calls that returned an error */
     /* cones: (point, light) pairs, pairs whose visibility differs from the
@@ -52,7 +56,9 @@ const char *acc_kind_name(acc_kind k);
  * -1 if a scene could not be built (not a disagreement). */
 int acc_run(acc_kind k, const acc_opts *o, acc_result *res);
 
-/* Everything that must be zero. */
+/* Everything that must be zero for this kind: its own unexplained
+ * disagreements, answers differing from single rays, watertightness
+ * failures, API errors, cone visibility mismatches. */
 uint64_t acc_failures(const acc_result *r);
 
 void acc_print_header(FILE *f);
