@@ -3,9 +3,11 @@
  * this shim flattens the default scene into world-space triangles behind the
  * C API of kdr_gltf.h.
  *
- * tinygltf trusts the file's numbers, so every index, offset, stride and
- * count it hands back is checked here before a byte is read (sizes are
- * compared by subtraction so no sum can overflow). The flattening runs in
+ * The JSON is type-checked first (gltf_schema.c), because tinygltf skips
+ * properties of the wrong type instead of failing. tinygltf also trusts the
+ * file's numbers, so every index, offset, stride and count it hands back is
+ * checked here before a byte is read (sizes are compared by subtraction so
+ * no sum can overflow). The flattening runs in
  * two passes: the first walks the node tree, validates every primitive and
  * counts triangles (so the 2^30 limit is enforced before allocating), the
  * second decodes positions, applies the node's world matrix in double
@@ -31,6 +33,7 @@
 
 #include <unistd.h>
 
+#include "gltf_schema.h"
 #include "kdr_gltf.h"
 
 namespace {
@@ -42,15 +45,12 @@ constexpr int kMaxNodeDepth = 1024;
 /* tinygltf takes 32-bit lengths, and GLB caps files at 4 GiB. */
 constexpr size_t kMaxFileBytes = 0xFFFFFFF0u;
 
-/* glTF itself nests about 6 deep; extras may nest more, but not this much. */
-constexpr int kMaxJsonDepth = 256;
-
 /* The triangle array may use at most this fraction of physical memory: an
  * instancing bomb must fail with a message, not wake the OOM killer. */
 constexpr double kMaxMemoryFraction = 0.5;
 
-/* Extensions that change where positions live; if a file requires one of
- * them, the plain accessors are not the geometry. */
+/* Required extensions that move positions out of plain accessors (also
+ * refused by the JSON check; repeated here for files it could not read). */
 const char *const kUnsupportedExtensions[] = {
     "KHR_draco_mesh_compression",
     "EXT_meshopt_compression",
@@ -392,205 +392,6 @@ std::string one_line(std::string s) {
     return s;
 }
 
-/* ---- schema check --------------------------------------------------------
- * tinygltf silently skips a property of the wrong JSON type, which would
- * turn a broken file into a quietly different scene. So the JSON is first
- * checked against the types of the glTF 2.0 schema for every property we or
- * tinygltf read; unknown properties are allowed, as the spec says. */
-
-enum Kind { K_STR, K_NUM, K_UINT, K_BOOL, K_OBJ, K_ARR_NUM, K_ARR_UINT, K_ARR_STR, K_ARR_OBJ,
-            K_MAP_UINT };
-
-struct Field {
-    const char *name;
-    Kind kind;
-    const Field *sub; /* element schema of K_OBJ / K_ARR_OBJ (may be null) */
-};
-
-const Field kNone[] = {{nullptr, K_STR, nullptr}};
-const Field kAsset[] = {{"version", K_STR, nullptr}, {"generator", K_STR, nullptr},
-                        {"minVersion", K_STR, nullptr}, {"copyright", K_STR, nullptr},
-                        {nullptr, K_STR, nullptr}};
-const Field kScene[] = {{"nodes", K_ARR_UINT, nullptr}, {nullptr, K_STR, nullptr}};
-const Field kNode[] = {{"children", K_ARR_UINT, nullptr}, {"mesh", K_UINT, nullptr},
-                       {"camera", K_UINT, nullptr},       {"skin", K_UINT, nullptr},
-                       {"matrix", K_ARR_NUM, nullptr},    {"rotation", K_ARR_NUM, nullptr},
-                       {"scale", K_ARR_NUM, nullptr},     {"translation", K_ARR_NUM, nullptr},
-                       {"weights", K_ARR_NUM, nullptr},   {nullptr, K_STR, nullptr}};
-const Field kTarget[] = {{nullptr, K_STR, nullptr}};
-const Field kPrimitive[] = {{"attributes", K_MAP_UINT, nullptr}, {"indices", K_UINT, nullptr},
-                            {"material", K_UINT, nullptr},      {"mode", K_UINT, nullptr},
-                            {"targets", K_ARR_OBJ, kTarget},    {nullptr, K_STR, nullptr}};
-const Field kMesh[] = {{"primitives", K_ARR_OBJ, kPrimitive}, {"weights", K_ARR_NUM, nullptr},
-                       {nullptr, K_STR, nullptr}};
-const Field kSparsePart[] = {{"bufferView", K_UINT, nullptr}, {"byteOffset", K_UINT, nullptr},
-                             {"componentType", K_UINT, nullptr}, {nullptr, K_STR, nullptr}};
-const Field kSparse[] = {{"count", K_UINT, nullptr}, {"indices", K_OBJ, kSparsePart},
-                         {"values", K_OBJ, kSparsePart}, {nullptr, K_STR, nullptr}};
-const Field kAccessor[] = {
-    {"bufferView", K_UINT, nullptr}, {"byteOffset", K_UINT, nullptr},
-    {"componentType", K_UINT, nullptr}, {"normalized", K_BOOL, nullptr},
-    {"count", K_UINT, nullptr}, {"type", K_STR, nullptr}, {"max", K_ARR_NUM, nullptr},
-    {"min", K_ARR_NUM, nullptr}, {"sparse", K_OBJ, kSparse}, {nullptr, K_STR, nullptr}};
-const Field kBufferView[] = {{"buffer", K_UINT, nullptr},     {"byteOffset", K_UINT, nullptr},
-                             {"byteLength", K_UINT, nullptr}, {"byteStride", K_UINT, nullptr},
-                             {"target", K_UINT, nullptr},     {nullptr, K_STR, nullptr}};
-const Field kBuffer[] = {{"uri", K_STR, nullptr}, {"byteLength", K_UINT, nullptr},
-                         {nullptr, K_STR, nullptr}};
-const Field kTexInfo[] = {{"index", K_UINT, nullptr}, {"texCoord", K_UINT, nullptr},
-                          {"scale", K_NUM, nullptr},  {"strength", K_NUM, nullptr},
-                          {nullptr, K_STR, nullptr}};
-const Field kPbr[] = {{"baseColorFactor", K_ARR_NUM, nullptr},
-                      {"baseColorTexture", K_OBJ, kTexInfo},
-                      {"metallicFactor", K_NUM, nullptr},
-                      {"roughnessFactor", K_NUM, nullptr},
-                      {"metallicRoughnessTexture", K_OBJ, kTexInfo},
-                      {nullptr, K_STR, nullptr}};
-const Field kMaterial[] = {
-    {"pbrMetallicRoughness", K_OBJ, kPbr}, {"normalTexture", K_OBJ, kTexInfo},
-    {"occlusionTexture", K_OBJ, kTexInfo}, {"emissiveTexture", K_OBJ, kTexInfo},
-    {"emissiveFactor", K_ARR_NUM, nullptr}, {"alphaMode", K_STR, nullptr},
-    {"alphaCutoff", K_NUM, nullptr},       {"doubleSided", K_BOOL, nullptr},
-    {nullptr, K_STR, nullptr}};
-const Field kTexture[] = {{"sampler", K_UINT, nullptr}, {"source", K_UINT, nullptr},
-                          {nullptr, K_STR, nullptr}};
-const Field kImage[] = {{"uri", K_STR, nullptr}, {"mimeType", K_STR, nullptr},
-                        {"bufferView", K_UINT, nullptr}, {nullptr, K_STR, nullptr}};
-const Field kSampler[] = {{"magFilter", K_UINT, nullptr}, {"minFilter", K_UINT, nullptr},
-                          {"wrapS", K_UINT, nullptr},     {"wrapT", K_UINT, nullptr},
-                          {nullptr, K_STR, nullptr}};
-const Field kSkin[] = {{"inverseBindMatrices", K_UINT, nullptr},
-                       {"skeleton", K_UINT, nullptr},
-                       {"joints", K_ARR_UINT, nullptr},
-                       {nullptr, K_STR, nullptr}};
-const Field kCamera[] = {{"type", K_STR, nullptr}, {"perspective", K_OBJ, kNone},
-                         {"orthographic", K_OBJ, kNone}, {nullptr, K_STR, nullptr}};
-const Field kAnimation[] = {{"channels", K_ARR_OBJ, kNone}, {"samplers", K_ARR_OBJ, kNone},
-                            {nullptr, K_STR, nullptr}};
-const Field kRoot[] = {
-    {"asset", K_OBJ, kAsset},           {"scene", K_UINT, nullptr},
-    {"scenes", K_ARR_OBJ, kScene},      {"nodes", K_ARR_OBJ, kNode},
-    {"meshes", K_ARR_OBJ, kMesh},       {"accessors", K_ARR_OBJ, kAccessor},
-    {"bufferViews", K_ARR_OBJ, kBufferView}, {"buffers", K_ARR_OBJ, kBuffer},
-    {"materials", K_ARR_OBJ, kMaterial}, {"textures", K_ARR_OBJ, kTexture},
-    {"images", K_ARR_OBJ, kImage},      {"samplers", K_ARR_OBJ, kSampler},
-    {"skins", K_ARR_OBJ, kSkin},        {"cameras", K_ARR_OBJ, kCamera},
-    {"animations", K_ARR_OBJ, kAnimation}, {"extensionsUsed", K_ARR_STR, nullptr},
-    {"extensionsRequired", K_ARR_STR, nullptr}, {nullptr, K_STR, nullptr}};
-
-using nlohmann::json;
-
-bool is_uint(const json &v) {
-    if (v.is_number_unsigned()) return true;
-    if (v.is_number_integer()) return v.get<int64_t>() >= 0;
-    if (!v.is_number_float()) return false;
-    double d = v.get<double>();
-    return d >= 0 && d <= 4294967295.0 && d == std::floor(d);
-}
-
-bool all_of(const json &v, bool (*ok)(const json &)) {
-    if (!v.is_array()) return false;
-    for (const json &e : v)
-        if (!ok(e)) return false;
-    return true;
-}
-
-bool is_num(const json &v) { return v.is_number(); }
-bool is_str(const json &v) { return v.is_string(); }
-bool is_obj(const json &v) { return v.is_object(); }
-
-void check_object(const json &o, const Field *schema, const std::string &path);
-
-void check_field(const json &v, const Field &f, const std::string &path) {
-    static const char *const expect[] = {
-        "a string", "a number", "a non-negative integer", "a boolean", "an object",
-        "an array of numbers", "an array of non-negative integers", "an array of strings",
-        "an array of objects", "an object of non-negative integers"};
-    bool ok = true;
-    switch (f.kind) {
-    case K_STR: ok = v.is_string(); break;
-    case K_NUM: ok = v.is_number(); break;
-    case K_UINT: ok = is_uint(v); break;
-    case K_BOOL: ok = v.is_boolean(); break;
-    case K_OBJ: ok = v.is_object(); break;
-    case K_ARR_NUM: ok = all_of(v, is_num); break;
-    case K_ARR_UINT: ok = all_of(v, is_uint); break;
-    case K_ARR_STR: ok = all_of(v, is_str); break;
-    case K_ARR_OBJ: ok = all_of(v, is_obj); break;
-    case K_MAP_UINT:
-        ok = v.is_object();
-        for (auto it = v.begin(); ok && it != v.end(); ++it) ok = is_uint(*it);
-        break;
-    }
-    if (!ok) fail("schema: %s is not %s", path.c_str(), expect[f.kind]);
-    if (f.kind == K_OBJ && f.sub) check_object(v, f.sub, path);
-    if (f.kind == K_ARR_OBJ && f.sub)
-        for (size_t i = 0; i < v.size(); i++)
-            check_object(v[i], f.sub, path + "[" + std::to_string(i) + "]");
-}
-
-void check_object(const json &o, const Field *schema, const std::string &path) {
-    for (auto it = o.begin(); it != o.end(); ++it) {
-        const std::string &key = it.key();
-        std::string sub = path.empty() ? key : path + "." + key;
-        if (key == "name") {
-            check_field(*it, Field{"name", K_STR, nullptr}, sub);
-        } else if (key == "extensions") {
-            check_field(*it, Field{"extensions", K_OBJ, nullptr}, sub);
-            for (auto e = it->begin(); e != it->end(); ++e)
-                if (!e->is_object()) fail("schema: %s.%s is not an object", sub.c_str(),
-                                          e.key().c_str());
-        } else {
-            for (const Field *f = schema; f->name; f++)
-                if (key == f->name) check_field(*it, *f, sub);
-        }
-    }
-}
-
-/* nlohmann parses any depth, but tinygltf converts `extras` recursively and
- * a deep enough nesting would overflow the stack: refuse it first. */
-void check_nesting(const std::string &text) {
-    int depth = 0;
-    bool in_string = false, escaped = false;
-    for (char c : text) {
-        if (in_string) {
-            if (escaped) escaped = false;
-            else if (c == '\\') escaped = true;
-            else if (c == '"') in_string = false;
-        } else if (c == '"') {
-            in_string = true;
-        } else if (c == '[' || c == '{') {
-            if (++depth > kMaxJsonDepth) fail("JSON nested deeper than %d levels", kMaxJsonDepth);
-        } else if (c == ']' || c == '}') {
-            depth--;
-        }
-    }
-}
-
-void check_schema(const std::string &text) {
-    check_nesting(text);
-    json root;
-    try {
-        root = json::parse(text);
-    } catch (const json::exception &e) {
-        fail("invalid JSON: %s", e.what());
-    }
-    if (!root.is_object()) fail("schema: the top level is not an object");
-    auto asset = root.find("asset");
-    if (asset == root.end() || !asset->is_object()) fail("schema: no \"asset\" object");
-    auto ver = asset->find("version");
-    if (ver != asset->end() && ver->is_string() &&
-        ver->get<std::string>().compare(0, 2, "2.") != 0)
-        fail("glTF version \"%s\" is not supported (need 2.x)",
-             ver->get<std::string>().c_str());
-    check_object(root, kRoot, "");
-    auto req = root.find("extensionsRequired");
-    if (req != root.end())
-        for (const json &e : *req)
-            for (const char *u : kUnsupportedExtensions)
-                if (e.get<std::string>() == u) fail("requires extension %s (unsupported)", u);
-}
-
 /* The whole file: tinygltf parses from memory so the file is read once and
  * the JSON can be schema-checked first. */
 std::vector<unsigned char> read_file(const char *path) {
@@ -647,7 +448,10 @@ void parse(const char *path, tinygltf::Model &m) {
     if (is_glb(bytes) && bytes.size() >= 8 && bytes[4] != 2)
         fail("GLB container version %u is not supported (glTF 1.0?), need 2", bytes[4]);
     std::string json = json_text(bytes);
-    if (!json.empty()) check_schema(json);
+    char err_json[512];
+    if (!json.empty() && kdr_gltf_check_json(json.data(), json.size(), err_json,
+                                             sizeof err_json) != 0)
+        fail("%s", err_json);
     tinygltf::TinyGLTF loader;
     loader.SetImageLoader(skip_image, nullptr);
     std::string err, warn, dir = base_dir(path);

@@ -29,7 +29,7 @@ endif()
 
 # libFuzzer target for the loader, with -DKDRAY_FUZZ=ON (the sanitizer pass
 # of scripts/dev test): the project builds with gcc, so clang++ compiles the
-# harness and the shim (tinygltf included) separately, then runs it for a
+# harness and the loader (tinygltf included) separately, then runs it for a
 # bounded time on assimp-testmodels' small glTF 2.0 files.
 find_program(KDRAY_CLANGXX NAMES clang++ clang++-14)
 if(KDRAY_FUZZ AND KDRAY_CLANGXX AND EXISTS /usr/share/assimp/models/glTF2)
@@ -39,9 +39,11 @@ if(KDRAY_FUZZ AND KDRAY_CLANGXX AND EXISTS /usr/share/assimp/models/glTF2)
     COMMAND ${KDRAY_CLANGXX} -g -O1 -fsanitize=fuzzer,address,undefined
             -fno-sanitize-recover=all -ffp-contract=off -I${PROJECT_SOURCE_DIR}/scenes
             -x c ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes_fuzz.c
-            -x c++ ${PROJECT_SOURCE_DIR}/scenes/gltf_shim.cpp
+            ${PROJECT_SOURCE_DIR}/scenes/gltf_schema.c
+            -x c++ ${PROJECT_SOURCE_DIR}/scenes/gltf_shim.cpp -lcjson
             -o ${KDRAY_FUZZ_GLTF_BIN}
     DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes_fuzz.c
+            ${PROJECT_SOURCE_DIR}/scenes/gltf_schema.c ${PROJECT_SOURCE_DIR}/scenes/gltf_schema.h
             ${PROJECT_SOURCE_DIR}/scenes/gltf_shim.cpp ${PROJECT_SOURCE_DIR}/scenes/kdr_gltf.h
     COMMENT "Building the glTF loader fuzzer with clang++"
     VERBATIM)
