@@ -359,11 +359,61 @@ KF_FN void kf_tile_init(kf_ctx *c, int l, size_t k) {
 /* ---- leaves ----------------------------------------------------------------- */
 
 /* Tests triangle prim against the selected lanes of group g. */
-KF_FN void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim) {
+/* A triangle's vertices relative to the eye, broadcast once per leaf for
+ * all groups: r[vertex][axis]. The scalar tri[3v+a] - eye[a] is the very
+ * float kd_tri_intersect computes as tri[..] - org[..]. */
+typedef struct kf_tri_rel {
+    VF r[3][3];
+} kf_tri_rel;
+
+KF_FN void kf_tri_rel_init(const kf_ctx *c, const float *tri, kf_tri_rel *tr) {
+    for (int k = 0; k < 3; k++)
+        for (int a = 0; a < 3; a++)
+            tr->r[k][a] = V(set1)(tri[3 * k + a] - c->b->eye[a]);
+}
+
+/* KB(tri_test) for a uniformly shearing group of rays from the eye, over
+ * [0, +inf]: the same operations from the shear on. */
+KF_FN VF kf_tri_test_eye(const KB(tri_pre) *p, const kf_tri_rel *tr, VF act,
+                         VF *t_out, VF *u_out, VF *v_out) {
+    const VF Ax = tr->r[0][p->kx], Ay = tr->r[0][p->ky], Az0 = tr->r[0][p->kz];
+    const VF Bx = tr->r[1][p->kx], By = tr->r[1][p->ky], Bz0 = tr->r[1][p->kz];
+    const VF Cx = tr->r[2][p->kx], Cy = tr->r[2][p->ky], Cz0 = tr->r[2][p->kz];
+    const VF ax = V(sub)(Ax, V(mul)(p->sx, Az0)), ay = V(sub)(Ay, V(mul)(p->sy, Az0));
+    const VF bx = V(sub)(Bx, V(mul)(p->sx, Bz0)), by = V(sub)(By, V(mul)(p->sy, Bz0));
+    const VF cx = V(sub)(Cx, V(mul)(p->sx, Cz0)), cy = V(sub)(Cy, V(mul)(p->sy, Cz0));
+    VF U = V(sub)(V(mul)(cx, by), V(mul)(cy, bx));
+    VF Vv = V(sub)(V(mul)(ax, cy), V(mul)(ay, cx));
+    VF W = V(sub)(V(mul)(bx, ay), V(mul)(by, ax));
+    const VF zero = V(set1)(0.0f);
+    const VF z = V(or)(V(or)(V(eq)(U, zero), V(eq)(Vv, zero)), V(eq)(W, zero));
+    const int zl = V(bits)(V(and)(z, act));
+    if (zl)
+        KB(tri_exact)(zl, ax, ay, bx, by, cx, cy, &U, &Vv, &W);
+    const VF neg = V(or)(V(or)(V(lt)(U, zero), V(lt)(Vv, zero)), V(lt)(W, zero));
+    const VF pos = V(or)(V(or)(V(gt)(U, zero), V(gt)(Vv, zero)), V(gt)(W, zero));
+    const VF det = V(add)(V(add)(U, Vv), W);
+    VF ok = V(andnot)(V(eq)(det, zero), V(andnot)(V(and)(neg, pos), act));
+    if (!V(bits)(ok))
+        return ok;
+    const VF az = V(mul)(p->sz, Az0), bz = V(mul)(p->sz, Bz0), cz = V(mul)(p->sz, Cz0);
+    const VF T = V(add)(V(add)(V(mul)(U, az), V(mul)(Vv, bz)), V(mul)(W, cz));
+    const VF t = V(div)(T, det);
+    ok = V(and)(ok, V(and)(V(le)(zero, t), V(le)(t, V(set1)(INFINITY))));
+    *t_out = t;
+    *u_out = V(div)(Vv, det);
+    *v_out = V(div)(W, det);
+    return ok;
+}
+
+KF_FN void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim,
+                       const kf_tri_rel *tr) {
     const float *tri = c->s->tris + 9 * (size_t)prim;
-    VF t = V(set1)(0.0f), u = t, v = t; /* set by tri_test on a hit */
-    const VF hit = KB(tri_test)(&g->pre, tri, V(bitmask)(*bits), V(set1)(0.0f),
-                                V(set1)(INFINITY), &t, &u, &v);
+    VF t = V(set1)(0.0f), u = t, v = t; /* set by the test on a hit */
+    const VF hit = g->pre.uniform
+                       ? kf_tri_test_eye(&g->pre, tr, V(bitmask)(*bits), &t, &u, &v)
+                       : KB(tri_test)(&g->pre, tri, V(bitmask)(*bits), V(set1)(0.0f),
+                                      V(set1)(INFINITY), &t, &u, &v);
     c->tri_tests += (uint64_t)kf_popcount(*bits);
     if (!V(bits)(hit))
         return;
@@ -421,10 +471,13 @@ KF_FN void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const float tn[4],
     if (nsel == 0)
         return;
     const uint32_t *refs = c->s->refs + n->u.first;
-    for (uint32_t r = 0; r < cnt; r++)
+    for (uint32_t r = 0; r < cnt; r++) {
+        kf_tri_rel tr;
+        kf_tri_rel_init(c, c->s->tris + 9 * (size_t)refs[r], &tr);
         for (size_t k = 0; k < nsel; k++)
             if (c->selbits[k])
-                kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r]);
+                kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r], &tr);
+    }
     /* a lane's bound can only fall when a group holding it fell */
     int dirty = 0;
     for (size_t k = 0; k < nsel; k++) {
