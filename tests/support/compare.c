@@ -278,9 +278,10 @@ static cmp_class classify_tie(const float *tris, size_t ntris,
                               const kdr_ray *r, const kdr_hit *kd,
                               const kdr_hit *em) {
     const float *p = tri_at(tris, ntris, em->prim);
+    const float *q = tri_at(tris, ntris, kd->prim);
     float t;
-    if (!p)
-        return CMP_WRONG_PRIM;
+    if (!p || !q || !our_test(r, q, r->tmin, r->tmax, &t) || t != kd->t)
+        return CMP_WRONG_PRIM; /* kd's own hit must be real */
     if (!ref_tri_degenerate(p) && our_test(r, p, r->tmin, r->tmax, &t))
         return kd_hit_better(t, em->prim, kd->t, kd->prim) ? CMP_WRONG_PRIM
                                                           : CMP_TIE;
