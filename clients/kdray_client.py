@@ -204,14 +204,10 @@ def _vec(text, n=3):
     return parts
 
 
-def _summary(answer, keys):
-    out = {}
-    for key, value in answer.items():
-        if isinstance(value, list) and key not in keys:
-            out[key] = value[:8] + (["..."] if len(value) > 8 else [])
-        else:
-            out[key] = value
-    return out
+def _summary(answer):
+    """The answer with long arrays cut to their first 8 entries."""
+    return {key: value[:8] + ["..."] if isinstance(value, list) and len(value) > 8
+            else value for key, value in answer.items()}
 
 
 def _cmd_bundle(client, args):
@@ -297,7 +293,7 @@ def main(argv=None):
         print("kdray_client: %s: %s" % (args.url, err), file=sys.stderr)
         return 1
     if not args.full and isinstance(answer, dict):
-        answer = _summary(answer, ())
+        answer = _summary(answer)
     print(json.dumps(answer, indent=1))
     return 0
 

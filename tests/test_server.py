@@ -83,6 +83,7 @@ def test_health_and_scenes(t, c, d):
     t.eq(first, s["triangles"], "mesh ranges cover every triangle")
     t.check(all(a <= b for a, b in zip(s["bounds"]["min"], s["bounds"]["max"])),
             "bounds")
+    t.check(d.wait_log("ready:"), "ready is logged")
     log = d.log_text()
     t.check(log.index("listening on") < log.index("ready:"),
             "the port opens before the scenes are built")
@@ -304,6 +305,53 @@ def test_bad_requests(t, c, d):
                    "zero samples")
 
 
+def mutations(body, n, seed):
+    """n corrupted copies of body: flipped, deleted, duplicated and inserted
+    bytes, cut tails, and JSON-ish tokens dropped into random places."""
+    rng = lib.random.Random(seed)
+    tokens = [b"NaN", b"-", b"1e999", b"null", b"{", b"]", b'"', b"\\u0000", b"\xff",
+              b"-0", b"0x10", b"[[[[", b'{"f32": "AAAA"}', b",", b"1e-50"]
+    for _ in range(n):
+        b = bytearray(body)
+        for _ in range(rng.randint(1, 4)):
+            i = rng.randrange(len(b) + 1)
+            op = rng.randrange(5)
+            if op == 0 and i < len(b):
+                b[i] = rng.randrange(256)
+            elif op == 1:
+                del b[i:i + rng.randint(1, 8)]
+            elif op == 2:
+                b[i:i] = b[i:i + rng.randint(1, 16)]
+            elif op == 3:
+                b[i:i] = rng.choice(tokens)
+            else:
+                del b[i:]
+        yield bytes(b)
+
+
+def test_mutated_bodies(t, c, d):
+    bounds = c.scene(SCENE)["bounds"]
+    seeds = [
+        ("bundle", bundle_payload(bounds, 5, 9)),
+        ("bundle", {"origins": f32_b64([0, 0, 9]), "directions": f32_b64([0, 0, -1] * 4),
+                    "tmax": [5, 6, 7, 8], "query": "any", "encoding": "base64"}),
+        ("cone-shadow", shadow_payload(bounds, 3, 2)),
+        ("frustum", camera_payload(bounds, 9, 7, 4, encoding="json")),
+    ]
+    statuses = {}
+    for k, (kind, payload) in enumerate(seeds):
+        path = "/v1/scenes/%s/%s" % (SCENE, kind)
+        for body in mutations(json.dumps(payload).encode(), 60, k):
+            code, headers, data = post(c, path, body)
+            statuses[code] = statuses.get(code, 0) + 1
+            if code != 200:
+                expect_problem(t, (code, headers, data), code, "mutated %s" % kind)
+            t.check(code in (200, 400, 413), "mutated %s: status %d for %r: %r"
+                    % (kind, code, body[:200], data[:200]))
+    t.check(statuses.get(400, 0) > 0, "mutations do produce 400s: %r" % statuses)
+    t.eq(c.health()["status"], "ok", "daemon alive after mutated bodies")
+
+
 def test_routing_errors(t, c, d):
     expect_problem(t, post(c, bundle_path("nosuch"), {}), 404, "unknown scene")
     expect_problem(t, c.request("GET", "/v1/scenes/nosuch"), 404, "unknown scene GET")
@@ -367,7 +415,9 @@ def test_concurrent_clients(t, c, d):
     payloads = [bundle_payload(bounds, n, 100 + i, "closest" if i % 2 else "any")
                 for i, n in enumerate(sizes)]
     payloads.append(camera_payload(bounds, 33, 17, 4))
-    paths = [bundle_path()] * len(sizes) + ["/v1/scenes/%s/frustum" % SCENE]
+    payloads.append(shadow_payload(bounds, 70, 4))
+    paths = [bundle_path()] * len(sizes) + ["/v1/scenes/%s/frustum" % SCENE,
+                                            "/v1/scenes/%s/cone-shadow" % SCENE]
     want = [post(c, p, b) for p, b in zip(paths, payloads)]  # one at a time
     errors = []
 
@@ -523,7 +573,8 @@ def main():
     try:
         for fn in (test_health_and_scenes, test_metrics, test_bundle_equals_core,
                    test_bundle_base64_and_any, test_shadow_equals_core,
-                   test_frustum_equals_core, test_bad_requests, test_routing_errors,
+                   test_frustum_equals_core, test_bad_requests, test_mutated_bodies,
+                   test_routing_errors,
                    test_broken_connections, test_concurrent_clients, test_client_cli):
             t.run(fn, c, d)
     finally:

@@ -58,6 +58,16 @@ class Daemon:
     def log_text(self):
         return "\n".join(self.log)
 
+    def wait_log(self, text, timeout=30.0):
+        """True once a log line contains text (the log is read by another
+        thread, so a line may trail the HTTP state it describes)."""
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            if any(text in line for line in self.log):
+                return True
+            time.sleep(0.01)
+        return False
+
     def wait_healthy(self):
         from kdray_client import Client
         client = Client(self.url, timeout=10)
