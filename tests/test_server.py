@@ -487,7 +487,9 @@ def test_limits(t):
                        "110 pixels over --max-rays 100")
         t.eq(c.health()["status"], "ok", "alive after limits")
     finally:
-        t.eq(d.stop(), 0, "exit status after SIGTERM")
+        d.signal(lib.signal.SIGINT)
+        t.eq(d.wait(), 0, "exit status after SIGINT")
+        t.check("received SIGINT" in d.log_text(), "SIGINT logged")
 
 
 def test_sigterm_in_flight(t):
