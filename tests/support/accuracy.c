@@ -252,6 +252,10 @@ void acc_print_header(FILE *f) {
             "--------", "-----------");
 }
 
+static uint64_t boundary_count(const cmp_tally *t) {
+    return t->n[CMP_BOUNDARY] + t->n[CMP_INTERVAL_END] + t->n[CMP_PARALLEL];
+}
+
 void acc_print_row(FILE *f, acc_kind k, const acc_result *r) {
     const cmp_tally *c = k == ACC_CONE ? &r->any : &r->closest;
     char inside[32];
@@ -261,8 +265,8 @@ void acc_print_row(FILE *f, acc_kind k, const acc_result *r) {
                "%10llu | %10llu | %13s | %6llu | %9llu |\n",
             acc_kind_name(k), (unsigned long long)c->rays,
             (unsigned long long)c->n[CMP_TIE],
-            (unsigned long long)(r->closest.n[CMP_BOUNDARY] +
-                                 r->any.n[CMP_BOUNDARY]),
+            (unsigned long long)(boundary_count(&r->closest) +
+                                 boundary_count(&r->any)),
             (unsigned long long)c->n[CMP_ILL_COND], c->max_t_err,
             (unsigned long long)cmp_tally_unexplained(&r->closest),
             (unsigned long long)cmp_tally_unexplained(&r->any),

@@ -28,7 +28,7 @@
 #define T_COND_ULPS 16.0
 
 static const char *const class_names[CMP_NCLASSES] = {
-    "agree", "tie", "boundary", "ill_cond", "kd_miss", "kd_extra", "wrong_prim", "t_error",
+    "agree", "tie", "edge", "interval_end", "parallel", "ill_cond", "kd_miss", "kd_extra", "wrong_prim", "t_error",
 };
 
 const char *cmp_class_name(cmp_class c) {
@@ -37,7 +37,7 @@ const char *cmp_class_name(cmp_class c) {
 
 int cmp_is_unexplained(cmp_class c) {
     return c != CMP_AGREE && c != CMP_TIE && c != CMP_BOUNDARY &&
-           c != CMP_ILL_COND;
+           c != CMP_INTERVAL_END && c != CMP_PARALLEL && c != CMP_ILL_COND;
 }
 
 /* ---- brute-force reference ------------------------------------------------ */
@@ -155,16 +155,25 @@ static void view_triangle(const kdr_ray *r, const float *tri, tri_view *out) {
     out->margin = lo;
 }
 
-/* The hit on tri is decided by rounding: the ray grazes an edge, lies in
- * the triangle's plane, or the exact t sits within rounding of an end of
- * [tmin, tmax]. */
-static int on_boundary(const kdr_ray *r, const float *tri) {
+/* Why a hit on tri is decided by rounding, as a class: the ray lies in the
+ * triangle's plane (CMP_PARALLEL), grazes an edge or vertex
+ * (CMP_BOUNDARY), or the exact t sits within rounding of an end of
+ * [tmin, tmax] (CMP_INTERVAL_END); CMP_NCLASSES if none of these. */
+static cmp_class boundary_reason(const kdr_ray *r, const float *tri) {
     tri_view v;
     view_triangle(r, tri, &v);
-    if (v.parallel || fabs(v.margin) <= v.tol)
-        return 1;
-    return fabs(v.t - r->tmin) <= v.t_bound ||
-           (isfinite(r->tmax) && fabs(v.t - r->tmax) <= v.t_bound);
+    if (v.parallel)
+        return CMP_PARALLEL;
+    if (fabs(v.margin) <= v.tol)
+        return CMP_BOUNDARY;
+    if (fabs(v.t - r->tmin) <= v.t_bound ||
+        (isfinite(r->tmax) && fabs(v.t - r->tmax) <= v.t_bound))
+        return CMP_INTERVAL_END;
+    return CMP_NCLASSES;
+}
+
+static int on_boundary(const kdr_ray *r, const float *tri) {
+    return boundary_reason(r, tri) != CMP_NCLASSES;
 }
 
 static double scale_of(const kdr_ray *r, const float *a, const float *b) {
@@ -212,36 +221,51 @@ static int near_interval_end(const kdr_ray *r, double t, double floor) {
            (isfinite(r->tmax) && t_diff(t, r->tmax, floor) <= CMP_T_REL_TOL);
 }
 
-/* Embree hits tri, kd (and, to be sure, brute force) does not. */
-static int explain_embree_only(const float *tris, size_t ntris,
-                               const kdr_ray *r, const kdr_hit *em,
-                               const kdr_hit *kd) {
+/* Why the float t of a hit is legitimately on either side of an interval
+ * end, or CMP_NCLASSES. */
+static cmp_class reason_at(const kdr_ray *r, const float *tri, double t) {
+    const cmp_class c = ref_tri_degenerate(tri) ? CMP_PARALLEL
+                                                : boundary_reason(r, tri);
+    if (c != CMP_NCLASSES)
+        return c;
+    return near_interval_end(r, t, t_floor(r, scale_of(r, tri, NULL)))
+               ? CMP_INTERVAL_END
+               : CMP_NCLASSES;
+}
+
+/* Embree hits tri, kd (and, to be sure, brute force) does not: the reason
+ * class, or CMP_NCLASSES when unexplained. */
+static cmp_class explain_embree_only(const float *tris, size_t ntris,
+                                     const kdr_ray *r, const kdr_hit *em,
+                                     const kdr_hit *kd) {
     const float *p = tri_at(tris, ntris, em->prim);
     if (!p)
-        return 0;
+        return CMP_NCLASSES;
     float t;
     if (!ref_tri_degenerate(p) && our_test(r, p, r->tmin, r->tmax, &t) &&
         (kd->prim < 0 || kd_hit_better(t, em->prim, kd->t, kd->prim)))
-        return 0; /* kd's own test would have found a better hit */
-    const double fl = t_floor(r, scale_of(r, p, NULL));
-    const int boundary = ref_tri_degenerate(p) || on_boundary(r, p) ||
-                         near_interval_end(r, em->t, fl);
-    if (!boundary)
-        return 0;
+        return CMP_NCLASSES; /* kd's own test would have found a better hit */
+    const cmp_class c = reason_at(r, p, em->t);
+    if (c == CMP_NCLASSES)
+        return c;
     kdr_hit ref;
     ref_intersect1(tris, ntris, r, &ref);
-    return ref.prim == kd->prim;
+    return ref.prim == kd->prim ? c : CMP_NCLASSES;
 }
 
 /* kd hits tri, Embree does not see it (or sees something farther). */
-static int explain_kd_only(const float *tris, size_t ntris, const kdr_ray *r,
-                           const kdr_hit *kd) {
+static cmp_class explain_kd_only(const float *tris, size_t ntris,
+                                 const kdr_ray *r, const kdr_hit *kd) {
     const float *q = tri_at(tris, ntris, kd->prim);
     float t;
     if (!q || !our_test(r, q, r->tmin, r->tmax, &t) || t != kd->t)
-        return 0; /* kd reports a hit its own triangle test does not give */
-    const double fl = t_floor(r, scale_of(r, q, NULL));
-    return on_boundary(r, q) || near_interval_end(r, kd->t, fl);
+        return CMP_NCLASSES; /* a hit kd's own triangle test does not give */
+    return reason_at(r, q, kd->t);
+}
+
+/* The explanation, or the unexplained class `otherwise`. */
+static cmp_class or_else(cmp_class why, cmp_class otherwise) {
+    return why != CMP_NCLASSES ? why : otherwise;
 }
 
 /* Same triangle, t compared with Embree's (d) and, when that is off, with
@@ -294,11 +318,10 @@ cmp_class cmp_closest(const float *tris, size_t ntris, const kdr_ray *ray,
     if (kd->prim < 0 && em->prim < 0)
         return CMP_AGREE;
     if (kd->prim < 0)
-        return explain_embree_only(tris, ntris, ray, em, kd) ? CMP_BOUNDARY
-                                                             : CMP_KD_MISS;
+        return or_else(explain_embree_only(tris, ntris, ray, em, kd),
+                       CMP_KD_MISS);
     if (em->prim < 0)
-        return explain_kd_only(tris, ntris, ray, kd) ? CMP_BOUNDARY
-                                                     : CMP_KD_EXTRA;
+        return or_else(explain_kd_only(tris, ntris, ray, kd), CMP_KD_EXTRA);
     const float *a = tri_at(tris, ntris, kd->prim);
     const float *b = tri_at(tris, ntris, em->prim);
     const double fl = t_floor(ray, scale_of(ray, a, b));
@@ -312,15 +335,17 @@ cmp_class cmp_closest(const float *tris, size_t ntris, const kdr_ray *ray,
         return c;
     }
     if (kd->t < em->t) {
-        if (explain_kd_only(tris, ntris, ray, kd))
-            return CMP_BOUNDARY;
+        const cmp_class why = explain_kd_only(tris, ntris, ray, kd);
+        if (why != CMP_NCLASSES)
+            return why;
         /* Embree ordered kd's triangle after its own: both t's of it are
          * within twice its error bound of each other */
         return ill_conditioned(ray, a, kd->t, em->t) ? CMP_ILL_COND
                                                      : CMP_WRONG_PRIM;
     }
-    if (explain_embree_only(tris, ntris, ray, em, kd))
-        return CMP_BOUNDARY;
+    const cmp_class why = explain_embree_only(tris, ntris, ray, em, kd);
+    if (why != CMP_NCLASSES)
+        return why;
     float tp;
     if (!ref_tri_degenerate(b) && our_test(ray, b, ray->tmin, ray->tmax, &tp) &&
         !kd_hit_better(tp, em->prim, kd->t, kd->prim) &&
@@ -338,7 +363,7 @@ cmp_class cmp_occluded(const float *tris, size_t ntris, const kdr_ray *ray,
         if (!kd_hit != (kd_closest->prim < 0))
             return kd_hit ? CMP_KD_EXTRA : CMP_KD_MISS;
         cmp_class c = cmp_closest(tris, ntris, ray, kd_closest, em_closest, &e);
-        if (c == CMP_BOUNDARY)
+        if (c == CMP_BOUNDARY || c == CMP_INTERVAL_END || c == CMP_PARALLEL)
             return c;
         return kd_hit ? CMP_KD_EXTRA : CMP_KD_MISS;
     }

@@ -9,10 +9,13 @@
  *   TIE        different prims at the same t, and the hit point lies on both
  *              triangles (shared edge/vertex or coincident faces), kd's prim
  *              obeying the tie rule under kd's own test;
- *   BOUNDARY   hit vs miss (or a different nearest prim) where the deciding
- *              hit is within rounding of a triangle edge (silhouette graze),
- *              of the ray's interval end, or in a ray-parallel triangle, and
- *              the brute-force reference agrees with kd;
+ *   BOUNDARY / INTERVAL_END / PARALLEL
+ *              hit vs miss (or a different nearest prim) where the deciding
+ *              hit is proven to lie within rounding of a triangle edge or
+ *              vertex (a silhouette graze: BOUNDARY, printed "edge"), of an
+ *              end of [tmin, tmax] (INTERVAL_END), or the ray lies in the
+ *              triangle's plane or the triangle has zero area (PARALLEL);
+ *              and the brute-force reference agrees with kd;
  *   ILL_COND   same triangle (or a tie-rule-consistent one), t off by more
  *              than the tolerance from Embree's, but kd's t is within the
  *              float-evaluation error bound of the exact (double) t: a ray
@@ -39,6 +42,8 @@ typedef enum cmp_class {
     CMP_AGREE = 0,
     CMP_TIE,
     CMP_BOUNDARY,
+    CMP_INTERVAL_END,
+    CMP_PARALLEL,
     CMP_ILL_COND,
     CMP_KD_MISS,
     CMP_KD_EXTRA,
