@@ -81,12 +81,14 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
 #define KB_FALLBACK 1 /* incoherent stretches go ray by ray */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 
-/* Tuning: a bundle whose average lane occupancy (active lanes per node
- * step / lanes that entered the tree) falls under KB_OCC_MIN is incoherent;
- * the rest of its chunk and the next KB_FALLBACK_CHUNKS chunks of the batch
- * are then traced ray by ray, in the caller's order (no regrouping), after
- * which a bundle probes again. */
+/* Tuning: rays are incoherent when the average lane occupancy (active
+ * lanes per node step / lanes that entered the tree) of a chunk's first
+ * KB_PROBE or more bundles falls under KB_OCC_MIN; the rest of the chunk
+ * and the next KB_FALLBACK_CHUNKS chunks of the batch are then traced ray
+ * by ray, in the caller's order (no regrouping), after which the next chunk
+ * probes again. */
 #define KB_OCC_MIN 0.3
+#define KB_PROBE 4
 #define KB_FALLBACK_CHUNKS 4
 
 #endif /* KD_TRAVERSE_BUNDLE_DECL */
@@ -489,14 +491,16 @@ KB_FN void KB(alone)(const kdr_scene *s, const kdr_ray_batch *rb,
         stats->fallbacks += (uint64_t)((m + KB_W - 1) / KB_W);
 }
 
-/* Traces one chunk of rays (ids) in bundles of KB_W. Returns 1 when a
- * bundle turned out incoherent (the rest of the chunk then went alone). */
+/* Traces one chunk of rays (ids) in bundles of KB_W. Returns 1 when the
+ * bundles so far (at least KB_PROBE of them) turned out incoherent; the
+ * rest of the chunk then went alone. */
 KB_FN int KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
                     const size_t *ids, int m, kdr_query q, int flags,
                     kdr_hits *out, kdr_trav_stats *stats) {
     KB(bundle) b;
+    double used = 0.0, offered = 0.0; /* lane steps: taken / possible */
     b.scene_mag = KB(scene_mag)(s);
-    for (int g = 0; g < m; g += KB_W) {
+    for (int g = 0, k = 1; g < m; g += KB_W, k++) {
         const int n = m - g < KB_W ? m - g : KB_W;
         int alone;
         KB(gather)(rb, ids + g, n, &b, &alone);
@@ -508,9 +512,9 @@ KB_FN int KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
                 kd_batch_single(s, rb, ids[g + j], q, out, stats);
         /* occupancy among the lanes that entered the tree: lanes that
          * missed the scene (camera rays past a silhouette) cost nothing */
-        const int entered = kd_lane_count(b.lanes);
-        if ((flags & KB_FALLBACK) && b.steps &&
-            (double)b.lane_steps < KB_OCC_MIN * entered * (double)b.steps) {
+        used += (double)b.lane_steps;
+        offered += (double)b.steps * kd_lane_count(b.lanes);
+        if ((flags & KB_FALLBACK) && k >= KB_PROBE && used < KB_OCC_MIN * offered) {
             KB(alone)(s, rb, ids + g + n, m - g - n, q, out, stats);
             return 1;
         }
