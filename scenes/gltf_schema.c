@@ -251,7 +251,8 @@ int kdr_gltf_check_json(const char *text, size_t len, char *err, size_t errlen) 
         return fail(err, errlen, "invalid JSON at byte %zu",
                     end && end >= text ? (size_t)(end - text) : (size_t)0);
     size_t used = (size_t)(end - text);
-    while (used < len && strchr(" \t\r\n", text[used]) && text[used]) used++;
+    /* GLB pads its JSON chunk with spaces; some exporters pad with NULs. */
+    while (used < len && memchr(" \t\r\n", text[used], 5)) used++;
     int rc = -1;
     if (used < len) fail(err, errlen, "invalid JSON: trailing characters at byte %zu", used);
     else if (!cJSON_IsObject(root)) fail(err, errlen, "schema: the top level is not an object");

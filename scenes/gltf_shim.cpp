@@ -407,9 +407,9 @@ std::vector<unsigned char> read_file(const char *path) {
         }
         bytes.insert(bytes.end(), buf, buf + n);
     }
-    bool bad = ferror(f) != 0;
+    int bad = ferror(f) ? errno : 0;
     fclose(f);
-    if (bad) fail("read error: %s", strerror(errno));
+    if (bad) fail("read error: %s", strerror(bad));
     if (bytes.empty()) fail("file is empty");
     return bytes;
 }

@@ -18,7 +18,8 @@
  * partial scene.
  *
  * Thread safety: kdr_gltf_load may run on several threads at once (it keeps
- * no global state). The result is owned by the caller: kdr_gltf_free.
+ * no state of its own; cJSON records its last syntax error in a global that
+ * nothing reads). The result is owned by the caller: kdr_gltf_free.
  */
 #ifndef KDR_GLTF_H
 #define KDR_GLTF_H
