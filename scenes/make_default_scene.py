@@ -120,28 +120,23 @@ def quat_y(deg):
     return [0.0, math.sin(h), 0.0, math.cos(h)]
 
 
-def quat_axis(axis, deg):
-    h = math.radians(deg) / 2
-    n = math.sqrt(sum(a * a for a in axis))
-    return [axis[0] / n * math.sin(h), axis[1] / n * math.sin(h), axis[2] / n * math.sin(h),
-            math.cos(h)]
-
-
 def build(path):
     g = Glb("kdray scenes/make_default_scene.py")
     floor = g.add_mesh("floor", *grid(24, 24, 12.0, 12.0))
     wall = g.add_mesh("wall", *grid(12, 6, 12.0, 6.0))
     column = g.add_mesh("column", *cylinder(0.25, 3.5, 20))
     knot = g.add_mesh("torus_knot", *torus_knot(2, 3, 1.1, 0.22, 160, 12))
-    sphere = g.add_mesh("sphere", *uv_sphere(0.8, 32, 18))
+    sphere = g.add_mesh("sphere", *uv_sphere(0.75, 32, 18))  # radius exact in float32
     cube = g.add_mesh("box", *box(0.5, 0.5, 0.5))
     top = g.add_mesh("table_top", *box(1.2, 0.05, 0.7))
     leg = g.add_mesh("table_leg", *box(0.05, 0.45, 0.05))
 
     g.add_node("floor", floor, root=True)
-    # Walls: the grid stands up (rotate about x), one at the back, one on the left.
-    g.add_node("back_wall", wall, root=True, translation=[0, 3, -6],
-               rotation=quat_axis([1, 0, 0], 90))
+    # Walls: the grid stands up, one at the back, one on the left. Exact
+    # matrices (not a 90-degree quaternion, whose rounding would lift the
+    # wall's corners 1e-8 off the floor plane y = 0).
+    g.add_node("back_wall", wall, root=True,
+               matrix=[1, 0, 0, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 3, -6, 1])
     g.add_node("left_wall", wall, root=True,
                matrix=[0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0, -6, 3, 0, 1])
     for i in range(6):
@@ -149,7 +144,7 @@ def build(path):
     plinth = g.add_node("plinth", cube, scale=[1.6, 0.8, 1.6], translation=[0, 0.4, 0])
     knot_node = g.add_node("knot", knot, translation=[0, 2.0, 0], rotation=quat_y(20))
     g.add_node("knot_group", None, [plinth, knot_node], root=True, translation=[-1.5, 0, -1.5])
-    g.add_node("sphere", sphere, root=True, translation=[2.4, 0.8, 0.6])
+    g.add_node("sphere", sphere, root=True, translation=[2.4, 0.75, 0.6])
     legs = [g.add_node("leg_%d" % i, leg, translation=[sx * 1.1, 0.45, sz * 0.6])
             for i, (sx, sz) in enumerate([(-1, -1), (1, -1), (-1, 1), (1, 1)])]
     table_top = g.add_node("top", top, translation=[0, 0.95, 0])
