@@ -5,10 +5,13 @@
  *   test_embree stress [rays]          every stress scene x every ray kind,
  *                                      plus bit-exact equality with the
  *                                      brute-force reference and inside rays
- *   test_embree ladder DIR [max_tris [rays]]
+ *   test_embree ladder DIR [max_tris [rays [KINDS]]]
  *                                      the real-scene ladder (DIR/ladder.txt),
  *                                      scenes up to max_tris triangles, rays
- *                                      per ray kind
+ *                                      per ray kind; KINDS a comma list of
+ *                                      camera and stress ray kind names
+ *                                      (default: all), or "-name,..." for
+ *                                      all but those
  *
  * Fails on any unexplained disagreement (see tests/support/compare.h), any
  * ray from inside a closed mesh that misses, and (stress) any difference
@@ -176,7 +179,24 @@ static void camera_rays(const kdr_scene *kd, kdr_ray *rays, size_t n) {
     }
 }
 
-static int run_ladder_scene(const ladder_entry *e, size_t nrays, suite *out) {
+/* Whether ray kind `name` is selected by the KINDS argument. */
+static int kind_wanted(const char *kinds, const char *name) {
+    if (!kinds || !*kinds)
+        return 1;
+    const int negate = kinds[0] == '-';
+    const char *p = kinds + negate;
+    const size_t n = strlen(name);
+    int listed = 0;
+    while (*p) {
+        const size_t len = strcspn(p, ",");
+        listed |= len == n && strncmp(p, name, n) == 0;
+        p += len + (p[len] == ',');
+    }
+    return negate ? !listed : listed;
+}
+
+static int run_ladder_scene(const ladder_entry *e, size_t nrays,
+                            const char *kinds, suite *out) {
     char err[512];
     stress_scene s = {.kind = STRESS_SOUP};
     if (ladder_load(e, &s.tris, &s.ntris, err, sizeof err) != 0) {
@@ -193,10 +213,14 @@ static int run_ladder_scene(const ladder_entry *e, size_t nrays, suite *out) {
     }
     printf("%s: %zu triangles\n", e->name, s.ntris);
     char label[160];
-    camera_rays(kd, rays, nrays);
-    snprintf(label, sizeof label, "%s/camera", e->name);
-    run_set(label, &s, kd, o, rays, nrays, 0, out);
+    if (kind_wanted(kinds, "camera")) {
+        camera_rays(kd, rays, nrays);
+        snprintf(label, sizeof label, "%s/camera", e->name);
+        run_set(label, &s, kd, o, rays, nrays, 0, out);
+    }
     for (int rk = 0; rk < STRESS_RAYS_MIXED; rk++) {
+        if (!kind_wanted(kinds, stress_ray_name((stress_ray_kind)rk)))
+            continue;
         stress_rays(&s, (stress_ray_kind)rk, SEED + (uint64_t)rk, nrays, rays);
         snprintf(label, sizeof label, "%s/%s", e->name,
                  stress_ray_name((stress_ray_kind)rk));
@@ -210,7 +234,7 @@ static int run_ladder_scene(const ladder_entry *e, size_t nrays, suite *out) {
 }
 
 static int run_ladder(const char *dir, size_t max_tris, size_t nrays,
-                      suite *out) {
+                      const char *kinds, suite *out) {
     ladder_entry *v;
     char err[512];
     const int n = ladder_read(dir, &v, err, sizeof err);
@@ -222,7 +246,7 @@ static int run_ladder(const char *dir, size_t max_tris, size_t nrays,
     for (int i = 0; i < n && rc == 0; i++) {
         if (v[i].triangles > max_tris)
             continue;
-        rc = run_ladder_scene(&v[i], nrays, out);
+        rc = run_ladder_scene(&v[i], nrays, kinds, out);
         ran++;
     }
     free(v);
@@ -242,12 +266,12 @@ int main(int argc, char **argv) {
         rc = run_ladder(argv[2],
                         argc >= 4 ? strtoul(argv[3], NULL, 10) : (size_t)-1,
                         argc >= 5 ? strtoul(argv[4], NULL, 10) : LADDER_RAYS,
-                        &s);
+                        argc >= 6 ? argv[5] : NULL, &s);
         if (rc == SKIP)
             return SKIP;
     } else {
         fprintf(stderr,
-                "usage: %s stress [rays] | ladder DIR [max_tris [rays]]\n",
+                "usage: %s stress [rays] | ladder DIR [max_tris [rays [KINDS]]]\n",
                 argv[0]);
         return 2;
     }
