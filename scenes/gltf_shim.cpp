@@ -87,7 +87,8 @@ Mat4 mat_mul(const Mat4 &a, const Mat4 &b) {
     for (int c = 0; c < 4; c++)
         for (int row = 0; row < 4; row++) {
             double s = 0;
-            for (int k = 0; k < 4; k++) s += a.m[k * 4 + row] * b.m[c * 4 + k];
+            for (int k = 0; k < 4; k++)
+                s += a.m[k * 4 + row] * b.m[c * 4 + k];
             r.m[c * 4 + row] = s;
         }
     return r;
@@ -109,12 +110,14 @@ Mat4 node_local_matrix(const tinygltf::Node &n, int idx) {
         fail("node %d: transform is not finite", idx);
     Mat4 r = mat_identity();
     if (!M.empty()) {
-        for (int i = 0; i < 16; i++) r.m[i] = M[(size_t)i];
+        for (int i = 0; i < 16; i++)
+            r.m[i] = M[(size_t)i];
         return r;
     }
     double x = 0, y = 0, z = 0, w = 1;
     if (!R.empty()) x = R[0], y = R[1], z = R[2], w = R[3];
-    double sx = S.empty() ? 1 : S[0], sy = S.empty() ? 1 : S[1], sz = S.empty() ? 1 : S[2];
+    double sx = S.empty() ? 1 : S[0], sy = S.empty() ? 1 : S[1],
+           sz = S.empty() ? 1 : S[2];
     /* Rotation of the unit quaternion, columns scaled by S. */
     r.m[0] = (1 - 2 * (y * y + z * z)) * sx;
     r.m[1] = (2 * (x * y + z * w)) * sx;
@@ -141,12 +144,16 @@ struct View {
 int component_size(int ctype) {
     switch (ctype) {
     case TINYGLTF_COMPONENT_TYPE_BYTE:
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return 1;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+        return 1;
     case TINYGLTF_COMPONENT_TYPE_SHORT:
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return 2;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+        return 2;
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
-    case TINYGLTF_COMPONENT_TYPE_FLOAT: return 4;
-    default: return 0;
+    case TINYGLTF_COMPONENT_TYPE_FLOAT:
+        return 4;
+    default:
+        return 0;
     }
 }
 
@@ -155,14 +162,15 @@ struct Where {
     int node, mesh, prim;
 };
 
-View checked_view(const tinygltf::Model &m, int acc_idx, const Where &w, const char *what) {
+View checked_view(const tinygltf::Model &m, int acc_idx, const Where &w,
+                  const char *what) {
     if (acc_idx < 0 || (size_t)acc_idx >= m.accessors.size())
-        fail("node %d mesh %d primitive %d: %s accessor %d does not exist", w.node, w.mesh,
-             w.prim, what, acc_idx);
+        fail("node %d mesh %d primitive %d: %s accessor %d does not exist", w.node,
+             w.mesh, w.prim, what, acc_idx);
     const tinygltf::Accessor &a = m.accessors[(size_t)acc_idx];
     if (a.sparse.isSparse)
-        fail("node %d mesh %d primitive %d: %s accessor %d is sparse (unsupported)", w.node,
-             w.mesh, w.prim, what, acc_idx);
+        fail("node %d mesh %d primitive %d: %s accessor %d is sparse (unsupported)",
+             w.node, w.mesh, w.prim, what, acc_idx);
     View v;
     v.count = a.count;
     v.ctype = a.componentType;
@@ -170,7 +178,8 @@ View checked_view(const tinygltf::Model &m, int acc_idx, const Where &w, const c
     v.normalized = a.normalized;
     size_t csize = (size_t)component_size(a.componentType);
     if (csize == 0 || v.ncomp <= 0)
-        fail("node %d mesh %d primitive %d: %s accessor %d has an invalid component type %d",
+        fail("node %d mesh %d primitive %d: %s accessor %d has an invalid component type "
+             "%d",
              w.node, w.mesh, w.prim, what, acc_idx, a.componentType);
     size_t elem = csize * (size_t)v.ncomp;
     if (a.bufferView < 0) return v;
@@ -180,27 +189,34 @@ View checked_view(const tinygltf::Model &m, int acc_idx, const Where &w, const c
     const tinygltf::BufferView &bv = m.bufferViews[(size_t)a.bufferView];
     if (!bv.extensions.empty() && bv.extensions.count("EXT_meshopt_compression"))
         fail("node %d mesh %d primitive %d: %s accessor %d uses EXT_meshopt_compression "
-             "(unsupported)", w.node, w.mesh, w.prim, what, acc_idx);
+             "(unsupported)",
+             w.node, w.mesh, w.prim, what, acc_idx);
     if (bv.buffer < 0 || (size_t)bv.buffer >= m.buffers.size())
-        fail("node %d mesh %d primitive %d: bufferView %d: buffer %d does not exist", w.node,
-             w.mesh, w.prim, a.bufferView, bv.buffer);
+        fail("node %d mesh %d primitive %d: bufferView %d: buffer %d does not exist",
+             w.node, w.mesh, w.prim, a.bufferView, bv.buffer);
     const std::vector<unsigned char> &data = m.buffers[(size_t)bv.buffer].data;
     if (bv.byteOffset > data.size() || bv.byteLength > data.size() - bv.byteOffset)
-        fail("node %d mesh %d primitive %d: bufferView %d (offset %zu, length %zu) exceeds "
-             "buffer %d (%zu bytes)", w.node, w.mesh, w.prim, a.bufferView, bv.byteOffset,
-             bv.byteLength, bv.buffer, data.size());
+        fail("node %d mesh %d primitive %d: bufferView %d (offset %zu, length %zu) "
+             "exceeds "
+             "buffer %d (%zu bytes)",
+             w.node, w.mesh, w.prim, a.bufferView, bv.byteOffset, bv.byteLength,
+             bv.buffer, data.size());
     v.stride = bv.byteStride ? bv.byteStride : elem;
     if (v.stride < elem)
-        fail("node %d mesh %d primitive %d: bufferView %d: byteStride %zu is smaller than "
-             "the element (%zu bytes)", w.node, w.mesh, w.prim, a.bufferView, v.stride, elem);
+        fail(
+            "node %d mesh %d primitive %d: bufferView %d: byteStride %zu is smaller than "
+            "the element (%zu bytes)",
+            w.node, w.mesh, w.prim, a.bufferView, v.stride, elem);
     if (v.count > 0) {
         size_t room = bv.byteLength;
         bool fits = a.byteOffset <= room && elem <= room - a.byteOffset &&
                     (v.count - 1) <= (room - a.byteOffset - elem) / v.stride;
         if (!fits)
-            fail("node %d mesh %d primitive %d: %s accessor %d (offset %zu, %zu elements, "
-                 "stride %zu) exceeds bufferView %d (%zu bytes)", w.node, w.mesh, w.prim,
-                 what, acc_idx, a.byteOffset, v.count, v.stride, a.bufferView, room);
+            fail(
+                "node %d mesh %d primitive %d: %s accessor %d (offset %zu, %zu elements, "
+                "stride %zu) exceeds bufferView %d (%zu bytes)",
+                w.node, w.mesh, w.prim, what, acc_idx, a.byteOffset, v.count, v.stride,
+                a.bufferView, room);
     }
     static const unsigned char none = 0;
     v.base = v.count ? data.data() + bv.byteOffset + a.byteOffset : &none;
@@ -212,24 +228,36 @@ double read_component(const View &v, size_t i, int c) {
     if (!v.base) return 0.0;
     const unsigned char *p = v.base + i * v.stride + (size_t)c * component_size(v.ctype);
     switch (v.ctype) {
-    case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; memcpy(&f, p, 4); return f; }
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+        float f;
+        memcpy(&f, p, 4);
+        return f;
+    }
     case TINYGLTF_COMPONENT_TYPE_BYTE: {
-        int8_t x; memcpy(&x, p, 1);
+        int8_t x;
+        memcpy(&x, p, 1);
         return v.normalized ? std::fmax(x / 127.0, -1.0) : x;
     }
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
-        uint8_t x; memcpy(&x, p, 1);
+        uint8_t x;
+        memcpy(&x, p, 1);
         return v.normalized ? x / 255.0 : x;
     }
     case TINYGLTF_COMPONENT_TYPE_SHORT: {
-        int16_t x; memcpy(&x, p, 2);
+        int16_t x;
+        memcpy(&x, p, 2);
         return v.normalized ? std::fmax(x / 32767.0, -1.0) : x;
     }
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
-        uint16_t x; memcpy(&x, p, 2);
+        uint16_t x;
+        memcpy(&x, p, 2);
         return v.normalized ? x / 65535.0 : x;
     }
-    default: { uint32_t x; memcpy(&x, p, 4); return x; }
+    default: {
+        uint32_t x;
+        memcpy(&x, p, 4);
+        return x;
+    }
     }
 }
 
@@ -237,9 +265,18 @@ uint32_t read_index(const View &v, size_t i) {
     if (!v.base) return 0;
     const unsigned char *p = v.base + i * v.stride;
     switch (v.ctype) {
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return *p;
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t x; memcpy(&x, p, 2); return x; }
-    default: { uint32_t x; memcpy(&x, p, 4); return x; }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+        return *p;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+        uint16_t x;
+        memcpy(&x, p, 2);
+        return x;
+    }
+    default: {
+        uint32_t x;
+        memcpy(&x, p, 4);
+        return x;
+    }
     }
 }
 
@@ -263,19 +300,22 @@ bool plan_primitive(const tinygltf::Model &m, const tinygltf::Primitive &p, Job 
     const Where &w = j.w;
     int mode = p.mode; /* tinygltf gives TRIANGLES when the file omits it */
     if (mode < 0 || mode > TINYGLTF_MODE_TRIANGLE_FAN)
-        fail("node %d mesh %d primitive %d: invalid mode %d", w.node, w.mesh, w.prim, mode);
+        fail("node %d mesh %d primitive %d: invalid mode %d", w.node, w.mesh, w.prim,
+             mode);
     if (!produces_triangles(mode)) return false;
     if (p.extensions.count("KHR_draco_mesh_compression"))
         fail("node %d mesh %d primitive %d: KHR_draco_mesh_compression is unsupported",
              w.node, w.mesh, w.prim);
     auto it = p.attributes.find("POSITION");
     if (it == p.attributes.end())
-        fail("node %d mesh %d primitive %d: no POSITION attribute", w.node, w.mesh, w.prim);
+        fail("node %d mesh %d primitive %d: no POSITION attribute", w.node, w.mesh,
+             w.prim);
     j.pos = checked_view(m, it->second, w, "POSITION");
     if (j.pos.ncomp != 3 || j.pos.ctype == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
-        fail("node %d mesh %d primitive %d: POSITION must be VEC3 of float, byte or short "
-             "(got %d components of type %d)", w.node, w.mesh, w.prim, j.pos.ncomp,
-             j.pos.ctype);
+        fail(
+            "node %d mesh %d primitive %d: POSITION must be VEC3 of float, byte or short "
+            "(got %d components of type %d)",
+            w.node, w.mesh, w.prim, j.pos.ncomp, j.pos.ctype);
     j.indexed = p.indices >= 0;
     size_t nverts = j.pos.count;
     if (j.indexed) {
@@ -283,16 +323,20 @@ bool plan_primitive(const tinygltf::Model &m, const tinygltf::Primitive &p, Job 
         if (j.idx.ncomp != 1 || j.idx.ctype == TINYGLTF_COMPONENT_TYPE_FLOAT ||
             j.idx.ctype == TINYGLTF_COMPONENT_TYPE_BYTE ||
             j.idx.ctype == TINYGLTF_COMPONENT_TYPE_SHORT)
-            fail("node %d mesh %d primitive %d: indices must be SCALAR unsigned byte, short "
-                 "or int", w.node, w.mesh, w.prim);
+            fail("node %d mesh %d primitive %d: indices must be SCALAR unsigned byte, "
+                 "short "
+                 "or int",
+                 w.node, w.mesh, w.prim);
         nverts = j.idx.count;
     }
     j.mode = mode;
     if (mode == TINYGLTF_MODE_TRIANGLES && nverts % 3 != 0)
         fail("node %d mesh %d primitive %d: %zu %s is not a multiple of 3 (TRIANGLES)",
              w.node, w.mesh, w.prim, nverts, j.indexed ? "indices" : "vertices");
-    if (mode == TINYGLTF_MODE_TRIANGLES) j.ntris = nverts / 3;
-    else j.ntris = nverts >= 3 ? nverts - 2 : 0;
+    if (mode == TINYGLTF_MODE_TRIANGLES)
+        j.ntris = nverts / 3;
+    else
+        j.ntris = nverts >= 3 ? nverts - 2 : 0;
     return true;
 }
 
@@ -303,7 +347,8 @@ struct Planner {
     std::vector<char> seen;
     size_t total = 0;
 
-    explicit Planner(const tinygltf::Model &model) : m(model), seen(model.nodes.size(), 0) {}
+    explicit Planner(const tinygltf::Model &model)
+        : m(model), seen(model.nodes.size(), 0) {}
 
     void visit(int ni, const Mat4 &parent, int depth) {
         if (ni < 0 || (size_t)ni >= m.nodes.size()) fail("node %d does not exist", ni);
@@ -314,12 +359,14 @@ struct Planner {
         const tinygltf::Node &n = m.nodes[(size_t)ni];
         Mat4 world = mat_mul(parent, node_local_matrix(n, ni));
         if (n.mesh >= 0) plan_mesh(ni, n.mesh, world);
-        for (int c : n.children) visit(c, world, depth + 1);
+        for (int c : n.children)
+            visit(c, world, depth + 1);
         seen[(size_t)ni] = 2;
     }
 
     void plan_mesh(int ni, int mi, const Mat4 &world) {
-        if ((size_t)mi >= m.meshes.size()) fail("node %d: mesh %d does not exist", ni, mi);
+        if ((size_t)mi >= m.meshes.size())
+            fail("node %d: mesh %d does not exist", ni, mi);
         const auto &prims = m.meshes[(size_t)mi].primitives;
         for (size_t pi = 0; pi < prims.size(); pi++) {
             Job j{};
@@ -354,7 +401,8 @@ void emit_job(const Job &j, float *out) {
                 vi = read_index(j.idx, vi);
                 if (vi >= j.pos.count)
                     fail("node %d mesh %d primitive %d: index %zu is out of range (%zu "
-                         "positions)", j.w.node, j.w.mesh, j.w.prim, vi, j.pos.count);
+                         "positions)",
+                         j.w.node, j.w.mesh, j.w.prim, vi, j.pos.count);
             }
             double x = read_component(j.pos, vi, 0), y = read_component(j.pos, vi, 1),
                    z = read_component(j.pos, vi, 2);
@@ -367,7 +415,8 @@ void emit_job(const Job &j, float *out) {
                 o[r] = (float)v;
                 if (!std::isfinite(o[r]))
                     fail("node %d mesh %d primitive %d: position %zu is not finite after "
-                         "the node transform", j.w.node, j.w.mesh, j.w.prim, vi);
+                         "the node transform",
+                         j.w.node, j.w.mesh, j.w.prim, vi);
             }
         }
 }
@@ -388,7 +437,8 @@ int default_scene(const tinygltf::Model &m) {
 std::string one_line(std::string s) {
     for (char &c : s)
         if (c == '\n' || c == '\r') c = ' ';
-    while (!s.empty() && s.back() == ' ') s.pop_back();
+    while (!s.empty() && s.back() == ' ')
+        s.pop_back();
     return s;
 }
 
@@ -449,17 +499,17 @@ void parse(const char *path, tinygltf::Model &m) {
         fail("GLB container version %u is not supported (glTF 1.0?), need 2", bytes[4]);
     std::string json = json_text(bytes);
     char err_json[512];
-    if (!json.empty() && kdr_gltf_check_json(json.data(), json.size(), err_json,
-                                             sizeof err_json) != 0)
+    if (!json.empty() &&
+        kdr_gltf_check_json(json.data(), json.size(), err_json, sizeof err_json) != 0)
         fail("%s", err_json);
     tinygltf::TinyGLTF loader;
     loader.SetImageLoader(skip_image, nullptr);
     std::string err, warn, dir = base_dir(path);
-    bool ok = is_glb(bytes)
-                  ? loader.LoadBinaryFromMemory(&m, &err, &warn, bytes.data(),
-                                                (unsigned)bytes.size(), dir)
-                  : loader.LoadASCIIFromString(&m, &err, &warn, (const char *)bytes.data(),
-                                               (unsigned)bytes.size(), dir);
+    bool ok = is_glb(bytes) ? loader.LoadBinaryFromMemory(&m, &err, &warn, bytes.data(),
+                                                          (unsigned)bytes.size(), dir)
+                            : loader.LoadASCIIFromString(&m, &err, &warn,
+                                                         (const char *)bytes.data(),
+                                                         (unsigned)bytes.size(), dir);
     if (!ok) fail("%s", err.empty() ? "not a valid glTF file" : one_line(err).c_str());
     if (m.asset.version.compare(0, 2, "2.") != 0)
         fail("glTF version \"%s\" is not supported (need 2.x)", m.asset.version.c_str());
@@ -489,9 +539,9 @@ void flatten(const tinygltf::Model &m, kdr_gltf_scene *out) {
     for (size_t i = 0; i < nr; i++) {
         const Job &j = plan.jobs[i];
         emit_job(j, out->tris + 9 * first);
-        out->ranges[i] = kdr_mesh_range{(uint32_t)j.w.node, (uint32_t)j.w.mesh,
-                                        (uint32_t)j.w.prim, (uint32_t)first,
-                                        (uint32_t)j.ntris};
+        out->ranges[i] =
+            kdr_mesh_range{(uint32_t)j.w.node, (uint32_t)j.w.mesh, (uint32_t)j.w.prim,
+                           (uint32_t)first, (uint32_t)j.ntris};
         first += j.ntris;
     }
     out->ntris = nt;

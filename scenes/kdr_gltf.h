@@ -42,12 +42,12 @@ typedef struct kdr_mesh_range {
 } kdr_mesh_range;
 
 typedef struct kdr_gltf_scene {
-    float *tris;             /* 9 * ntris floats: p0, p1, p2 in world space */
+    float *tris; /* 9 * ntris floats: p0, p1, p2 in world space */
     size_t ntris;
-    kdr_mesh_range *ranges;  /* one per triangle-producing (node, mesh, prim),
-                                in triangle order; they tile [0, ntris) */
+    kdr_mesh_range *ranges; /* one per triangle-producing (node, mesh, prim),
+                               in triangle order; they tile [0, ntris) */
     size_t nranges;
-    double load_ms;          /* wall time of parse + flatten */
+    double load_ms; /* wall time of parse + flatten */
 } kdr_gltf_scene;
 
 /* Loads path (.glb is recognised by its magic, not its name). Returns 0 and

@@ -37,8 +37,8 @@ static void print_tree(const kdr_scene *scene) {
     kdr_tree_stats st;
     kdr_scene_bounds(scene, &b);
     kdr_scene_tree_stats(scene, &st);
-    printf("bounds:        min [%g, %g, %g] max [%g, %g, %g]\n", b.min[0], b.min[1], b.min[2],
-           b.max[0], b.max[1], b.max[2]);
+    printf("bounds:        min [%g, %g, %g] max [%g, %g, %g]\n", b.min[0], b.min[1],
+           b.min[2], b.max[0], b.max[1], b.max[2]);
     printf("diagonal:      %g\n", kdr_scene_diagonal(scene));
     printf("kd-tree:       %llu nodes, %llu leaves (%llu empty), max depth %llu\n",
            (unsigned long long)st.nodes, (unsigned long long)st.leaves,
@@ -53,11 +53,18 @@ int main(int argc, char **argv) {
     int all = 0;
     const char *path = NULL;
     for (int i = 1; i < argc; i++) {
-        if (strcmp(argv[i], "--ranges") == 0) all = 1;
-        else if (argv[i][0] == '-') { usage(); return 2; }
-        else path = argv[i];
+        if (strcmp(argv[i], "--ranges") == 0)
+            all = 1;
+        else if (argv[i][0] == '-') {
+            usage();
+            return 2;
+        } else
+            path = argv[i];
     }
-    if (!path) { usage(); return 2; }
+    if (!path) {
+        usage();
+        return 2;
+    }
 
     char err[512];
     kdr_gltf_scene g;

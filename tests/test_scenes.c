@@ -56,10 +56,12 @@ static void appendf(char *dst, size_t cap, const char *fmt, ...) {
 
 /* Appends data as a new bufferView (4-byte aligned); stride 0 = tight. */
 static int add_view(model *m, const void *data, size_t n, size_t stride) {
-    while (m->len % 4) m->bin[m->len++] = 0;
+    while (m->len % 4)
+        m->bin[m->len++] = 0;
     memcpy(m->bin + m->len, data, n);
-    appendf(m->views, sizeof m->views, "%s{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu",
-            m->nviews ? "," : "", m->len, n);
+    appendf(m->views, sizeof m->views,
+            "%s{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu", m->nviews ? "," : "",
+            m->len, n);
     if (stride) appendf(m->views, sizeof m->views, ",\"byteStride\":%zu", stride);
     appendf(m->views, sizeof m->views, "}");
     m->len += n;
@@ -71,8 +73,8 @@ static int add_acc(model *m, int view, size_t offset, int ctype, size_t count,
     appendf(m->accs, sizeof m->accs, "%s{", m->naccs ? "," : "");
     if (view >= 0) appendf(m->accs, sizeof m->accs, "\"bufferView\":%d,", view);
     appendf(m->accs, sizeof m->accs,
-            "\"byteOffset\":%zu,\"componentType\":%d,\"count\":%zu,\"type\":\"%s\"%s}", offset,
-            ctype, count, type, normalized ? ",\"normalized\":true" : "");
+            "\"byteOffset\":%zu,\"componentType\":%d,\"count\":%zu,\"type\":\"%s\"%s}",
+            offset, ctype, count, type, normalized ? ",\"normalized\":true" : "");
     return m->naccs++;
 }
 
@@ -143,7 +145,8 @@ static const char *write_model(const model *m, const char *name, file_kind kind,
     size_t total = 12 + 8 + jl + jpad + 8 + bl;
     unsigned char *g = calloc(1, total);
     uint32_t hdr[3] = {0x46546C67u, 2, (uint32_t)total};
-    uint32_t jc[2] = {(uint32_t)(jl + jpad), 0x4E4F534Au}, bc[2] = {(uint32_t)bl, 0x004E4942u};
+    uint32_t jc[2] = {(uint32_t)(jl + jpad), 0x4E4F534Au},
+             bc[2] = {(uint32_t)bl, 0x004E4942u};
     memcpy(g, hdr, 12);
     memcpy(g + 12, jc, 8);
     memcpy(g + 20, json, jl);
@@ -180,8 +183,8 @@ static void load_fails(const char *path, const char *want, int line) {
     if (!strstr(err, path) || (want && !strstr(err, want)) || strchr(err, '\n') ||
         s.tris || s.ntris) {
         failures++;
-        fprintf(stderr, "line %d: bad error for %s: \"%s\" (want \"%s\")\n", line, path, err,
-                want ? want : "");
+        fprintf(stderr, "line %d: bad error for %s: \"%s\" (want \"%s\")\n", line, path,
+                err, want ? want : "");
     }
 }
 #define LOAD_FAILS(path, want) load_fails(path, want, __LINE__)
@@ -234,26 +237,27 @@ static void test_order_hierarchy(void) {
     float two[18] = {0, 0, 0, 0, 0, 1, 0, 1, 0, 5, 5, 5, 6, 5, 5, 5, 6, 5};
     add_positions(&m, one, 3);
     add_positions(&m, two, 6);
-    const char *rest =
-        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]},"
-        "{\"primitives\":[{\"attributes\":{\"POSITION\":1}}]}],"
-        "\"nodes\":[{\"mesh\":1},"                                   /* 0: scene 0 only */
-        "{\"mesh\":0,\"translation\":[10,0,0],\"children\":[3,2]}," /* 1 */
-        "{\"mesh\":1,\"translation\":[0,10,0]},"                     /* 2 */
-        "{\"children\":[4],\"translation\":[0,0,10]},"               /* 3 */
-        "{\"mesh\":0},"                                              /* 4 */
-        "{\"mesh\":0}],"                                             /* 5 */
-        "\"scene\":1,\"scenes\":[{\"nodes\":[0]},{\"nodes\":[5,1]}]";
+    const char *rest = "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]},"
+                       "{\"primitives\":[{\"attributes\":{\"POSITION\":1}}]}],"
+                       "\"nodes\":[{\"mesh\":1}," /* 0: scene 0 only */
+                       "{\"mesh\":0,\"translation\":[10,0,0],\"children\":[3,2]}," /* 1 */
+                       "{\"mesh\":1,\"translation\":[0,10,0]},"                    /* 2 */
+                       "{\"children\":[4],\"translation\":[0,0,10]},"              /* 3 */
+                       "{\"mesh\":0},"                                             /* 4 */
+                       "{\"mesh\":0}],"                                            /* 5 */
+                       "\"scene\":1,\"scenes\":[{\"nodes\":[0]},{\"nodes\":[5,1]}]";
     kdr_gltf_scene s;
     if (!load_ok(write_model(&m, "order.gltf", AS_DATA_URI, rest), &s)) return;
     /* Expected walk: 5, 1, 3 (no mesh), 4, 2. */
-    static const uint32_t node[] = {5, 1, 4, 2}, mesh[] = {0, 0, 0, 1}, count[] = {1, 1, 1, 2};
-    CHECK(s.ntris == 5 && s.nranges == 4, "%zu triangles, %zu ranges", s.ntris, s.nranges);
+    static const uint32_t node[] = {5, 1, 4, 2}, mesh[] = {0, 0, 0, 1},
+                          count[] = {1, 1, 1, 2};
+    CHECK(s.ntris == 5 && s.nranges == 4, "%zu triangles, %zu ranges", s.ntris,
+          s.nranges);
     for (size_t i = 0; i < 4 && s.nranges == 4; i++)
         CHECK(s.ranges[i].node == node[i] && s.ranges[i].mesh == mesh[i] &&
                   s.ranges[i].primitive == 0 && s.ranges[i].count == count[i],
-              "range %zu: node %u mesh %u count %u", i, s.ranges[i].node, s.ranges[i].mesh,
-              s.ranges[i].count);
+              "range %zu: node %u mesh %u count %u", i, s.ranges[i].node,
+              s.ranges[i].mesh, s.ranges[i].count);
     CHECK(ranges_tile(&s), "ranges do not tile the triangles");
     if (s.ntris == 5) {
         CHECK(near3(s.tris + 0, 0, 0, 0), "node 5 untransformed");
@@ -291,10 +295,11 @@ static const char *nul_padded_copy(const char *src) {
 static void test_instancing(void) {
     model m = {0};
     add_positions(&m, kTri, 3);
-    const char *rest = "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
-                       "\"nodes\":[{\"mesh\":0},{\"mesh\":0,\"translation\":[0,0,1]},"
-                       "{\"mesh\":0,\"translation\":[0,0,2]}],"
-                       "\"scenes\":[{\"nodes\":[0,1,2]}]";
+    const char *rest =
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+        "\"nodes\":[{\"mesh\":0},{\"mesh\":0,\"translation\":[0,0,1]},"
+        "{\"mesh\":0,\"translation\":[0,0,2]}],"
+        "\"scenes\":[{\"nodes\":[0,1,2]}]";
     const char *glb = write_model(&m, "inst.glb", AS_GLB, rest);
     for (int padded = 0; padded < 2; padded++) {
         kdr_gltf_scene s;
@@ -316,17 +321,19 @@ static void check_corners(const kdr_gltf_scene *s, const int *want, size_t ntris
                           const char *what) {
     CHECK(s->ntris == ntris, "%s: %zu triangles", what, s->ntris);
     for (size_t i = 0; i < 3 * ntris && s->ntris == ntris; i++)
-        CHECK(vertex_of(s->tris + 3 * i) == want[i], "%s: corner %zu is v%d, want v%d", what,
-              i, vertex_of(s->tris + 3 * i), want[i]);
+        CHECK(vertex_of(s->tris + 3 * i) == want[i], "%s: corner %zu is v%d, want v%d",
+              what, i, vertex_of(s->tris + 3 * i), want[i]);
 }
 
 /* glTF 2.0 3.7.2.1: strip p_i = {v_i, v_{i+(1+i%2)}, v_{i+(2-i%2)}},
  * fan p_i = {v_{i+1}, v_{i+2}, v_0}. */
 static void test_strip_fan(void) {
     float v[15];
-    for (int i = 0; i < 5; i++) v[3 * i] = (float)i, v[3 * i + 1] = (float)(i * i), v[3 * i + 2] = 7;
+    for (int i = 0; i < 5; i++)
+        v[3 * i] = (float)i, v[3 * i + 1] = (float)(i * i), v[3 * i + 2] = 7;
     static const uint16_t rev[5] = {4, 3, 2, 1, 0};
-    static const int strip[9] = {0, 1, 2, 1, 3, 2, 2, 3, 4}, fan[9] = {1, 2, 0, 2, 3, 0, 3, 4, 0};
+    static const int strip[9] = {0, 1, 2, 1, 3, 2, 2, 3, 4},
+                     fan[9] = {1, 2, 0, 2, 3, 0, 3, 4, 0};
     static const int strip_rev[9] = {4, 3, 2, 3, 1, 2, 2, 1, 0};
     static const int fan_rev[9] = {3, 2, 4, 2, 1, 4, 1, 0, 4};
     for (int indexed = 0; indexed < 2; indexed++)
@@ -335,15 +342,16 @@ static void test_strip_fan(void) {
             add_positions(&m, v, 5);
             if (indexed) add_indices_u16(&m, rev, 5);
             char rest[512], name[32];
-            snprintf(rest, sizeof rest,
-                     "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},"
-                     "\"mode\":%d%s}]}],\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]",
-                     mode, indexed ? ",\"indices\":1" : "");
+            snprintf(
+                rest, sizeof rest,
+                "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},"
+                "\"mode\":%d%s}]}],\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]",
+                mode, indexed ? ",\"indices\":1" : "");
             snprintf(name, sizeof name, "mode%d_%d.gltf", mode, indexed);
             kdr_gltf_scene s;
             if (!load_ok(write_model(&m, name, AS_DATA_URI, rest), &s)) continue;
-            const int *want = mode == 5 ? (indexed ? strip_rev : strip)
-                                        : (indexed ? fan_rev : fan);
+            const int *want =
+                mode == 5 ? (indexed ? strip_rev : strip) : (indexed ? fan_rev : fan);
             check_corners(&s, want, 3, name);
             kdr_gltf_free(&s);
         }
@@ -357,7 +365,8 @@ static void test_non_indexed_and_lines(void) {
     add_positions(&m, v, 6);
     const char *rest =
         "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"mode\":1},"
-        "{\"attributes\":{\"POSITION\":0},\"mode\":0},{\"attributes\":{\"POSITION\":0}}]}],"
+        "{\"attributes\":{\"POSITION\":0},\"mode\":0},{\"attributes\":{\"POSITION\":0}}]}"
+        "],"
         "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
     kdr_gltf_scene s;
     if (!load_ok(write_model(&m, "lines.gltf", AS_DATA_URI, rest), &s)) return;
@@ -394,20 +403,26 @@ static void test_component_types(void) {
         for (int vtx = 0; vtx < 3; vtx++)
             for (int k = 0; k < 3; k++) {
                 int x = vtx == 0 ? cases[c].raw[k] : 0; /* vertices 1, 2 are zero */
-                if (size == 1) vbuf[vtx * stride + k] = (unsigned char)(x & 0xff);
-                else { int16_t h = (int16_t)x; memcpy(vbuf + vtx * stride + 2 * k, &h, 2); }
+                if (size == 1)
+                    vbuf[vtx * stride + k] = (unsigned char)(x & 0xff);
+                else {
+                    int16_t h = (int16_t)x;
+                    memcpy(vbuf + vtx * stride + 2 * k, &h, 2);
+                }
             }
         add_acc(&m, add_view(&m, vbuf, 3 * stride, stride), 0, cases[c].ctype, 3, "VEC3",
                 cases[c].normalized);
         unsigned char ibuf[12] = {0};
         int it = index_types[c % 3], isz = it == 5121 ? 1 : it == 5123 ? 2 : 4;
-        for (int i = 0; i < 3; i++) ibuf[i * isz] = (unsigned char)(2 - i); /* 2, 1, 0 */
+        for (int i = 0; i < 3; i++)
+            ibuf[i * isz] = (unsigned char)(2 - i); /* 2, 1, 0 */
         add_acc(&m, add_view(&m, ibuf, (size_t)(3 * isz), 0), 0, it, 3, "SCALAR", 0);
-        const char *rest = "\"extensionsUsed\":[\"KHR_mesh_quantization\"],"
-                           "\"extensionsRequired\":[\"KHR_mesh_quantization\"],"
-                           "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},"
-                           "\"indices\":1}]}],\"nodes\":[{\"mesh\":0}],"
-                           "\"scenes\":[{\"nodes\":[0]}]";
+        const char *rest =
+            "\"extensionsUsed\":[\"KHR_mesh_quantization\"],"
+            "\"extensionsRequired\":[\"KHR_mesh_quantization\"],"
+            "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},"
+            "\"indices\":1}]}],\"nodes\":[{\"mesh\":0}],"
+            "\"scenes\":[{\"nodes\":[0]}]";
         kdr_gltf_scene s;
         if (!load_ok(write_model(&m, "quant.glb", AS_GLB, rest), &s)) continue;
         CHECK(s.ntris == 1, "%zu", s.ntris);
@@ -431,19 +446,23 @@ static void test_stride_offsets(void) {
     float inter[2 + 3 * 6];
     inter[0] = inter[1] = -1; /* 8 bytes skipped by the accessor's byteOffset */
     for (int i = 0; i < 3; i++) {
-        for (int k = 0; k < 3; k++) inter[2 + 6 * i + k] = kTri[3 * i + k] + 0.5f;
-        for (int k = 0; k < 3; k++) inter[2 + 6 * i + 3 + k] = 1e30f; /* the normal */
+        for (int k = 0; k < 3; k++)
+            inter[2 + 6 * i + k] = kTri[3 * i + k] + 0.5f;
+        for (int k = 0; k < 3; k++)
+            inter[2 + 6 * i + 3 + k] = 1e30f; /* the normal */
     }
     int view = add_view(&m, inter, sizeof inter - 12, 24); /* last normal cut off */
     add_acc(&m, view, 8, 5126, 3, "VEC3", 0);
-    const char *rest = "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
-                       "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
+    const char *rest =
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
     for (int kind = 0; kind < 3; kind++) {
         static const char *names[3] = {"stride.gltf", "stride.glb", "stride_ext.gltf"};
         kdr_gltf_scene s;
         if (!load_ok(write_model(&m, names[kind], (file_kind)kind, rest), &s)) continue;
         CHECK(s.ntris == 1 && near3(s.tris, 0.5f, 0.5f, 0.5f) &&
-                  near3(s.tris + 3, 1.5f, 0.5f, 0.5f) && near3(s.tris + 6, 0.5f, 1.5f, 0.5f),
+                  near3(s.tris + 3, 1.5f, 0.5f, 0.5f) &&
+                  near3(s.tris + 6, 0.5f, 1.5f, 0.5f),
               "%s: strided positions", names[kind]);
         kdr_gltf_free(&s);
     }
@@ -467,7 +486,8 @@ static void test_empty_and_free(void) {
 
 /* ---- errors --------------------------------------------------------------- */
 
-static const char *one_tri_file(const char *name, const char *mesh_json, const char *extra) {
+static const char *one_tri_file(const char *name, const char *mesh_json,
+                                const char *extra) {
     static char rest[2048];
     model m = {0};
     float v[9];
@@ -475,13 +495,16 @@ static const char *one_tri_file(const char *name, const char *mesh_json, const c
     add_positions(&m, v, 3);
     uint16_t idx[3] = {0, 1, 2};
     add_indices_u16(&m, idx, 3);
-    snprintf(rest, sizeof rest, "\"meshes\":[%s],\"nodes\":[{\"mesh\":0}],"
-             "\"scenes\":[{\"nodes\":[0]}]%s", mesh_json, extra);
+    snprintf(rest, sizeof rest,
+             "\"meshes\":[%s],\"nodes\":[{\"mesh\":0}],"
+             "\"scenes\":[{\"nodes\":[0]}]%s",
+             mesh_json, extra);
     return write_model(&m, name, AS_DATA_URI, rest);
 }
 
 static void test_errors_structure(void) {
-    const char *prim = "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]}";
+    const char *prim =
+        "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]}";
     LOAD_FAILS(one_tri_file("draco.gltf", prim,
                             ",\"extensionsRequired\":[\"KHR_draco_mesh_compression\"]"),
                "unsupported");
@@ -490,13 +513,15 @@ static void test_errors_structure(void) {
                "unsupported");
     LOAD_FAILS(one_tri_file("draco_prim.gltf",
                             "{\"primitives\":[{\"attributes\":{\"POSITION\":0},"
-                            "\"extensions\":{\"KHR_draco_mesh_compression\":{}}}]}", ""),
-               "unsupported");
-    LOAD_FAILS(one_tri_file("noposition.gltf", "{\"primitives\":[{\"attributes\":{}}]}", ""),
-               "POSITION");
-    LOAD_FAILS(one_tri_file("badmode.gltf",
-                            "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"mode\":7}]}",
+                            "\"extensions\":{\"KHR_draco_mesh_compression\":{}}}]}",
                             ""),
+               "unsupported");
+    LOAD_FAILS(
+        one_tri_file("noposition.gltf", "{\"primitives\":[{\"attributes\":{}}]}", ""),
+        "POSITION");
+    LOAD_FAILS(one_tri_file(
+                   "badmode.gltf",
+                   "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"mode\":7}]}", ""),
                "mode");
     LOAD_FAILS(one_tri_file("badacc.gltf",
                             "{\"primitives\":[{\"attributes\":{\"POSITION\":9}}]}", ""),
@@ -506,11 +531,13 @@ static void test_errors_structure(void) {
                "POSITION must be VEC3");
     LOAD_FAILS(one_tri_file("posidx.gltf",
                             "{\"primitives\":[{\"attributes\":{\"POSITION\":0},"
-                            "\"indices\":0}]}", ""),
+                            "\"indices\":0}]}",
+                            ""),
                "indices must be SCALAR");
     LOAD_FAILS(one_tri_file("badmesh.gltf", prim, ",\"scene\":3"), "scene 3");
-    LOAD_FAILS(one_tri_file("wrongtype.gltf", prim, ",\"materials\":[{\"doubleSided\":1}]"),
-               "materials[0].doubleSided");
+    LOAD_FAILS(
+        one_tri_file("wrongtype.gltf", prim, ",\"materials\":[{\"doubleSided\":1}]"),
+        "materials[0].doubleSided");
     LOAD_FAILS(one_tri_file("badjson.gltf", prim, ",\"extras\":0}"), "JSON");
 }
 
@@ -518,28 +545,32 @@ static void test_errors_geometry(void) {
     model m = {0};
     float v[9] = {0, 0, 0, 1, NAN, 0, 0, 1, 0};
     add_positions(&m, v, 3);
-    const char *rest = "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
-                       "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
+    const char *rest =
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
     LOAD_FAILS(write_model(&m, "nan.gltf", AS_DATA_URI, rest),
                "node 0 mesh 0 primitive 0: position 1 is not finite");
 
     /* A huge scale overflows float only after the transform. */
     model h = {0};
     add_positions(&h, kTri, 3);
-    LOAD_FAILS(write_model(&h, "overflow.gltf", AS_DATA_URI,
-                           "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
-                           "\"nodes\":[{\"mesh\":0,\"scale\":[1e300,1,1]}],"
-                           "\"scenes\":[{\"nodes\":[0]}]"),
-               "not finite");
+    LOAD_FAILS(
+        write_model(&h, "overflow.gltf", AS_DATA_URI,
+                    "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+                    "\"nodes\":[{\"mesh\":0,\"scale\":[1e300,1,1]}],"
+                    "\"scenes\":[{\"nodes\":[0]}]"),
+        "not finite");
 
     model r = {0};
     add_positions(&r, kTri, 3);
     uint16_t idx[3] = {0, 1, 3};
     add_indices_u16(&r, idx, 3);
-    add_acc(&r, 0, 4, 5126, 3, "VEC3", 0);         /* 2: 4 bytes past the view */
-    add_acc(&r, 0, 0, 5126, 3, "VEC3", 0);         /* 3: fine */
+    add_acc(&r, 0, 4, 5126, 3, "VEC3", 0);            /* 2: 4 bytes past the view */
+    add_acc(&r, 0, 0, 5126, 3, "VEC3", 0);            /* 3: fine */
     add_acc(&r, -1, 0, 5126, 3221225475u, "VEC3", 0); /* 4: no view, 2^30 + 1 triangles */
-    static const struct { const char *name, *prim, *want; } bad[] = {
+    static const struct {
+        const char *name, *prim, *want;
+    } bad[] = {
         {"idx_range.gltf", "\"indices\":1", "index 3 is out of range"},
         {"acc_range.gltf", "\"indices\":2", "exceeds bufferView"},
         {"too_many.gltf", "\"indices\":4", "more than 2^30"},
@@ -549,7 +580,10 @@ static void test_errors_geometry(void) {
         snprintf(rest2, sizeof rest2,
                  "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":%d},%s}]}],"
                  "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]",
-                 i == 1 ? 2 : i == 2 ? 4 : 0, i == 0 ? bad[i].prim : "\"mode\":4");
+                 i == 1   ? 2
+                 : i == 2 ? 4
+                          : 0,
+                 i == 0 ? bad[i].prim : "\"mode\":4");
         LOAD_FAILS(write_model(&r, bad[i].name, AS_DATA_URI, rest2), bad[i].want);
     }
 }
@@ -566,8 +600,10 @@ static void test_errors_views(void) {
     strcpy(big.views, "{\"buffer\":0,\"byteOffset\":8,\"byteLength\":36}");
     LOAD_FAILS(write_model(&big, "view_range.gltf", AS_DATA_URI, rest), "exceeds buffer");
     model stride = m;
-    strcpy(stride.views, "{\"buffer\":0,\"byteOffset\":0,\"byteLength\":36,\"byteStride\":8}");
-    LOAD_FAILS(write_model(&stride, "stride_small.gltf", AS_DATA_URI, rest), "byteStride");
+    strcpy(stride.views,
+           "{\"buffer\":0,\"byteOffset\":0,\"byteLength\":36,\"byteStride\":8}");
+    LOAD_FAILS(write_model(&stride, "stride_small.gltf", AS_DATA_URI, rest),
+               "byteStride");
     model sparse = m;
     strcpy(sparse.accs, "{\"bufferView\":0,\"componentType\":5126,\"count\":3,"
                         "\"type\":\"VEC3\",\"sparse\":{\"count\":1,"
@@ -577,7 +613,8 @@ static void test_errors_views(void) {
     model four = {0};
     float v4[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0};
     add_positions(&four, v4, 4);
-    LOAD_FAILS(write_model(&four, "multi3.gltf", AS_DATA_URI, rest), "not a multiple of 3");
+    LOAD_FAILS(write_model(&four, "multi3.gltf", AS_DATA_URI, rest),
+               "not a multiple of 3");
     LOAD_FAILS(write_model(&m, "cycle.gltf", AS_DATA_URI,
                            "\"nodes\":[{\"children\":[1]},{\"children\":[0]}],"
                            "\"scenes\":[{\"nodes\":[0]}]"),
@@ -621,8 +658,9 @@ static void test_errors_limits(void) {
         add_positions(&m, kTri, 3);
         /* positions: 3 * 2^30 zero vertices, an accessor without bufferView */
         add_acc(&m, -1, 0, 5126, (size_t)3 << 30, "VEC3", 0);
-        const char *rest = "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":1}}]}],"
-                           "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
+        const char *rest =
+            "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":1}}]}],"
+            "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]";
         LOAD_FAILS(write_model(&m, "bomb.gltf", AS_DATA_URI, rest), "GiB");
     }
 }
@@ -633,10 +671,11 @@ static void test_truncation_garbage(void) {
     add_positions(&m, kTri, 3);
     uint16_t idx[3] = {0, 1, 2};
     add_indices_u16(&m, idx, 3);
-    const char *full = write_model(&m, "whole.glb", AS_GLB,
-                                   "\"meshes\":[{\"primitives\":[{\"attributes\":"
-                                   "{\"POSITION\":0},\"indices\":1}]}],"
-                                   "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]");
+    const char *full =
+        write_model(&m, "whole.glb", AS_GLB,
+                    "\"meshes\":[{\"primitives\":[{\"attributes\":"
+                    "{\"POSITION\":0},\"indices\":1}]}],"
+                    "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]");
     FILE *f = fopen(full, "rb");
     unsigned char buf[4096];
     size_t n = f ? fread(buf, 1, sizeof buf, f) : 0;
@@ -729,7 +768,9 @@ int main(void) {
     test_truncation_garbage();
     test_mutations();
     remove_tmpdir();
-    if (failures) fprintf(stderr, "test_scenes: %d failure(s)\n", failures);
-    else printf("test_scenes: all passed\n");
+    if (failures)
+        fprintf(stderr, "test_scenes: %d failure(s)\n", failures);
+    else
+        printf("test_scenes: all passed\n");
     return failures ? 1 : 0;
 }

@@ -16,7 +16,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     static char path[64];
-    if (!path[0]) snprintf(path, sizeof path, "scenes-fuzz-input-%ld.gltf", (long)getpid());
+    if (!path[0])
+        snprintf(path, sizeof path, "scenes-fuzz-input-%ld.gltf", (long)getpid());
     FILE *f = fopen(path, "wb");
     if (!f) return 0;
     size_t written = fwrite(data, 1, size, f);

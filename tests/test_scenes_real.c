@@ -41,9 +41,11 @@ static void check_invariants(const char *path, const kdr_gltf_scene *s) {
         if (s->ranges[i].first_prim != next) bad++;
         next += s->ranges[i].count;
     }
-    CHECK(bad == 0 && next == s->ntris, "%s: ranges do not tile [0, %zu)", path, s->ntris);
+    CHECK(bad == 0 && next == s->ntris, "%s: ranges do not tile [0, %zu)", path,
+          s->ntris);
     size_t nonfinite = 0;
-    for (size_t i = 0; i < 9 * s->ntris; i++) nonfinite += !isfinite(s->tris[i]);
+    for (size_t i = 0; i < 9 * s->ntris; i++)
+        nonfinite += !isfinite(s->tris[i]);
     CHECK(nonfinite == 0, "%s: %zu non-finite coordinates", path, nonfinite);
 }
 
@@ -83,7 +85,8 @@ static void area_normal(const kdr_gltf_scene *s, double n[3]) {
     for (size_t t = 0; t < s->ntris; t++) {
         const float *p = s->tris + 9 * t;
         double a[3], b[3];
-        for (int k = 0; k < 3; k++) a[k] = p[3 + k] - p[k], b[k] = p[6 + k] - p[k];
+        for (int k = 0; k < 3; k++)
+            a[k] = p[3 + k] - p[k], b[k] = p[6 + k] - p[k];
         n[0] += a[1] * b[2] - a[2] * b[1];
         n[1] += a[2] * b[0] - a[0] * b[2];
         n[2] += a[0] * b[1] - a[1] * b[0];
@@ -99,7 +102,8 @@ static void check_primitive_modes(const char *dir) {
     for (size_t i = 0; i < sizeof tri_modes / sizeof tri_modes[0]; i++) {
         char path[1024], err[512];
         snprintf(path, sizeof path,
-                 "%s/glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_%02d.gltf",
+                 "%s/glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/"
+                 "Mesh_PrimitiveMode_%02d.gltf",
                  dir, tri_modes[i]);
         kdr_gltf_scene s;
         if (kdr_gltf_load(path, &s, err, sizeof err) != 0) {
@@ -111,7 +115,8 @@ static void check_primitive_modes(const char *dir) {
         area_normal(&s, n);
         if (i == 0) memcpy(ref, n, sizeof ref);
         CHECK(s.ntris == 2 && fabs(n[0] - ref[0]) < 1e-5 && fabs(n[1] - ref[1]) < 1e-5 &&
-                  fabs(n[2] - ref[2]) < 1e-5 && fabs(ref[0]) + fabs(ref[1]) + fabs(ref[2]) > 0.1,
+                  fabs(n[2] - ref[2]) < 1e-5 &&
+                  fabs(ref[0]) + fabs(ref[1]) + fabs(ref[2]) > 0.1,
               "mode model %02d: %zu triangles, area normal (%g %g %g) vs (%g %g %g)",
               tri_modes[i], s.ntris, n[0], n[1], n[2], ref[0], ref[1], ref[2]);
         kdr_gltf_free(&s);
@@ -120,9 +125,10 @@ static void check_primitive_modes(const char *dir) {
     static const int other_modes[] = {0, 1, 2, 3, 7, 8, 9, 10};
     for (size_t i = 0; i < sizeof other_modes / sizeof other_modes[0]; i++) {
         char rel[128];
-        snprintf(rel, sizeof rel,
-                 "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_%02d.gltf",
-                 other_modes[i]);
+        snprintf(
+            rel, sizeof rel,
+            "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_%02d.gltf",
+            other_modes[i]);
         expect_count(dir, rel, 0);
     }
 }
@@ -157,8 +163,8 @@ static int run_models(const char *dir) {
     expect_error(dir, "glTF2/RecursiveNodes/RecursiveNodes.gltf", "cycle");
     expect_error(dir, "glTF2/MissingBin/BoxTextured.gltf", "BoxTextured0.bin");
     expect_error(dir, "glTF2/TestNoRootNode/NoScene.gltf", "no scene");
-    static const char *wrong[] = {"badArray", "badExtension", "badNumber",
-                                  "badObject", "badString", "badUint"};
+    static const char *wrong[] = {"badArray",  "badExtension", "badNumber",
+                                  "badObject", "badString",    "badUint"};
     for (size_t i = 0; i < sizeof wrong / sizeof wrong[0]; i++) {
         char rel[128];
         snprintf(rel, sizeof rel, "glTF2/wrongTypes/%s.gltf", wrong[i]);
@@ -228,15 +234,21 @@ static int run_ladder(const char *file) {
 
 int main(int argc, char **argv) {
     if (argc != 3) {
-        fprintf(stderr, "usage: test_scenes_real models DIR | default PATH | ladder FILE\n");
+        fprintf(stderr,
+                "usage: test_scenes_real models DIR | default PATH | ladder FILE\n");
         return 2;
     }
     int rc;
-    if (strcmp(argv[1], "models") == 0) rc = run_models(argv[2]);
-    else if (strcmp(argv[1], "default") == 0) rc = run_default(argv[2]);
-    else if (strcmp(argv[1], "ladder") == 0) rc = run_ladder(argv[2]);
-    else rc = 2;
+    if (strcmp(argv[1], "models") == 0)
+        rc = run_models(argv[2]);
+    else if (strcmp(argv[1], "default") == 0)
+        rc = run_default(argv[2]);
+    else if (strcmp(argv[1], "ladder") == 0)
+        rc = run_ladder(argv[2]);
+    else
+        rc = 2;
     if (rc) return rc;
-    if (failures) fprintf(stderr, "test_scenes_real %s: %d failure(s)\n", argv[1], failures);
+    if (failures)
+        fprintf(stderr, "test_scenes_real %s: %d failure(s)\n", argv[1], failures);
     return failures ? 1 : 0;
 }
