@@ -126,6 +126,7 @@ typedef struct KB(state) {
     float sorg[3]; /* the origin, when every lane has the same one */
     int shared;
     VF live;   /* lanes still searching (any-hit lanes leave on a hit) */
+    VF lane_steps, tri_tests; /* per-lane counters (V(count)) */
     VF limit;  /* kd_term_bound(best_t) on live lanes, -inf elsewhere */
     int any;
 } KB(state);
@@ -155,15 +156,14 @@ KB_FN VF KB(ties)(const KB(state) *st, VF eq, int32_t prim) {
 }
 
 /* Tests the leaf's triangles against the active lanes. */
-KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
-                    KB(bundle) *b) {
+KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st,
+                    VF act) {
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
-    int nact = kd_lane_count(V(bits)(act));
     for (uint32_t r = 0; r < cnt; r++) {
         const int32_t prim = (int32_t)refs[r];
         VF t, Vv, W, det;
-        b->tri_tests += (uint64_t)nact;
+        st->tri_tests = V(count)(st->tri_tests, act);
         VF hit = KB(tri_test_raw)(&st->tp, s->tris + 9 * (size_t)prim, act,
                                   st->tmin, st->best_t, &t, &Vv, &W, &det);
         if (!V(bits)(hit))
@@ -171,7 +171,7 @@ KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st, VF act,
         if (st->any) {
             st->live = V(andnot)(hit, st->live);
             act = V(andnot)(hit, act);
-            if (!(nact = kd_lane_count(V(bits)(act))))
+            if (!V(bits)(act))
                 break;
             continue;
         }
@@ -309,22 +309,25 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
     KB(entry) stack[KD_MAX_DEPTH + 1];
     int sp = 0;
     KB(cursor) c = {t_near, t_far, KB(active)(st, t_near, t_far), 0};
+    uint64_t steps = 0;
     for (;;) {
         const kd_node *n = &s->nodes[c.node];
-        b->steps++;
-        b->lane_steps += (uint64_t)kd_lane_count(V(bits)(c.act));
+        steps++;
+        st->lane_steps = V(count)(st->lane_steps, c.act);
         if (!kd_is_leaf(n)) {
             const float a = n->u.split - st->sorg[kd_axis(n)];
             if (st->shared && a != 0.0f ? KB(step_shared)(st, n, a, &c, stack, &sp)
                                            : KB(step_general)(st, n, &c, stack, &sp))
                 continue;
         } else {
-            KB(leaf)(s, n, st, c.act, b);
+            KB(leaf)(s, n, st, c.act);
         }
         /* pop the nearest entry that still has an active lane */
         for (;;) {
-            if (sp == 0)
+            if (sp == 0) {
+                b->steps = steps;
                 return;
+            }
             const KB(entry) *e = &stack[--sp];
             c.act = KB(active)(st, e->t_near, e->t_far);
             if (V(bits)(c.act)) {
@@ -443,9 +446,12 @@ KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
     st.best_u = st.best_v = V(set1)(0.0f);
     st.best_prim = V(seti)(-1);
     st.live = V(bitmask)(b->lanes);
+    st.lane_steps = st.tri_tests = V(seti)(0);
     st.any = any;
     KB(update_limit)(&st);
     KB(walk)(s, &st, t_near, t_far, b);
+    b->lane_steps = V(count_sum)(st.lane_steps);
+    b->tri_tests = V(count_sum)(st.tri_tests);
     V(store)(b->best_t, st.best_t);
     V(store)(b->best_u, st.best_u);
     V(store)(b->best_v, st.best_v);

@@ -59,6 +59,16 @@ static inline f4 f4_bitmask(int bits) {
 }
 /* int32 lanes carried in a float vector (selects are bitwise) */
 static inline f4 f4_seti(int32_t x) { return _mm_castsi128_ps(_mm_set1_epi32(x)); }
+/* Per-lane counters: +1 in the lanes of mask m (all-ones is -1 as int32). */
+static inline f4 f4_count(f4 acc, f4 m) {
+    return _mm_castsi128_ps(_mm_sub_epi32(_mm_castps_si128(acc), _mm_castps_si128(m)));
+}
+/* Sum of the int32 lanes of a counter. */
+static inline uint64_t f4_count_sum(f4 acc) {
+    _Alignas(16) int32_t v[4];
+    _mm_store_si128((__m128i *)v, _mm_castps_si128(acc));
+    return (uint64_t)v[0] + (uint64_t)v[1] + (uint64_t)v[2] + (uint64_t)v[3];
+}
 
 /* Number of set bits in a lane mask (<= 8 lanes). A table, because the
  * baseline build has no popcnt instruction and __builtin_popcount would be
@@ -103,6 +113,18 @@ KD_AVX2 static inline f8 f8_bitmask(int bits) {
 }
 KD_AVX2 static inline f8 f8_seti(int32_t x) {
     return _mm256_castsi256_ps(_mm256_set1_epi32(x));
+}
+KD_AVX2 static inline f8 f8_count(f8 acc, f8 m) {
+    return _mm256_castsi256_ps(
+        _mm256_sub_epi32(_mm256_castps_si256(acc), _mm256_castps_si256(m)));
+}
+KD_AVX2 static inline uint64_t f8_count_sum(f8 acc) {
+    _Alignas(32) int32_t v[8];
+    _mm256_store_si256((__m256i *)v, _mm256_castps_si256(acc));
+    uint64_t sum = 0;
+    for (int j = 0; j < 8; j++)
+        sum += (uint64_t)v[j];
+    return sum;
 }
 KD_AVX2 static inline f8 f8_loadu(const float *p) { return _mm256_loadu_ps(p); }
 /* Lane j gets v[idx[j]]; idx holds int32 lane indices (0..7) as bits. */
