@@ -12,6 +12,9 @@
 
 #define KD_TILE_MIN 4u
 #define KD_TILE_MAX 64u
+/* Images are at most this many pixels (KDR_ERANGE beyond): the traversal
+ * keeps pixel indices in int32 lanes. */
+#define KD_MAX_PIXELS 0x7fffffffull
 /* pi / 360: turns fov_y in degrees into the half angle in radians */
 #define KD_HALF_DEG_TO_RAD 0.008726646259971647884618453842443
 
@@ -137,6 +140,8 @@ static int check_args(const kdr_scene *scene, const kdr_camera *cam,
     if (mode != KDR_FRUSTUM_MULTI4 && mode != KDR_FRUSTUM_SINGLE &&
         mode != KDR_FRUSTUM_RAYS)
         return KDR_EINVAL;
+    if ((unsigned long long)cam->width * cam->height > KD_MAX_PIXELS)
+        return KDR_ERANGE;
     const size_t ntiles = kdr_frustum_tile_count(cam, tile);
     if (first_tile > ntiles || count > ntiles - first_tile)
         return KDR_EINVAL;

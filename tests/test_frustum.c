@@ -417,6 +417,11 @@ static void check_args(const kdr_scene *s) {
         if (rc != cases[k].want)
             FAIL("argument case %zu: got %d want %d\n", k, rc, cases[k].want);
     }
+    kdr_camera huge = cam;
+    huge.width = huge.height = 65536; /* 2^32 pixels: over the limit */
+    if (kdr_frustum_trace(s, &huge, 8, 0, 1, KDR_CLOSEST, KDR_FRUSTUM_MULTI4, &out,
+                          NULL) != KDR_ERANGE)
+        FAIL("a 2^32-pixel image was accepted\n");
     kdr_camera bad[6];
     for (int k = 0; k < 6; k++)
         bad[k] = cam;
