@@ -12,10 +12,11 @@
  * the box, views along the axes (with odd image sizes a pixel column and
  * row have direction components exactly 0, so tiles straddle an axis),
  * eyes exactly on split planes read from the tree (some looking along the
- * plane, so rays lie in it), narrow and very wide fields of view. Images of
- * odd sizes with partial tiles, tiles of 4, 5, 8, 16 and 64, traced in
- * chunks of 1..7 tiles so lane sets are partial and ranges disjoint. One
- * scene is also checked directly against Embree; argument errors too.
+ * plane, so rays lie in it), eyes 10^4 scene sizes away, fields of view
+ * from 0.01 to 179.5 degrees. Images of odd sizes with partial tiles,
+ * tiles of 4, 5, 8, 16 and 64, traced in chunks of 1..7 tiles so lane sets
+ * are partial and ranges disjoint. One scene is also checked directly
+ * against Embree; argument errors and the image-size limit too.
  */
 #include <math.h>
 #include <stdio.h>
@@ -198,10 +199,10 @@ static void random_point(const kdr_bounds *b, float scale, float p[3]) {
 }
 
 static void camera_init(kdr_camera *cam, int k) {
-    static const float fovs[] = {60.0f, 30.0f, 90.0f, 2.0f, 150.0f, 45.0f};
+    static const float fovs[] = {60.0f, 30.0f, 90.0f, 2.0f, 150.0f, 45.0f, 179.5f, 0.01f};
     memset(cam, 0, sizeof *cam);
     cam->up[1] = 1.0f;
-    cam->fov_y_deg = fovs[k % 6];
+    cam->fov_y_deg = fovs[k % 8];
     cam->width = sizes[k % 8][0];
     cam->height = sizes[k % 8][1];
 }
@@ -217,7 +218,7 @@ static void camera_outside(const kdr_bounds *b, int k, kdr_camera *cam) {
     for (int a = 0; a < 3; a++)
         diag = fmaxf(diag, b->max[a] - b->min[a]);
     for (int a = 0; a < 3; a++)
-        cam->eye[a] = c[a] + dir[a] * diag * rnd_in(0.8f, 2.0f);
+        cam->eye[a] = c[a] + dir[a] * diag * (k % 5 == 4 ? 1e4f : rnd_in(0.8f, 2.0f));
     random_point(b, 0.5f, cam->target);
     stress_rng_dir(&g_rng, cam->up);
 }
