@@ -29,13 +29,6 @@ static void batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
     r->tmax = b->tmax ? b->tmax[b->tmax_stride * i] : INFINITY;
 }
 
-/* Bundles assume t >= 0 (the paper's "negative distance is +inf" would be
- * wrong behind the origin), so a negative tmin goes alone as well. */
-int kd_batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
-    batch_read(b, i, r);
-    return kd_ray_valid(r->org, r->dir, r->tmin, r->tmax) && r->tmin >= 0.0f;
-}
-
 void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
                      kdr_query q, kdr_hits *out, kdr_trav_stats *stats) {
     kdr_ray r;

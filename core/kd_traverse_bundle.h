@@ -60,10 +60,6 @@ void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                       size_t count, kdr_query q, int flags, kdr_hits *out,
                       kdr_trav_stats *stats);
 
-/* Loads ray i of a batch; 0 if it must be traced alone (NaN or infinite
- * input, zero direction, negative tmin, tmax < tmin). Defined in
- * kd_batch.c. */
-int kd_batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r);
 /* Traces ray i alone and writes its result (kd_batch.c). */
 void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
                      kdr_query q, kdr_hits *out, kdr_trav_stats *stats);
@@ -343,24 +339,38 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
  * a harmless ray. */
 KB_FN void KB(gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
                       KB(bundle) *b, int *alone) {
-    b->lanes = 0;
-    *alone = 0;
     for (int j = 0; j < KB_W; j++) {
-        const kdr_ray dummy = {{0, 0, 0}, {1, 1, 1}, 0.0f, 0.0f};
-        kdr_ray r = dummy;
-        if (j < n && kd_batch_ray(rb, ids[j], &r))
-            b->lanes |= 1 << j;
-        else if (j < n)
-            *alone |= 1 << j, r = dummy;
+        const size_t i = ids[j < n ? j : 0];
+        const float *o = rb->org + rb->org_stride * i, *d = rb->dir + 3 * i;
         for (int k = 0; k < 3; k++) {
-            b->org[k][j] = r.org[k];
-            b->dir[k][j] = r.dir[k];
+            b->org[k][j] = o[k];
+            b->dir[k][j] = d[k];
         }
-        b->tmin[j] = r.tmin;
-        b->best_t[j] = r.tmax;
+        b->tmin[j] = rb->tmin ? rb->tmin[rb->tmin_stride * i] : 0.0f;
+        b->best_t[j] = rb->tmax ? rb->tmax[rb->tmax_stride * i] : INFINITY;
         b->best_u[j] = b->best_v[j] = 0.0f;
         b->best_prim[j] = -1;
     }
+    /* a bundle takes finite (x - x == 0) rays with a non-zero direction and
+     * 0 <= tmin <= tmax (false for NaN): t >= 0 is what makes the paper's
+     * "negative means behind" rule right; the others go alone */
+    const VF zero = V(set1)(0.0f);
+    VF ok = V(le)(zero, V(load)(b->tmin)), nonzero = V(seti)(0);
+    ok = V(and)(ok, V(le)(V(load)(b->tmin), V(load)(b->best_t)));
+    for (int k = 0; k < 3; k++) {
+        const VF o = V(load)(b->org[k]), d = V(load)(b->dir[k]);
+        ok = V(and)(ok, V(and)(V(eq)(V(sub)(o, o), zero), V(eq)(V(sub)(d, d), zero)));
+        nonzero = V(or)(nonzero, V(andnot)(V(eq)(d, zero), V(seti)(-1)));
+    }
+    const int used = (1 << n) - 1, good = V(bits)(V(and)(ok, nonzero)) & used;
+    b->lanes = good;
+    *alone = used & ~good;
+    for (int j = 0; j < KB_W; j++) /* a harmless ray where none is traced */
+        if (!((good >> j) & 1)) {
+            for (int k = 0; k < 3; k++)
+                b->org[k][j] = 0.0f, b->dir[k][j] = 1.0f;
+            b->tmin[j] = b->best_t[j] = 0.0f;
+        }
 }
 
 /* kd_ray_slack's scene part (a max, so its order does not matter). */
