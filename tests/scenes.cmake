@@ -19,6 +19,23 @@ if(TARGET kdray_scenes)
   add_test(NAME scenes_ladder COMMAND test_scenes_real ladder ${KDRAY_SCENE_DIR}/ladder.txt)
   set_tests_properties(scenes_models scenes_ladder PROPERTIES SKIP_RETURN_CODE 77)
   set_tests_properties(scenes_ladder PROPERTIES FIXTURES_REQUIRED scenes)
+
+  # An independent oracle for transforms, hierarchy and numbering: assimp's
+  # OBJ export flattens the same file in the same order; every triangle must
+  # match. (Skipped, 77, without assimp or the model.)
+  set(KDRAY_G2 /usr/share/assimp/models/glTF2)
+  foreach(pair "engine=${KDRAY_G2}/2CylinderEngine-glTF-Binary/2CylinderEngine.glb"
+               "clearcoat=${KDRAY_G2}/ClearCoat-glTF/ClearCoatTest.gltf"
+               "texture_transform=${KDRAY_G2}/textureTransform/TextureTransformTest.gltf"
+               "default=${CMAKE_SOURCE_DIR}/scenes/default.glb")
+    string(REPLACE "=" ";" kv "${pair}")
+    list(GET kv 0 name)
+    list(GET kv 1 file)
+    add_test(NAME scenes_vs_assimp_${name}
+             COMMAND sh -c "command -v assimp >/dev/null && [ -f '${file}' ] || exit 77; assimp export '${file}' 'assimp_${name}.obj' >/dev/null && '$<TARGET_FILE:test_scenes_real>' obj 'assimp_${name}.obj' '${file}'"
+             WORKING_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR})
+    set_tests_properties(scenes_vs_assimp_${name} PROPERTIES SKIP_RETURN_CODE 77)
+  endforeach()
 endif()
 
 if(TARGET kdray_scene_info)

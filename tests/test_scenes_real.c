@@ -9,6 +9,8 @@
  *   test_scenes_real ladder FILE    every scene of ladder.txt loads with the
  *                                   count scenes/count_triangles.py gave,
  *                                   and the loader's time is printed
+ *   test_scenes_real obj OBJ GLTF   GLTF's triangles equal, in order, those
+ *                                   `assimp export GLTF OBJ` wrote
  * Exit 77 (ctest skip) when the models or ladder are not installed.
  */
 #define _POSIX_C_SOURCE 200809L
@@ -233,10 +235,90 @@ static int run_ladder(const char *file) {
     return 0;
 }
 
+/* Reads an OBJ's triangles (v and f lines; faces must be triangles) into a
+ * flat array of 9 floats per triangle. Returns the count, or -1. */
+static long read_obj(const char *path, float **out) {
+    FILE *f = fopen(path, "r");
+    if (!f) return -1;
+    size_t nv = 0, cv = 1024, nt = 0, ct = 1024;
+    float *v = malloc(cv * 3 * sizeof *v), *t = malloc(ct * 9 * sizeof *t);
+    char line[512];
+    long rc = 0;
+    while (rc == 0 && v && t && fgets(line, sizeof line, f)) {
+        if (line[0] == 'v' && line[1] == ' ') {
+            if (nv == cv) v = realloc(v, (cv *= 2) * 3 * sizeof *v);
+            if (v && sscanf(line + 2, "%f %f %f", &v[3 * nv], &v[3 * nv + 1],
+                            &v[3 * nv + 2]) == 3)
+                nv++;
+        } else if (line[0] == 'f' && line[1] == ' ') {
+            long idx[4];
+            int k = 0;
+            for (char *tok = strtok(line + 2, " \t\r\n"); tok && k < 4;
+                 tok = strtok(NULL, " \t\r\n"))
+                idx[k++] = strtol(tok, NULL, 10);
+            if (k != 3) rc = -1;
+            if (nt == ct) t = realloc(t, (ct *= 2) * 9 * sizeof *t);
+            for (int c = 0; c < 3 && rc == 0 && t; c++) {
+                if (idx[c] < 1 || (size_t)idx[c] > nv) rc = -1;
+                else memcpy(t + 9 * nt + 3 * c, v + 3 * (idx[c] - 1), 3 * sizeof *t);
+            }
+            nt++;
+        }
+    }
+    fclose(f);
+    free(v);
+    if (rc || !t) {
+        free(t);
+        return -1;
+    }
+    *out = t;
+    return (long)nt;
+}
+
+/* The loader against assimp's own flattening of the same file (its OBJ
+ * export writes every node's meshes in world space, in the same node,
+ * primitive and index order): same triangles, same order, same corners. */
+static int run_obj(const char *obj, const char *gltf) {
+    char err[512];
+    float *ref = NULL;
+    long nref = read_obj(obj, &ref);
+    if (nref < 0) {
+        fprintf(stderr, "%s: cannot read as a triangle OBJ\n", obj);
+        return 1;
+    }
+    kdr_gltf_scene s;
+    if (kdr_gltf_load(gltf, &s, err, sizeof err) != 0) {
+        fprintf(stderr, "%s\n", err);
+        free(ref);
+        return 1;
+    }
+    CHECK((size_t)nref == s.ntris, "%s: %zu triangles, assimp %ld", gltf, s.ntris, nref);
+    float extent = 1.0f, worst = 0.0f;
+    for (size_t i = 0; i < 9 * s.ntris; i++)
+        if (fabsf(s.tris[i]) > extent) extent = fabsf(s.tris[i]);
+    size_t bad = 0, n = (size_t)nref < s.ntris ? (size_t)nref : s.ntris;
+    for (size_t i = 0; i < 9 * n; i++) {
+        float e = fabsf(s.tris[i] - ref[i]);
+        if (e > worst) worst = e;
+        bad += e > 1e-5f * extent;
+    }
+    CHECK(bad == 0, "%s: %zu coordinates differ from assimp's by more than %g", gltf, bad,
+          1e-5 * extent);
+    printf("%s: %zu triangles match assimp's flattening (max |diff| %g, extent %g)\n", gltf,
+           n, worst, extent);
+    kdr_gltf_free(&s);
+    free(ref);
+    return 0;
+}
+
 int main(int argc, char **argv) {
+    if (argc == 4 && strcmp(argv[1], "obj") == 0) {
+        int rc = run_obj(argv[2], argv[3]);
+        return rc ? rc : failures ? 1 : 0;
+    }
     if (argc != 3) {
-        fprintf(stderr,
-                "usage: test_scenes_real models DIR | default PATH | ladder FILE\n");
+        fprintf(stderr, "usage: test_scenes_real models DIR | default PATH | ladder FILE |"
+                        " obj OBJ GLTF\n");
         return 2;
     }
     int rc;
