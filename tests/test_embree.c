@@ -2,9 +2,10 @@
  * test_embree.c — the kd-tree's single-ray queries (kdr_intersect1,
  * kdr_occluded1) against Embree 3, ray by ray.
  *
- *   test_embree stress [rays]          every stress scene x every ray kind,
- *                                      plus bit-exact equality with the
- *                                      brute-force reference and inside rays
+ *   test_embree stress [rays [brute]]  every stress scene x every ray kind
+ *                                      and inside rays; with "brute", also
+ *                                      bit-exact equality with the
+ *                                      brute-force reference
  *   test_embree ladder DIR [max_tris [rays [KINDS]]]
  *                                      the real-scene ladder (DIR/ladder.txt),
  *                                      scenes up to max_tris triangles, rays
@@ -14,8 +15,8 @@
  *                                      all but those
  *
  * Fails on any unexplained disagreement (see tests/support/compare.h), any
- * ray from inside a closed mesh that misses, and (stress) any difference
- * from brute force. Exit 77 (skip) only when the ladder was never fetched.
+ * ray from inside a closed mesh that misses, and (stress brute) any
+ * difference from brute force. Exit 77 (skip) only when the ladder was never fetched.
  */
 #include <math.h>
 #include <stdio.h>
@@ -131,7 +132,7 @@ static int build_both(const stress_scene *s, kdr_scene **kd, oracle **o) {
     return 0;
 }
 
-static int run_stress(size_t nrays, suite *out) {
+static int run_stress(size_t nrays, int brute, suite *out) {
     kdr_ray *rays = malloc(nrays * sizeof *rays);
     if (!rays)
         return -1;
@@ -150,7 +151,7 @@ static int run_stress(size_t nrays, suite *out) {
                      stress_ray_name((stress_ray_kind)rk));
             stress_rays(&s, (stress_ray_kind)rk, SEED + (uint64_t)rk, nrays,
                         rays);
-            run_set(label, &s, kd, o, rays, nrays, 1, out);
+            run_set(label, &s, kd, o, rays, nrays, brute, out);
         }
         run_inside(stress_scene_name(s.kind), &s, kd, o, out);
         oracle_free(o);
@@ -261,7 +262,8 @@ int main(int argc, char **argv) {
     cmp_tally_init(&s.any);
     int rc;
     if (argc >= 2 && strcmp(argv[1], "stress") == 0) {
-        rc = run_stress(argc >= 3 ? strtoul(argv[2], NULL, 10) : STRESS_RAYS, &s);
+        rc = run_stress(argc >= 3 ? strtoul(argv[2], NULL, 10) : STRESS_RAYS,
+                        argc >= 4 && strcmp(argv[3], "brute") == 0, &s);
     } else if (argc >= 3 && strcmp(argv[1], "ladder") == 0) {
         rc = run_ladder(argv[2],
                         argc >= 4 ? strtoul(argv[3], NULL, 10) : (size_t)-1,
@@ -271,7 +273,7 @@ int main(int argc, char **argv) {
             return SKIP;
     } else {
         fprintf(stderr,
-                "usage: %s stress [rays] | ladder DIR [max_tris [rays [KINDS]]]\n",
+                "usage: %s stress [rays [brute]] | ladder DIR [max_tris [rays [KINDS]]]\n",
                 argv[0]);
         return 2;
     }

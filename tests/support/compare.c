@@ -250,7 +250,15 @@ static cmp_class explain_embree_only(const float *tris, size_t ntris,
         return c;
     kdr_hit ref;
     ref_intersect1(tris, ntris, r, &ref);
-    return ref.prim == kd->prim ? c : CMP_NCLASSES;
+    if (ref.prim == kd->prim)
+        return c;
+    /* Brute force found a hit kd did not: acceptable only for a miss, and
+     * only when that hit is itself decided by rounding (e.g. a sliver whose
+     * float t rounds to tmin while its exact t lies before it). */
+    const float *b = tri_at(tris, ntris, ref.prim);
+    return kd->prim < 0 && b && reason_at(r, b, ref.t) != CMP_NCLASSES
+               ? c
+               : CMP_NCLASSES;
 }
 
 /* kd hits tri, Embree does not see it (or sees something farther). */
