@@ -25,14 +25,11 @@ add_executable(test_embree ${CMAKE_CURRENT_SOURCE_DIR}/test_embree.c)
 target_link_libraries(test_embree PRIVATE kdray_testsupport)
 # Real scenes: the rungs up to 200K triangles always (3000 rays per kind),
 # every rung with 10000 rays per kind in the slow (non-sanitizer) pass.
-# Directions with FLT_MIN-sized components are tested apart (embree_ladder_tiny_dir):
-# they hit an open core bug (docs/ACCURACY.md) and are DISABLED below.
-add_test(NAME embree_ladder COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 200000 3000 -denormal)
-add_test(NAME embree_ladder_all COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 2000000 10000 -denormal)
-add_test(NAME embree_ladder_tiny_dir COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 2000000 10000 denormal)
-set_tests_properties(embree_ladder embree_ladder_all embree_ladder_tiny_dir PROPERTIES
+add_test(NAME embree_ladder COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 200000 3000)
+add_test(NAME embree_ladder_all COMMAND test_embree ladder ${KDRAY_SCENE_DIR} 2000000 10000)
+set_tests_properties(embree_ladder embree_ladder_all PROPERTIES
                      FIXTURES_REQUIRED scenes_fetch SKIP_RETURN_CODE 77)
-set_tests_properties(embree_ladder_all embree_ladder_tiny_dir PROPERTIES LABELS slow)
+set_tests_properties(embree_ladder_all PROPERTIES LABELS slow)
 
 # Every query kind vs Embree, single rays and watertightness (issue 7).
 add_executable(test_accuracy ${CMAKE_CURRENT_SOURCE_DIR}/test_accuracy.c)
@@ -49,5 +46,4 @@ endforeach()
 add_test(NAME accuracy_single COMMAND test_accuracy single)
 add_test(NAME embree_stress COMMAND test_embree stress)
 add_test(NAME embree_stress_brute COMMAND test_embree stress 3000 brute)
-set_tests_properties(embree_stress_brute embree_ladder_tiny_dir
-                     PROPERTIES DISABLED TRUE)
+set_tests_properties(embree_stress_brute PROPERTIES DISABLED TRUE)
