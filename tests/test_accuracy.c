@@ -6,18 +6,22 @@
  * visibilities equal to the fraction of unblocked samples. A kind whose
  * function is missing or returns an error fails.
  *
- *   test_accuracy [KIND...]   KIND: single bundle4 bundle8 frustum_multi4
- *                             frustum_single cone_shadow
+ *   test_accuracy [--rays N] [KIND...]
+ *                             KIND: single bundle4 bundle8 frustum_multi4
+ *                             frustum_single cone_shadow (default: all);
+ *                             N rays per stress scene and ray kind
  */
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "accuracy.h"
 
-static int wanted(int argc, char **argv, acc_kind k) {
-    if (argc < 2)
+/* argv[first..argc) are kind names; none means all. */
+static int wanted(int argc, char **argv, int first, acc_kind k) {
+    if (argc <= first)
         return 1;
-    for (int i = 1; i < argc; i++)
+    for (int i = first; i < argc; i++)
         if (strcmp(argv[i], acc_kind_name(k)) == 0)
             return 1;
     return 0;
@@ -26,11 +30,16 @@ static int wanted(int argc, char **argv, acc_kind k) {
 int main(int argc, char **argv) {
     acc_opts opt;
     acc_opts_default(&opt);
+    int first = 1;
+    if (argc >= 3 && strcmp(argv[1], "--rays") == 0) {
+        opt.rays = strtoul(argv[2], NULL, 10);
+        first = 3;
+    }
     int fail = 0, ran = 0;
     acc_result res[ACC_NKINDS];
     memset(res, 0, sizeof res);
     for (int k = 0; k < ACC_NKINDS; k++) {
-        if (!wanted(argc, argv, (acc_kind)k))
+        if (!wanted(argc, argv, first, (acc_kind)k))
             continue;
         ran++;
         if (acc_run((acc_kind)k, &opt, &res[k]) != 0) {
@@ -42,10 +51,10 @@ int main(int argc, char **argv) {
     }
     acc_print_header(stdout);
     for (int k = 0; k < ACC_NKINDS; k++)
-        if (wanted(argc, argv, (acc_kind)k))
+        if (wanted(argc, argv, first, (acc_kind)k))
             acc_print_row(stdout, (acc_kind)k, &res[k]);
     for (int k = 0; k < ACC_NKINDS; k++)
-        if (wanted(argc, argv, (acc_kind)k) && acc_failures(&res[k]))
+        if (wanted(argc, argv, first, (acc_kind)k) && acc_failures(&res[k]))
             acc_print_details(stdout, (acc_kind)k, &res[k]);
     if (ran == 0) {
         printf("no such query kind\n");

@@ -51,7 +51,10 @@ void acc_judge(const stress_scene *s, const kdr_scene *kd, const oracle *o,
         kdr_intersect1(kd, r, &h, NULL);
         differs = !hit_same(&h, kd_closest) ||
                   kdr_occluded1(kd, r, NULL) != kd_any;
-        res->not_single += differs;
+        if (differs && res->not_single++ == 0) {
+            res->first_not_single = *r;
+            res->first_not_single_scene = stress_scene_name(s->kind);
+        }
     }
     if (differs && (cmp_is_unexplained(c) || cmp_is_unexplained(ca)))
         res->own_unexplained++;
@@ -283,6 +286,14 @@ void acc_print_details(FILE *f, acc_kind k, const acc_result *r) {
     snprintf(label, sizeof label, "%s any", acc_kind_name(k));
     cmp_tally_print(f, label, &r->any);
     cmp_tally_print_bad(f, label, &r->any);
+    if (r->not_single) {
+        const kdr_ray *x = &r->first_not_single;
+        fprintf(f, "  %s first answer differing from kdr_intersect1/"
+                   "kdr_occluded1 (scene %s): org %a %a %a dir %a %a %a "
+                   "tmin %a tmax %a\n",
+                acc_kind_name(k), r->first_not_single_scene, x->org[0], x->org[1], x->org[2], x->dir[0],
+                x->dir[1], x->dir[2], x->tmin, x->tmax);
+    }
     if (k == ACC_CONE)
         fprintf(f, "  cone pairs %llu, Embree fraction differs %llu\n",
                 (unsigned long long)r->pairs,

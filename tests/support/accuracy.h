@@ -13,6 +13,7 @@
 #include <stdio.h>
 
 #include "compare.h"
+#include "kdray.h"
 
 typedef enum acc_kind {
     ACC_SINGLE = 0,     /* kdr_intersect1 / kdr_occluded1 */
@@ -29,6 +30,8 @@ typedef struct acc_result {
     cmp_tally any;         /* vs Embree; for cones: every shadow sample */
     uint64_t not_single;   /* answers not bit-identical to kdr_intersect1 /
                               kdr_occluded1 on the same ray */
+    kdr_ray first_not_single; /* valid when not_single > 0 */
+    const char *first_not_single_scene;
     uint64_t own_unexplained; /* unexplained vs Embree and not inherited
                                  from the single-ray answer (bundles and
                                  frusta equal to single rays inherit its
