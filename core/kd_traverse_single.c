@@ -15,6 +15,10 @@
 #include "kd_internal.h"
 #include "kd_traverse.h"
 #include "kd_tri.h"
+#include "kd_tri_multi.h"
+
+/* Leaves with at least this many references are tested four at a time. */
+#define KD_LEAF_SIMD_MIN 3
 
 typedef struct kd_todo {
     const kd_node *node;
@@ -60,14 +64,63 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
     return n;
 }
 
+/* Keeps hit (t, prim) when it beats the best by the tie rule. */
+static inline void keep_hit(walk_out *o, float t, int32_t prim, float u,
+                            float v) {
+    if (kd_hit_better(t, prim, o->t, o->prim)) {
+        o->t = t;
+        o->u = u;
+        o->v = v;
+        o->prim = prim;
+    }
+}
+
+/* Tests four references at once (the last group repeats its final
+ * reference); returns 1 at a hit when any != 0. All four use the best t at
+ * the start of the group as tmax: a hit the scalar loop would reject with a
+ * tighter tmax loses the tie rule anyway, so the best hit is the same. */
+static inline int test_group(const kdr_scene *s, const uint32_t *ref,
+                             uint32_t left, const kd_ray_pre4 *pre4,
+                             float tmin, const int any, walk_out *o) {
+    const float *rows[4];
+    int32_t prims[4];
+    for (uint32_t j = 0; j < 4; j++) {
+        prims[j] = (int32_t)ref[j < left ? j : left - 1];
+        rows[j] = s->tris + 9 * (size_t)prims[j];
+    }
+    f4 t, V, W, det;
+    const int hits = kd_tri4_intersect(pre4, rows, f4_set1(tmin), f4_set1(o->t),
+                                       &t, &V, &W, &det);
+    if (!hits)
+        return 0;
+    if (any)
+        return 1;
+    _Alignas(16) float tv[4], vv[4], wv[4], dv[4];
+    f4_store(tv, t);
+    f4_store(vv, V);
+    f4_store(wv, W);
+    f4_store(dv, det);
+    for (int j = 0; j < 4; j++)
+        if ((hits >> j) & 1 && kd_hit_better(tv[j], prims[j], o->t, o->prim))
+            keep_hit(o, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+    return 0;
+}
+
 /* Tests every triangle of leaf n over [tmin, best t] and keeps the best by
- * the tie rule; returns 1 at the first hit when any != 0. */
+ * the tie rule; returns 1 at the first hit when any != 0. Leaves of at least
+ * KD_LEAF_SIMD_MIN references go four at a time. */
 static inline int test_leaf(const kdr_scene *s, const kd_node *n,
-                            const kd_ray_pre *pre, float tmin, const int any,
-                            walk_out *o) {
+                            const kd_ray_pre *pre, const kd_ray_pre4 *pre4,
+                            float tmin, const int any, walk_out *o) {
     const uint32_t *ref = s->refs + n->u.first;
     const uint32_t count = kd_count(n);
     o->tests += count;
+    if (count >= KD_LEAF_SIMD_MIN) {
+        for (uint32_t i = 0; i < count; i += 4)
+            if (test_group(s, ref + i, count - i, pre4, tmin, any, o))
+                return 1;
+        return 0;
+    }
     for (uint32_t i = 0; i < count; i++) {
         float t, u, v;
         const int32_t prim = (int32_t)ref[i];
@@ -76,12 +129,7 @@ static inline int test_leaf(const kdr_scene *s, const kd_node *n,
             continue;
         if (any)
             return 1;
-        if (kd_hit_better(t, prim, o->t, o->prim)) {
-            o->t = t;
-            o->u = u;
-            o->v = v;
-            o->prim = prim;
-        }
+        keep_hit(o, t, prim, u, v);
     }
     return 0;
 }
@@ -104,13 +152,15 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
         return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
+    kd_ray_pre4 pre4;
+    kd_ray_pre4_init(&pre, &pre4);
     const kd_node *nodes = s->nodes;
     kd_todo stack[KD_MAX_DEPTH];
     int sp = 0;
     const kd_node *n = nodes;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
-        if (test_leaf(s, n, &pre, r->tmin, any, o))
+        if (test_leaf(s, n, &pre, &pre4, r->tmin, any, o))
             return 1;
         const float bound = kd_term_bound(o->t);
         do {
