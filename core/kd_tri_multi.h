@@ -108,8 +108,10 @@ static inline int kd_tri4_intersect(const kd_ray_pre4 *p, const float *const r[4
     const f4 det = f4_add(f4_add(U, V), W);
     const f4 ok = f4_andnot(f4_or(f4_and(neg, pos), f4_eq(det, zero)),
                             f4_seti(-1));
-    if (!f4_bits(ok))
+    if (!f4_bits(ok)) {
+        *t_out = *V_out = *W_out = *det_out = zero;
         return 0;
+    }
     const f4 az = f4_mul(p->sz, Az0), bz = f4_mul(p->sz, Bz0),
              cz = f4_mul(p->sz, Cz0);
     const f4 T = f4_add(f4_add(f4_mul(U, az), f4_mul(V, bz)), f4_mul(W, cz));

@@ -22,3 +22,8 @@ if(TARGET kdray_scenes AND TARGET embree)
   add_executable(test_core_perf ${CMAKE_CURRENT_SOURCE_DIR}/test_core_perf.c)
   target_link_libraries(test_core_perf PRIVATE kdray_core kdray_scenes embree)
 endif()
+
+# The four-triangle single-ray test against the scalar one, bit for bit.
+add_executable(test_core_tri4 ${CMAKE_CURRENT_SOURCE_DIR}/test_core_tri4.c)
+target_include_directories(test_core_tri4 PRIVATE ${CMAKE_SOURCE_DIR}/core)
+add_test(NAME test_core_tri4 COMMAND test_core_tri4)
