@@ -45,6 +45,7 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
         const float t_lo = (a - ss[axis]) * inv[axis];
         const float t_hi = (a + ss[axis]) * inv[axis];
         const kd_node *below = n + 1, *above = nodes + kd_above(n);
+        __builtin_prefetch(above);
         const kd_node *nearc = neg[axis] ? above : below;
         const kd_node *farc = neg[axis] ? below : above;
         if (t_lo > *tf) {
