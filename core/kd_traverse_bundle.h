@@ -39,8 +39,9 @@
  *
  * Lanes are active while t_near <= t_far and t_near <= kd_term_bound(best_t)
  * (any-hit lanes leave once they hit); a bundle pops when no lane is active.
- * Rays a bundle cannot take (NaN/inf input, zero direction, tmin < 0 where
- * "negative means behind" breaks, tmax < tmin) are traced alone.
+ * Rays a bundle cannot take (NaN/inf input, zero direction, a subnormal
+ * direction component, tmin < 0 where "negative means behind" breaks,
+ * tmax < tmin) are traced alone.
  */
 #ifndef KD_TRAVERSE_BUNDLE_DECL
 #define KD_TRAVERSE_BUNDLE_DECL
@@ -351,15 +352,20 @@ KB_FN void KB(gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
         b->best_u[j] = b->best_v[j] = 0.0f;
         b->best_prim[j] = -1;
     }
-    /* a bundle takes finite (x - x == 0) rays with a non-zero direction and
+    /* a bundle takes finite (x - x == 0) rays with a non-zero direction, no
+     * subnormal direction component, and
      * 0 <= tmin <= tmax (false for NaN): t >= 0 is what makes the paper's
      * "negative means behind" rule right; the others go alone */
     const VF zero = V(set1)(0.0f);
+    const VF tiny = V(set1)(FLT_MIN), ntiny = V(set1)(-FLT_MIN);
     VF ok = V(le)(zero, V(load)(b->tmin)), nonzero = V(seti)(0);
     ok = V(and)(ok, V(le)(V(load)(b->tmin), V(load)(b->best_t)));
     for (int k = 0; k < 3; k++) {
         const VF o = V(load)(b->org[k]), d = V(load)(b->dir[k]);
         ok = V(and)(ok, V(and)(V(eq)(V(sub)(o, o), zero), V(eq)(V(sub)(d, d), zero)));
+        /* a subnormal direction component (its reciprocal overflows): the
+         * single walk decides how such a ray is traced (kd_traverse.h) */
+        ok = V(and)(ok, V(or)(V(eq)(d, zero), V(or)(V(le)(tiny, d), V(le)(d, ntiny))));
         nonzero = V(or)(nonzero, V(andnot)(V(eq)(d, zero), V(seti)(-1)));
     }
     const int used = (1 << n) - 1, good = V(bits)(V(and)(ok, nonzero)) & used;
