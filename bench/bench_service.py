@@ -13,6 +13,17 @@ flatter the core). The table gives rays/s both ways and their ratio (HTTP
 rays/s / in-process rays/s; the gap is parsing, encoding and transport).
 The 1-ray round-trip median comes from wrk --latency with one connection
 and from a plain keep-alive Python loop.
+
+    bench_service.py KDRAYD KDRAY_TRACE --soak 60 [--soak-only]
+
+adds a soak run (the issue's "zero errors and no growth in memory under a
+60-second wrk run"): wrk on 127.0.0.1 for 60 s, its Lua script cycling
+bundle (JSON and base64, closest and any), cone-shadow and frustum bodies;
+kdrayd's VmRSS and open descriptors are sampled every second. It prints wrk's
+non-2xx answers and socket errors (both must be 0), RSS after the warm-up
+(5 s), half-way and at the end, and checks that the /metrics request
+counters grew by wrk's request count (plus at most the requests still in
+flight when wrk stopped). Exit status 1 if any check fails.
 """
 
 import argparse
@@ -41,6 +52,32 @@ wrk.headers["Content-Type"] = "application/json"
 local f = assert(io.open(os.getenv("KDRAY_BODY"), "rb"))
 wrk.body = f:read("*a")
 f:close()
+"""
+
+
+SOAK_WARMUP_S = 5       # RSS reference point: caches, arenas, pools are warm
+SOAK_CONNS = 4
+SOAK_RSS_SLACK_KIB = 1024  # end - half-way RSS allowed (allocator noise)
+SOAK_LUA = """
+-- Cycles the bodies listed in KDRAY_SOAK (lines "PATH BODYFILE"); each wrk
+-- thread starts at a different offset so every kind is always in flight.
+local reqs = {}
+local i = 0
+function init(args)
+  for line in io.lines(os.getenv("KDRAY_SOAK")) do
+    local path, file = line:match("^(%S+) (%S+)$")
+    local f = assert(io.open(file, "rb"))
+    local body = f:read("*a")
+    f:close()
+    reqs[#reqs + 1] = wrk.format("POST", path,
+      {["Content-Type"] = "application/json"}, body)
+  end
+  i = math.random(#reqs)
+end
+function request()
+  i = i % #reqs + 1
+  return reqs[i]
+end
 """
 
 
@@ -134,6 +171,161 @@ def python_rtt(url, body):
     return statistics.median(times)
 
 
+def soak_bodies(bounds):
+    """(path suffix, payload) pairs covering every query kind and both
+    encodings, small enough that wrk completes thousands of each."""
+    lo, hi = bounds["min"], bounds["max"]
+    size = max(b - a for a, b in zip(lo, hi)) or 1.0
+    c = [(a + b) / 2 for a, b in zip(lo, hi)]
+    origin, dirs = rays(bounds, 4096, seed=7)
+    rng = random.Random(11)
+    pts = [rng.uniform(lo[k % 3], hi[k % 3]) for k in range(3 * 64)]
+    nrm = [0.0, 1.0, 0.0] * 64
+    light = {"center": [c[0], hi[1] + size, c[2]], "radius": 0.1 * size}
+    light2 = {"center": [hi[0] + size, c[1], c[2]], "radius": 0.05 * size}
+    origins = [origin[k % 3] for k in range(3 * 1024)]
+    cam = {"eye": origin, "target": c, "up": [0, 1, 0], "fov_y_deg": 60}
+    return [
+        ("bundle", {"origins": origin, "directions": dirs[:3 * 1024]}),
+        ("bundle", {"origins": f32_b64(origin), "directions": f32_b64(dirs),
+                    "encoding": "base64"}),
+        ("bundle", {"origins": f32_b64(origins), "directions": f32_b64(dirs[:3 * 1024]),
+                    "tmax": f32_b64([0.5] * 1024), "query": "any",
+                    "encoding": "base64"}),
+        ("bundle", {"origins": origin, "directions": dirs[:3]}),
+        ("cone-shadow", {"points": pts, "normals": nrm, "lights": [light, light2],
+                         "samples": 16, "seed": 3, "stats": True}),
+        ("cone-shadow", {"points": f32_b64(pts), "lights": [light], "samples": 64,
+                         "encoding": "base64"}),
+        ("frustum", {"camera": dict(cam, width=128, height=96), "tile": 8,
+                     "encoding": "base64"}),
+        ("frustum", {"camera": dict(cam, width=32, height=32), "tile": 16,
+                     "query": "any", "encoding": "json"}),
+    ]
+
+
+def scrape(url):
+    """(requests answered on the query endpoints, error answers) from /metrics."""
+    text = Client(url).metrics()
+    total = errors = 0
+    for m in re.finditer(r'^kdray_http_(requests|errors)_total\{endpoint="([^"]+)"'
+                         r',status="\d+"\} (\d+)$', text, re.M):
+        if m.group(2) in ("bundle", "cone-shadow", "frustum"):
+            if m.group(1) == "requests":
+                total += int(m.group(3))
+            else:
+                errors += int(m.group(3))
+    return total, errors
+
+
+def proc_sample(pid):
+    """(VmRSS KiB, open descriptors) of a process."""
+    with open("/proc/%d/status" % pid) as f:
+        rss = int(re.search(r"^VmRSS:\s+(\d+) kB", f.read(), re.M).group(1))
+    return rss, len(os.listdir("/proc/%d/fd" % pid))
+
+
+def soak(url, pid, bounds, seconds, tmp):
+    manifest = os.path.join(tmp, "soak.txt")
+    with open(manifest, "w") as m:
+        for k, (ep, payload) in enumerate(soak_bodies(bounds)):
+            body = os.path.join(tmp, "soak-%d.json" % k)
+            with open(body, "w") as f:
+                json.dump(payload, f)
+            m.write("/v1/scenes/default/%s %s\n" % (ep, body))
+            status, _, _ = Client(url).request("POST", "/v1/scenes/default/" + ep,
+                                            json.dumps(payload).encode())
+            if status != 200:
+                raise SystemExit("soak body %d (%s) answered %d" % (k, ep, status))
+    lua = os.path.join(tmp, "soak.lua")
+    with open(lua, "w") as f:
+        f.write(SOAK_LUA)
+    before, err_before = scrape(url)
+    samples, stop = [], threading.Event()
+
+    def sampler():
+        t0 = time.monotonic()
+        while not stop.wait(max(0.0, len(samples) + 1 - (time.monotonic() - t0))):
+            samples.append((time.monotonic() - t0,) + proc_sample(pid))
+    th = threading.Thread(target=sampler, daemon=True)
+    th.start()
+    args = ["wrk", "-t", "2", "-c", str(SOAK_CONNS), "-d", "%ds" % seconds,
+            "--timeout", "10s", "-s", lua, url]
+    out = subprocess.run(args, capture_output=True, text=True, timeout=seconds + 60,
+                         env=dict(os.environ, KDRAY_SOAK=manifest)).stdout
+    stop.set()
+    th.join()
+    return soak_report(out, samples, seconds, before, err_before, scrape(url))
+
+
+def rss_at(samples, t):
+    return min(samples, key=lambda s: abs(s[0] - t))
+
+
+def soak_report(out, samples, seconds, before, err_before, after):
+    reqs = int(re.search(r"(\d+) requests in", out).group(1))
+    bad = re.search(r"Non-2xx or 3xx responses: (\d+)", out)
+    non2xx = int(bad.group(1)) if bad else 0
+    sock = re.search(r"Socket errors: connect (\d+), read (\d+), write (\d+), "
+                     r"timeout (\d+)", out)
+    sockerr = sum(map(int, sock.groups())) if sock else 0
+    served, errors = after[0] - before, after[1] - err_before
+    warm, half, end = (rss_at(samples, seconds * f) for f in
+                       (SOAK_WARMUP_S / seconds, 0.5, 1.0))
+    peak = max(s[1] for s in samples)
+    print("soak %d s, %d connections, 8 bodies (bundle json/base64/any, "
+          "cone-shadow json/base64, frustum base64/json):" % (seconds, SOAK_CONNS))
+    print("  wrk: %d requests (%.1f req/s), non-2xx %d, socket errors %d%s" % (
+        reqs, reqs / seconds, non2xx, sockerr,
+        " (%s)" % sock.group(0) if sock else ""))
+    print("  /metrics: %d query requests answered (wrk saw %d; up to %d may "
+          "finish after wrk stops), %d error answers" % (served, reqs, SOAK_CONNS,
+                                                         errors))
+    print("  kdrayd VmRSS: %.1f MiB at %.0f s, %.1f MiB at %.0f s, %.1f MiB at "
+          "%.0f s (end); growth %+d KiB since warm-up, %+d KiB over the second "
+          "half; peak %.1f MiB; open fds %d -> %d" % (
+              warm[1] / 1024, warm[0], half[1] / 1024, half[0], end[1] / 1024,
+              end[0], end[1] - warm[1], end[1] - half[1], peak / 1024, warm[2],
+              end[2]))
+    ok = (non2xx == 0 and sockerr == 0 and errors == 0
+          and 0 <= served - reqs <= SOAK_CONNS and end[2] <= warm[2]
+          and end[1] - half[1] <= SOAK_RSS_SLACK_KIB)
+    print("  soak: %s" % ("PASS" if ok else "FAIL"))
+    if not ok:
+        print(out)
+    return ok
+
+
+def throughput_table(args, url, scene, tmp):
+    lua = os.path.join(tmp, "post.lua")
+    with open(lua, "w") as f:
+        f.write(WRK_LUA)
+    endpoint = url + "/v1/scenes/default/bundle"
+    print("%-8s %-7s %10s %12s %14s %14s %7s" % (
+        "rays", "enc", "body KiB", "HTTP req/s", "HTTP rays/s", "core rays/s",
+        "ratio"))
+    one_ray_body = None
+    for n in BATCHES:
+        origin, dirs = rays(scene["bounds"], n, seed=n)
+        for enc in ("json", "base64"):
+            body = request_body(origin, dirs, enc)
+            path = os.path.join(tmp, "req-%d-%s.json" % (n, enc))
+            with open(path, "wb") as f:
+                f.write(body)
+            if n == 1 and enc == "json":
+                one_ray_body = (body, path)
+            conns = 4 if n < 65536 else 2
+            rps, _ = wrk_rate(endpoint, path, lua, args.seconds, conns)
+            core = core_rate(args.trace, args.scene, path, args.threads, n)
+            print("%-8d %-7s %10.1f %12.1f %14.3e %14.3e %7.3f" % (
+                n, enc, len(body) / 1024, rps, rps * n, core, rps * n / core),
+                flush=True)
+    _, p50 = wrk_rate(endpoint, one_ray_body[1], lua, args.seconds, 1, True)
+    py = python_rtt(url, one_ray_body[0])
+    print("1-ray round trip, median: wrk 1 connection %.1f us, Python "
+          "http.client keep-alive %.1f us" % (p50 * 1e6, py * 1e6))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("kdrayd")
@@ -141,6 +333,10 @@ def main():
     ap.add_argument("--scene", help="glTF file (default: the bundled scene)")
     ap.add_argument("--seconds", type=int, default=3, help="per wrk run")
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--soak", type=int, default=0, metavar="S",
+                    help="also run the S-second mixed-query soak (issue: 60)")
+    ap.add_argument("--soak-only", action="store_true",
+                    help="skip the throughput table and round trip")
     args = ap.parse_args()
     if not shutil.which("wrk"):
         raise SystemExit("wrk is not installed")
@@ -151,38 +347,18 @@ def main():
         scene = Client(url).scene("default")
         print("kdrayd %s: scene default, %d triangles, %d threads, loopback"
               % (url, scene["triangles"], args.threads))
-        lua = os.path.join(tmp, "post.lua")
-        with open(lua, "w") as f:
-            f.write(WRK_LUA)
-        endpoint = url + "/v1/scenes/default/bundle"
-        print("%-8s %-7s %10s %12s %14s %14s %7s" % (
-            "rays", "enc", "body KiB", "HTTP req/s", "HTTP rays/s", "core rays/s",
-            "ratio"))
-        one_ray_body = None
-        for n in BATCHES:
-            origin, dirs = rays(scene["bounds"], n, seed=n)
-            for enc in ("json", "base64"):
-                body = request_body(origin, dirs, enc)
-                path = os.path.join(tmp, "req-%d-%s.json" % (n, enc))
-                with open(path, "wb") as f:
-                    f.write(body)
-                if n == 1 and enc == "json":
-                    one_ray_body = (body, path)
-                conns = 4 if n < 65536 else 2
-                rps, _ = wrk_rate(endpoint, path, lua, args.seconds, conns)
-                core = core_rate(args.trace, args.scene, path, args.threads, n)
-                print("%-8d %-7s %10.1f %12.1f %14.3e %14.3e %7.3f" % (
-                    n, enc, len(body) / 1024, rps, rps * n, core, rps * n / core),
-                    flush=True)
-        _, p50 = wrk_rate(endpoint, one_ray_body[1], lua, args.seconds, 1, True)
-        py = python_rtt(url, one_ray_body[0])
-        print("1-ray round trip, median: wrk 1 connection %.1f us, Python "
-              "http.client keep-alive %.1f us" % (p50 * 1e6, py * 1e6))
+        ok = True
+        if not args.soak_only:
+            throughput_table(args, url, scene, tmp)
+        if args.soak:
+            ok = soak(url, proc.pid, scene["bounds"], args.soak, tmp)
     finally:
         proc.terminate()
         proc.wait(60)
         shutil.rmtree(tmp)
     print("bench_service: %.1f s" % (time.time() - t_start))
+    if not ok:
+        sys.exit(1)
 
 
 if __name__ == "__main__":

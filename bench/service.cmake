@@ -1,7 +1,9 @@
-# Service benchmark (owner: server): kdrayd over loopback HTTP (wrk + Lua)
+# Service benchmark (owner: soak): kdrayd over loopback HTTP (wrk + Lua)
 # against the core's in-process rate from kdray-trace in the same run, for
 # 1, 1K and 64K-ray bundles in JSON and base64, plus the 1-ray round trip.
-# Not a test: `cmake --build build --target bench_service` (< 1 min).
+# Not a test: `cmake --build build --target bench_service` (< 1 min);
+# `--target bench_service_soak` runs only the 60 s mixed-query soak (errors,
+# RSS growth, /metrics agreement).
 find_package(Python3 COMPONENTS Interpreter)
 if(Python3_Interpreter_FOUND AND TARGET kdrayd AND TARGET kdray_trace)
   add_custom_target(bench_service
@@ -10,4 +12,10 @@ if(Python3_Interpreter_FOUND AND TARGET kdrayd AND TARGET kdray_trace)
     DEPENDS kdrayd kdray_trace
     USES_TERMINAL
     COMMENT "kdrayd end-to-end throughput vs in-process core")
+  add_custom_target(bench_service_soak
+    COMMAND ${Python3_EXECUTABLE} ${CMAKE_CURRENT_SOURCE_DIR}/bench_service.py
+            $<TARGET_FILE:kdrayd> $<TARGET_FILE:kdray_trace> --soak 60 --soak-only
+    DEPENDS kdrayd kdray_trace
+    USES_TERMINAL
+    COMMENT "kdrayd 60 s soak: errors, memory, metrics")
 endif()
