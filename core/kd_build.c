@@ -36,6 +36,13 @@
 #define KD_BAD_SMALL 16                /* ... and not for nodes this small */
 #define KD_LOG_PHASES 1000000          /* log each phase above this size */
 #define KD_ROOT_PAD 0x1p-20f           /* root padding, relative (~8 ulps) */
+/* Default depth limit KD_DEPTH_BASE + KD_DEPTH_PER_LOG2 * log2(N): pbrt uses
+ * 8 + 1.3 log2 N; 6 builds 20-25% faster and smaller trees with the same
+ * single-ray speed (measured on haus, 2CylinderEngine, engine3), because
+ * the last levels mostly re-split clusters of tiny triangles that no plane
+ * separates. */
+#define KD_DEPTH_BASE 6.0
+#define KD_DEPTH_PER_LOG2 1.3
 
 enum { EV_END = 0, EV_PLANAR = 1, EV_START = 2 };
 enum { SIDE_BOTH = 0, SIDE_LEFT = 1, SIDE_RIGHT = 2 };
@@ -704,7 +711,9 @@ static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev) {
 
 static int max_depth_for(const kdr_build_opts *o, size_t n) {
     int d = o->max_depth > 0 ? o->max_depth
-                             : (int)lround(8.0 + 1.3 * log2((double)(n ? n : 1)));
+                             : (int)lround(KD_DEPTH_BASE +
+                                           KD_DEPTH_PER_LOG2 *
+                                               log2((double)(n ? n : 1)));
     return d < KD_MAX_DEPTH ? d : KD_MAX_DEPTH;
 }
 

@@ -54,7 +54,7 @@ typedef struct kdr_build_opts {
     float isect_cost;   /* cost of one ray-triangle test */
     float trav_cost;    /* cost of one interior-node step */
     float empty_bonus;  /* in [0,1): SAH discount for cutting off empty space */
-    int max_depth;      /* <= 0: 8 + 1.3 log2(N), as pbrt */
+    int max_depth;      /* <= 0: 6 + 1.3 log2(N) (pbrt: 8 + ...) */
     int leaf_size;      /* never split a node with at most this many refs */
 } kdr_build_opts;
 
