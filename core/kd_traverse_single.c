@@ -17,8 +17,10 @@
 #include "kd_tri.h"
 #include "kd_tri_multi.h"
 
-/* Leaves with at least this many references are tested four at a time. */
+/* Leaves with at least this many references are tested four at a time,
+ * and on AVX2 CPUs those with at least KD_LEAF_AVX2_MIN eight at a time. */
 #define KD_LEAF_SIMD_MIN 3
+#define KD_LEAF_AVX2_MIN 8
 
 typedef struct kd_todo {
     const kd_node *node;
@@ -107,15 +109,54 @@ static inline int test_group(const kdr_scene *s, const uint32_t *ref,
     return 0;
 }
 
+/* A leaf of at least 8 references, eight at a time; the last group is the
+ * last eight references (re-testing a reference cannot change the best hit:
+ * an equal (t, prim) is not better). Returns 1 at a hit when any != 0. Not
+ * inlined: the caller is not compiled for AVX2. */
+KD_AVX2 __attribute__((noinline)) static int
+test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
+           const kd_ray_pre *pre, float tmin, const int any, walk_out *o) {
+    kd_ray_pre8 pre8;
+    kd_ray_pre8_init(pre, &pre8);
+    const f8 tmin8 = f8_set1(tmin);
+    for (uint32_t i = 0; i < count; i += 8) {
+        const uint32_t base = i + 8 <= count ? i : count - 8;
+        const float *rows[8];
+        for (int j = 0; j < 8; j++)
+            rows[j] = s->tris + 9 * (size_t)ref[base + j];
+        f8 t, V, W, det;
+        const int hits = kd_tri8_intersect(&pre8, rows, tmin8, f8_set1(o->t), &t,
+                                           &V, &W, &det);
+        if (!hits)
+            continue;
+        if (any)
+            return 1;
+        _Alignas(32) float tv[8], vv[8], wv[8], dv[8];
+        f8_store(tv, t);
+        f8_store(vv, V);
+        f8_store(wv, W);
+        f8_store(dv, det);
+        for (int j = 0; j < 8; j++) {
+            const int32_t prim = (int32_t)ref[base + j];
+            if ((hits >> j) & 1 && kd_hit_better(tv[j], prim, o->t, o->prim))
+                keep_hit(o, tv[j], prim, vv[j] / dv[j], wv[j] / dv[j]);
+        }
+    }
+    return 0;
+}
+
 /* Tests every triangle of leaf n over [tmin, best t] and keeps the best by
  * the tie rule; returns 1 at the first hit when any != 0. Leaves of at least
  * KD_LEAF_SIMD_MIN references go four at a time. */
 static inline int test_leaf(const kdr_scene *s, const kd_node *n,
                             const kd_ray_pre *pre, const kd_ray_pre4 *pre4,
-                            float tmin, const int any, walk_out *o) {
+                            float tmin, const int any, const int avx2,
+                            walk_out *o) {
     const uint32_t *ref = s->refs + n->u.first;
     const uint32_t count = kd_count(n);
     o->tests += count;
+    if (avx2 && count >= KD_LEAF_AVX2_MIN)
+        return test_leaf8(s, ref, count, pre, tmin, any, o);
     if (count >= KD_LEAF_SIMD_MIN) {
         for (uint32_t i = 0; i < count; i += 4)
             if (test_group(s, ref + i, count - i, pre4, tmin, any, o))
@@ -155,13 +196,14 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     kd_ray_precompute(r->org, r->dir, &pre);
     kd_ray_pre4 pre4;
     kd_ray_pre4_init(&pre, &pre4);
+    const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     const kd_node *nodes = s->nodes;
     kd_todo stack[KD_MAX_DEPTH];
     int sp = 0;
     const kd_node *n = nodes;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
-        if (test_leaf(s, n, &pre, &pre4, r->tmin, any, o))
+        if (test_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
             return 1;
         const float bound = kd_term_bound(o->t);
         do {

@@ -1,6 +1,7 @@
 /*
- * test_core_tri4.c — kd_tri4_intersect (core/kd_tri_multi.h) against
- * kd_tri_intersect (core/kd_tri.h), lane by lane, bit for bit: hit mask, t,
+ * test_core_tri4.c — kd_tri4_intersect and kd_tri8_intersect (AVX2, when
+ * the CPU has it) of core/kd_tri_multi.h against kd_tri_intersect
+ * (core/kd_tri.h), lane by lane, bit for bit: hit mask, t,
  * u = V / det and v = W / det. Triangles are random, share vertices and
  * edges with the ray's target (so edge functions are exactly 0 and the
  * double fallback runs), repeat across lanes, and rays have every dominant
@@ -31,13 +32,44 @@ static float coord(void) {
 
 static int same(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
 
-static int check_round(void) {
-    float tris[4][9], org[3], dir[3];
-    for (int j = 0; j < 4; j++)
+/* Lane j of the wide test against the scalar test of tris[j]. */
+static int lane_bad(const kd_ray_pre *pre, const float *tri, float tmin,
+                    float tmax, int hit_lane, float t, float V, float W,
+                    float d) {
+    float st, su, sv;
+    const int hit = kd_tri_intersect(pre, tri, tmin, tmax, &st, &su, &sv);
+    if (hit != hit_lane)
+        return 1;
+    return hit && (!same(st, t) || !same(su, V / d) || !same(sv, W / d));
+}
+
+KD_AVX2 static int check8(const kd_ray_pre *pre, float tris[8][9], float tmin,
+                          float tmax) {
+    kd_ray_pre8 pre8;
+    kd_ray_pre8_init(pre, &pre8);
+    const float *rows[8];
+    for (int j = 0; j < 8; j++)
+        rows[j] = tris[j];
+    f8 t8, V8, W8, d8;
+    const int m = kd_tri8_intersect(&pre8, rows, f8_set1(tmin), f8_set1(tmax),
+                                    &t8, &V8, &W8, &d8);
+    _Alignas(32) float t[8], V[8], W[8], d[8];
+    f8_store(t, t8), f8_store(V, V8), f8_store(W, W8), f8_store(d, d8);
+    int bad = 0;
+    for (int j = 0; j < 8; j++)
+        bad |= lane_bad(pre, tris[j], tmin, tmax, (m >> j) & 1, t[j], V[j], W[j],
+                        d[j]);
+    return bad;
+}
+
+static int check_round(int avx2) {
+    float tris[8][9], org[3], dir[3];
+    for (int j = 0; j < 8; j++)
         for (int k = 0; k < 9; k++)
             tris[j][k] = coord();
-    if (rng & 2) /* a lane repeats another */
-        memcpy(tris[3], tris[(rng >> 2) & 3], sizeof tris[3]);
+    if (rng & 2) /* lanes repeat others */
+        for (int j = 3; j < 8; j += 4)
+            memcpy(tris[j], tris[(rng >> 2) & 3], sizeof tris[j]);
     for (int k = 0; k < 3; k++) {
         org[k] = 2.0f * coord();
         dir[k] = (rng & 4) ? coord() - org[k] : rnd(); /* maybe at a grid point */
@@ -56,22 +88,23 @@ static int check_round(void) {
     _Alignas(16) float t[4], V[4], W[4], d[4];
     f4_store(t, t4), f4_store(V, V4), f4_store(W, W4), f4_store(d, d4);
     int bad = 0;
-    for (int j = 0; j < 4; j++) {
-        float st, su, sv;
-        const int hit = kd_tri_intersect(&pre, tris[j], tmin, tmax, &st, &su, &sv);
-        if (hit != ((m >> j) & 1))
-            bad = 1;
-        else if (hit && (!same(st, t[j]) || !same(su, V[j] / d[j]) ||
-                         !same(sv, W[j] / d[j])))
-            bad = 1;
-    }
+    for (int j = 0; j < 4; j++)
+        bad |= lane_bad(&pre, tris[j], tmin, tmax, (m >> j) & 1, t[j], V[j], W[j],
+                        d[j]);
+    if (avx2)
+        bad |= check8(&pre, tris, tmin, tmax) << 1;
     return bad;
 }
 
 int main(void) {
-    int fails = 0;
-    for (int i = 0; i < ROUNDS; i++)
-        fails += check_round();
-    printf("test_core_tri4: %d of %d rounds differ\n", fails, ROUNDS);
-    return fails != 0;
+    const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
+    int fails4 = 0, fails8 = 0;
+    for (int i = 0; i < ROUNDS; i++) {
+        const int bad = check_round(avx2);
+        fails4 += bad & 1;
+        fails8 += bad >> 1;
+    }
+    printf("test_core_tri4: %d (4 lanes) and %d (8 lanes%s) of %d rounds differ\n",
+           fails4, fails8, avx2 ? "" : ", no AVX2: skipped", ROUNDS);
+    return fails4 + fails8 != 0;
 }
