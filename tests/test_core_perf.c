@@ -251,6 +251,8 @@ int main(int argc, char **argv) {
     kdr_build_opts_default(&opts);
     if (getenv("KDR_PERF_MAX_DEPTH")) /* experiments with the depth limit */
         opts.max_depth = atoi(getenv("KDR_PERF_MAX_DEPTH"));
+    if (getenv("KDR_PERF_LEAF"))
+        opts.leaf_size = atoi(getenv("KDR_PERF_LEAF"));
     if (getenv("KDR_PERF_ISECT"))
         opts.isect_cost = (float)atof(getenv("KDR_PERF_ISECT"));
     if (kdr_scene_build(tris, n, &opts, NULL, NULL, &s) != KDR_OK)
