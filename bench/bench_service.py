@@ -173,11 +173,12 @@ def python_rtt(url, body):
 
 def soak_bodies(bounds):
     """(path suffix, payload) pairs covering every query kind and both
-    encodings, small enough that wrk completes thousands of each."""
+    encodings; one 64K-ray batch for the large-buffer paths, the rest small
+    enough that wrk completes thousands of each."""
     lo, hi = bounds["min"], bounds["max"]
     size = max(b - a for a, b in zip(lo, hi)) or 1.0
     c = [(a + b) / 2 for a, b in zip(lo, hi)]
-    origin, dirs = rays(bounds, 4096, seed=7)
+    origin, dirs = rays(bounds, 65536, seed=7)
     rng = random.Random(11)
     pts = [rng.uniform(lo[k % 3], hi[k % 3]) for k in range(3 * 64)]
     nrm = [0.0, 1.0, 0.0] * 64
@@ -187,6 +188,8 @@ def soak_bodies(bounds):
     cam = {"eye": origin, "target": c, "up": [0, 1, 0], "fov_y_deg": 60}
     return [
         ("bundle", {"origins": origin, "directions": dirs[:3 * 1024]}),
+        ("bundle", {"origins": f32_b64(origin), "directions": f32_b64(dirs[:3 * 4096]),
+                    "encoding": "base64"}),
         ("bundle", {"origins": f32_b64(origin), "directions": f32_b64(dirs),
                     "encoding": "base64"}),
         ("bundle", {"origins": f32_b64(origins), "directions": f32_b64(dirs[:3 * 1024]),
@@ -273,8 +276,9 @@ def soak_report(out, samples, seconds, before, err_before, after):
     warm, half, end = (rss_at(samples, seconds * f) for f in
                        (SOAK_WARMUP_S / seconds, 0.5, 1.0))
     peak = max(s[1] for s in samples)
-    print("soak %d s, %d connections, 8 bodies (bundle json/base64/any, "
-          "cone-shadow json/base64, frustum base64/json):" % (seconds, SOAK_CONNS))
+    print("soak %d s, %d connections, 9 bodies (bundle 1 and 1K json, 4K and "
+          "64K base64, 1K any; cone-shadow json/base64; frustum base64/json):"
+          % (seconds, SOAK_CONNS))
     print("  wrk: %d requests (%.1f req/s), non-2xx %d, socket errors %d%s" % (
         reqs, reqs / seconds, non2xx, sockerr,
         " (%s)" % sock.group(0) if sock else ""))
