@@ -9,6 +9,12 @@
  * then smaller prim) then makes the answer independent of visiting order.
  * The walk ends when no pending subtree starts at or before
  * kd_term_bound(best_t).
+ *
+ * Speed (measured with tests/test_core_perf): node fetches are latency-bound
+ * for incoherent rays, so each interior step prefetches the above child;
+ * rays that start on surfaces (AO, shadows) spend most of their time in
+ * leaves of clustered small triangles, so leaves of 3+ references are tested
+ * 4 (SSE2) or 8 (AVX2) triangles at a time, bit-identical to kd_tri.h.
  */
 #include <math.h>
 
