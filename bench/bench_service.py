@@ -45,6 +45,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "clients"))
 from kdray_client import Client, f32_b64  # noqa: E402
 
 BATCHES = (1, 1024, 65536)
+SERVER_CHUNK_RAYS = 4096  # server/query.c CHUNK_RAYS: rays per pool job
 LATENCY_REQUESTS = 400
 WRK_LUA = """
 wrk.method = "POST"
@@ -324,6 +325,9 @@ def throughput_table(args, url, scene, tmp):
             print("%-8d %-7s %10.1f %12.1f %14.3e %14.3e %7.3f" % (
                 n, enc, len(body) / 1024, rps, rps * n, core, rps * n / core),
                 flush=True)
+    print("(batches under %d rays are one chunk: in-process they run on one "
+          "thread, while wrk's %d connections keep all %d HTTP threads busy, so "
+          "their ratio can exceed 1)" % (SERVER_CHUNK_RAYS, 4, args.threads))
     _, p50 = wrk_rate(endpoint, one_ray_body[1], lua, args.seconds, 1, True)
     py = python_rtt(url, one_ray_body[0])
     print("1-ray round trip, median: wrk 1 connection %.1f us, Python "
