@@ -23,7 +23,8 @@ kdrayd's VmRSS and open descriptors are sampled every second. It prints wrk's
 non-2xx answers and socket errors (both must be 0), RSS after the warm-up
 (5 s), half-way and at the end, and checks that the /metrics request
 counters grew by wrk's request count (plus at most the requests still in
-flight when wrk stopped). Exit status 1 if any check fails.
+flight when wrk stopped) and that kdrayd logged nothing (it logs only
+errors). Exit status 1 if any check fails.
 """
 
 import argparse
@@ -96,8 +97,11 @@ def start_daemon(kdrayd, scene, threads):
             break
     if not url:
         raise SystemExit("kdrayd did not start")
-    # Keep draining the log so the daemon never blocks on a full pipe.
-    threading.Thread(target=lambda: [None for _ in proc.stderr], daemon=True).start()
+    # Keep draining the log so the daemon never blocks on a full pipe; the
+    # soak counts what it logs (only errors and libmicrohttpd complaints).
+    proc.log = []
+    threading.Thread(target=lambda: [proc.log.append(l) for l in proc.stderr],
+                     daemon=True).start()
     return proc, url
 
 
@@ -229,7 +233,7 @@ def proc_sample(pid):
     return rss, len(os.listdir("/proc/%d/fd" % pid))
 
 
-def soak(url, pid, bounds, seconds, tmp):
+def soak(url, proc, bounds, seconds, tmp):
     manifest = os.path.join(tmp, "soak.txt")
     with open(manifest, "w") as m:
         for k, (ep, payload) in enumerate(soak_bodies(bounds)):
@@ -245,12 +249,13 @@ def soak(url, pid, bounds, seconds, tmp):
     with open(lua, "w") as f:
         f.write(SOAK_LUA)
     before, err_before = scrape(url)
+    log_before = len(proc.log)
     samples, stop = [], threading.Event()
 
     def sampler():
         t0 = time.monotonic()
         while not stop.wait(max(0.0, len(samples) + 1 - (time.monotonic() - t0))):
-            samples.append((time.monotonic() - t0,) + proc_sample(pid))
+            samples.append((time.monotonic() - t0,) + proc_sample(proc.pid))
     th = threading.Thread(target=sampler, daemon=True)
     th.start()
     args = ["wrk", "-t", "2", "-c", str(SOAK_CONNS), "-d", "%ds" % seconds,
@@ -259,14 +264,16 @@ def soak(url, pid, bounds, seconds, tmp):
                          env=dict(os.environ, KDRAY_SOAK=manifest)).stdout
     stop.set()
     th.join()
-    return soak_report(out, samples, seconds, before, err_before, scrape(url))
+    after = scrape(url)
+    logged = proc.log[log_before:]
+    return soak_report(out, samples, seconds, before, err_before, after, logged)
 
 
 def rss_at(samples, t):
     return min(samples, key=lambda s: abs(s[0] - t))
 
 
-def soak_report(out, samples, seconds, before, err_before, after):
+def soak_report(out, samples, seconds, before, err_before, after, logged):
     reqs = int(re.search(r"(\d+) requests in", out).group(1))
     bad = re.search(r"Non-2xx or 3xx responses: (\d+)", out)
     non2xx = int(bad.group(1)) if bad else 0
@@ -292,7 +299,9 @@ def soak_report(out, samples, seconds, before, err_before, after):
               warm[1] / 1024, warm[0], half[1] / 1024, half[0], end[1] / 1024,
               end[0], end[1] - warm[1], end[1] - half[1], peak / 1024, warm[2],
               end[2]))
-    ok = (non2xx == 0 and sockerr == 0 and errors == 0
+    print("  kdrayd log lines during the soak: %d%s" % (
+        len(logged), "".join("\n    " + l.rstrip() for l in logged[:5])))
+    ok = (non2xx == 0 and sockerr == 0 and errors == 0 and not logged
           and 0 <= served - reqs <= SOAK_CONNS and end[2] <= warm[2]
           and end[1] - half[1] <= SOAK_RSS_SLACK_KIB)
     print("  soak: %s" % ("PASS" if ok else "FAIL"))
@@ -359,7 +368,7 @@ def main():
         if not args.soak_only:
             throughput_table(args, url, scene, tmp)
         if args.soak:
-            ok = soak(url, proc.pid, scene["bounds"], args.soak, tmp)
+            ok = soak(url, proc, scene["bounds"], args.soak, tmp)
     finally:
         proc.terminate()
         proc.wait(60)
