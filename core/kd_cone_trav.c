@@ -128,6 +128,12 @@ static int cone_clip_root(const kdr_scene *scene, const kd_cone *c, float *tn,
 
 /* ---- candidate culling ---------------------------------------------------- */
 
+/* Plain-comparison min/max: fmin/fmax are libm calls here (they must treat
+ * NaN specially) and took ~9% of cone time at 4 spp; no operand of the cull
+ * is NaN (scene coordinates are finite, nn > 0 is checked). */
+static inline double dmin(double a, double b) { return a < b ? a : b; }
+static inline double dmax(double a, double b) { return a > b ? a : b; }
+
 /* 1 if the triangle's plane has the whole truncated cone strictly on one
  * side. The truncated cone is the convex hull of the apex and its disc at
  * axial distance reach, so the plane's signed distance over it ranges over
@@ -147,11 +153,11 @@ static int plane_misses(const kd_cone *cc, const float *tri) {
     const double d_apex = (n[0] * w[0] + n[1] * w[1] + n[2] * w[2]) / nn;
     const double nv = (n[0] * cc->axis[0] + n[1] * cc->axis[1] + n[2] * cc->axis[2]) / nn;
     const double d_disc = d_apex + (double)cc->t_far * nv;
-    const double spread = (double)cc->t_far * cc->tan_p * sqrt(fmax(0.0, 1.0 - nv * nv));
+    const double spread = (double)cc->t_far * cc->tan_p * sqrt(dmax(0.0, 1.0 - nv * nv));
     const double wlen = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
     const double slack = cc->band + CULL_REL_SLACK * (wlen + (double)cc->t_far);
-    const double lo = fmin(d_apex, d_disc - spread);
-    const double hi = fmax(d_apex, d_disc + spread);
+    const double lo = dmin(d_apex, d_disc - spread);
+    const double hi = dmax(d_apex, d_disc + spread);
     return lo > slack || hi < -slack;
 }
 
@@ -165,8 +171,8 @@ static int tri_may_block(const kd_cone *cc, const float *tri) {
         return 0;
     double m[3], w[3], r2 = 0.0;
     for (int k = 0; k < 3; k++) {
-        const double lo = fmin(tri[k], fmin(tri[3 + k], tri[6 + k]));
-        const double hi = fmax(tri[k], fmax(tri[3 + k], tri[6 + k]));
+        const double lo = dmin(tri[k], dmin(tri[3 + k], tri[6 + k]));
+        const double hi = dmax(tri[k], dmax(tri[3 + k], tri[6 + k]));
         m[k] = 0.5 * (lo + hi);
         w[k] = m[k] - cc->dapex[k];
     }
@@ -174,7 +180,7 @@ static int tri_may_block(const kd_cone *cc, const float *tri) {
         double d2 = 0.0;
         for (int k = 0; k < 3; k++)
             d2 += (tri[3 * j + k] - m[k]) * (tri[3 * j + k] - m[k]);
-        r2 = fmax(r2, d2);
+        r2 = dmax(r2, d2);
     }
     const double proj = w[0] * cc->axis[0] + w[1] * cc->axis[1] + w[2] * cc->axis[2];
     const double cx = w[1] * cc->axis[2] - w[2] * cc->axis[1];
