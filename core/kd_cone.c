@@ -54,19 +54,14 @@
  * spent to learn blockers first (learn_blockers), and how many. */
 #define LEARN_MIN 8u
 #define LEARN_ROUNDS 3u
-/* Below this many samples per point the whole-light walk is not tried: it
- * culls every triangle of every leaf it reaches (leaves hold ~12 refs), which
- * costs more than tracing the few rays (bench_cone, default scene and
- * 2CylinderEngine: cone 1.3-3.3x slower than kd rays at 1-4 spp, about even
- * at 8, faster from 16 on). */
-#define CONE_WALK_MIN_SAMPLES 8u
-#define LOW_SPP_TRACE lit_by_tree
-/* Below this many pending samples a walk that finds candidates (decides
- * nothing) also triggers the back-off: testing the few samples against the
- * list saves less than the walk cost (bench_cone at 8 spp: 0.41 -> 0.48x
- * Embree on default/large, 0.87 -> 1.02x on 2CylinderEngine/small; at 32 it
- * skipped too many decidable points: default/small 16 spp 0.99 -> 0.74x). */
-#define WALK_DECIDE_SAMPLES 16u
+/* Below this many samples per point the whole-light walk is not tried and
+ * the samples go through the tree as bundles (kdr_trace_batch, shared
+ * origin): the walk culls every triangle of every leaf it reaches (leaves
+ * hold ~12 refs) and only a decided cone repays it. bench_cone, Embree time /
+ * cone time, walk -> bundles: at 8 spp 0.64-1.02x -> 0.73-1.58x, at 16 spp
+ * 0.51-1.17x -> 0.66-1.55x on all four configurations; at 32 spp the walk
+ * wins where most points are lit (default, small light: 1.3-1.4x vs 0.9-1.0x). */
+#define CONE_WALK_MIN_SAMPLES 32u
 
 /* Per light, carried from point to point (points arrive in image order). */
 typedef struct light_state {
@@ -369,10 +364,7 @@ static int walk_light(const kdr_scene *scene, const kd_shadow_frame *f,
     const int rc = kd_cone_collect(scene, &c, &ws->cl, CONE_MAX_CANDS,
                                    CONE_NODES_BASE + CONE_NODES_PER_SAMPLE * pending,
                                    &ws->st.nodes_visited);
-    /* at few samples a walk pays off only when it decides the cone */
-    const int wasted = rc == KD_CONE_OVER ||
-                       (rc == KDR_OK && ws->cl.n > 0 && pending < WALK_DECIDE_SAMPLES);
-    if (wasted) {
+    if (rc == KD_CONE_OVER) {
         ls->backoff = ls->backoff * 2 + 1 > WALK_BACKOFF_MAX ? WALK_BACKOFF_MAX
                                                              : ls->backoff * 2 + 1;
         ls->skip = ls->backoff;
@@ -398,7 +390,7 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     if (pending > 0 && nsamples < CONE_WALK_MIN_SAMPLES) {
         if (!made)
             make_samples(f, nsamples, ws);
-        lit = LOW_SPP_TRACE(scene, ws, ws->idx, pending);
+        lit = lit_by_tree(scene, ws, ws->idx, pending);
     } else if (pending > 0) {
         rc = walk_light(scene, f, ws, pending, ls);
         if (rc == KDR_ENOMEM)

@@ -371,7 +371,7 @@ static void test_soup_vs_embree(void) {
                 pts[3 * i + 2] = -1.0f;
         }
     }
-    kdr_shadow_query q = make_query(pts, NP, lights, NL, 16);
+    kdr_shadow_query q = make_query(pts, NP, lights, NL, 32);
     check_modes("soup", s, &b, &q);
     q.normals = nrm;
     q.samples = 5;
@@ -483,7 +483,7 @@ static void test_adversarial(void) {
                     pts[3 * i + i1] = -3.0f - (float)i;
             }
         }
-        kdr_shadow_query q = make_query(pts, NP, lights, 5, 24);
+        kdr_shadow_query q = make_query(pts, NP, lights, 5, 32);
         char label[64];
         snprintf(label, sizeof label, "split %zu axis %d at %g", c, k, pos[c]);
         check_modes(label, s, &b, &q);
