@@ -7,6 +7,8 @@
  * KDR_SHADOW_CONE, per (point, light):
  *  1. if the light's last blocker blocks sample 0 (umbra likely), every
  *     sample is first tested against that one triangle;
+ *  below CONE_WALK_MIN_SAMPLES samples the rest go straight to the tree in
+ *  one shared-origin batch (the walk costs more than it saves there); else
  *  2. the cone of the whole light walks the tree (kd_cone_trav.c) with a
  *     budget: no candidate gives visibility 1 with no rays (a decided cone),
  *     a short list is tested by packets of samples (kd_cone_packet.c);
