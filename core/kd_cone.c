@@ -7,8 +7,11 @@
  * KDR_SHADOW_CONE, per (point, light):
  *  1. if the light's last blocker blocks sample 0 (umbra likely), every
  *     sample is first tested against that one triangle;
- *  below CONE_WALK_MIN_SAMPLES samples the rest go straight to the tree in
- *  one shared-origin batch (the walk costs more than it saves there); else
+ *  below CONE_WALK_MIN_SAMPLES samples a cone that reaches no candidate
+ *  (a walk stopped at the first one) is decided (visibility 1, no rays),
+ *  else the rest go straight to
+ *  the tree in one shared-origin batch (the full walk with its per-triangle
+ *  cull costs more than it saves there); else
  *  2. the cone of the whole light walks the tree (kd_cone_trav.c) with a
  *     budget: no candidate gives visibility 1 with no rays (a decided cone),
  *     a short list is tested by packets of samples (kd_cone_packet.c);
@@ -380,6 +383,22 @@ static int walk_light(const kdr_scene *scene, const kd_shadow_frame *f,
     return rc;
 }
 
+/* Below CONE_WALK_MIN_SAMPLES: the whole-light cone walks the tree only
+ * until its first candidate (max_cands 0: the walk stops at the first
+ * triangle the cull keeps). A cone that reaches none is decided, visibility
+ * exactly 1 with no rays, as the contract requires of a point whose cone
+ * reaches no occluder. Returns 1 for such a cone, 0 otherwise (and
+ * KDR_ENOMEM through *rc). */
+static int cone_in_empty_space(const kdr_scene *scene, const kd_shadow_frame *f,
+                               shadow_ws *ws, uint64_t max_nodes, int *rc) {
+    kd_cone c;
+    kd_cone_init(&c, scene, f, NULL, 0.0);
+    const int r = kd_cone_collect(scene, &c, &ws->cl, 0, max_nodes,
+                                  &ws->st.nodes_visited);
+    *rc = r == KDR_ENOMEM ? KDR_ENOMEM : KDR_OK;
+    return r == KDR_OK && ws->cl.n == 0; /* over budget: not decided */
+}
+
 static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
                               uint32_t nsamples, shadow_ws *ws, light_state *ls,
                               float *vis) {
@@ -394,9 +413,16 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
         ws->st.rays_traced += nsamples - pending;
     }
     if (pending > 0 && nsamples < CONE_WALK_MIN_SAMPLES) {
-        if (!made)
-            make_samples(f, nsamples, ws);
-        lit = lit_by_tree(scene, ws, ws->idx, pending);
+        if (cone_in_empty_space(scene, f, ws,
+                                CONE_NODES_BASE + CONE_NODES_PER_SAMPLE * pending,
+                                &rc)) {
+            ws->st.cones_decided += !made;
+            lit = pending;
+        } else if (rc == KDR_OK) {
+            if (!made)
+                make_samples(f, nsamples, ws);
+            lit = lit_by_tree(scene, ws, ws->idx, pending);
+        }
     } else if (pending > 0) {
         rc = walk_light(scene, f, ws, pending, ls);
         if (rc == KDR_ENOMEM)

@@ -282,16 +282,26 @@ static void test_analytic(void) {
     }
     /* light 0 above the roof, light 1 below the roof beside the points */
     const kdr_sphere_light lights[2] = {{{0, 0, 6}, 2.0f}, {{0, 0, -1}, 0.5f}};
+    /* every path (below and above CONE_WALK_MIN_SAMPLES) must decide the
+     * open light's cones without rays, as the contract says */
+    const uint32_t spp[4] = {1, 4, 31, 64};
     kdr_shadow_query q = make_query(pts, 16, lights, 2, 64);
-    float vis[32];
-    kdr_shadow_stats st = {0};
-    CHECK(kdr_shadow_trace(s, &q, 0, 16, KDR_SHADOW_CONE, vis, &st) == KDR_OK, "ok");
-    for (int i = 0; i < 16; i++) {
-        CHECK(vis[2 * i] == 0.0f, "under the roof: %g", vis[2 * i]);
-        CHECK(vis[2 * i + 1] == 1.0f, "open light: %g", vis[2 * i + 1]);
+    for (int k = 0; k < 4; k++) {
+        float vis[32];
+        kdr_shadow_stats st = {0};
+        q.samples = spp[k];
+        CHECK(kdr_shadow_trace(s, &q, 0, 16, KDR_SHADOW_CONE, vis, &st) == KDR_OK,
+              "ok");
+        for (int i = 0; i < 16; i++) {
+            CHECK(vis[2 * i] == 0.0f, "under the roof: %g", vis[2 * i]);
+            CHECK(vis[2 * i + 1] == 1.0f, "open light: %g", vis[2 * i + 1]);
+        }
+        CHECK(st.cones_decided == 16, "open cones decided at %u spp: %llu", spp[k],
+              (unsigned long long)st.cones_decided);
+        CHECK(st.rays_traced <= 16u * spp[k], "rays only toward the roofed light: %llu",
+              (unsigned long long)st.rays_traced);
     }
-    CHECK(st.cones_decided == 16, "open cones decided: %llu",
-          (unsigned long long)st.cones_decided);
+    q.samples = 64;
     check_modes("analytic roof", s, &b, &q);
     kdr_scene_free(s);
     free(b.v);
