@@ -1,0 +1,113 @@
+/*
+ * kd_tri_lanes.h — the one-ray-against-KT_W-triangles watertight test,
+ * written once for any lane count. No include guard: kd_tri_multi.h
+ * includes it once per width after defining
+ *   KT_W      lanes (4 or 8)
+ *   VF, V(op) the lane type and its helpers (f4 / f4_op, f8 / f8_op)
+ *   KT(x)     the function prefix (kd_tri4_x, kd_tri8_x)
+ *   KT_PRE(x) the per-ray prefix (kd_ray_pre4x, kd_ray_pre8x)
+ *   KT_FN     the function qualifiers (the avx2 target for 8 lanes)
+ * and a KT(load)(r, A, B, C) that transposes rows r[0..KT_W-1] into the
+ * vertices' x, y, z vectors (lane j of A[i] is r[j][i], of B[i] r[j][3 + i],
+ * of C[i] r[j][6 + i]).
+ *
+ * Every lane performs exactly the float operations of kd_tri_intersect
+ * (core/kd_tri.h) in the same order, so keep both in step.
+ */
+
+/* A ray's shear broadcast to KT_W lanes (built once per ray). */
+typedef struct KT_PRE() {
+    VF ox, oy, oz, sx, sy, sz;
+    int kx, ky, kz;
+} KT_PRE();
+
+KT_FN void KT_PRE(_init)(const kd_ray_pre *p, KT_PRE() *q) {
+    q->ox = V(set1)(p->org[p->kx]);
+    q->oy = V(set1)(p->org[p->ky]);
+    q->oz = V(set1)(p->org[p->kz]);
+    q->sx = V(set1)(p->sx);
+    q->sy = V(set1)(p->sy);
+    q->sz = V(set1)(p->sz);
+    q->kx = p->kx;
+    q->ky = p->ky;
+    q->kz = p->kz;
+}
+
+/* The scalar double-precision recomputation for the lanes in `lanes`. */
+KT_FN void KT(exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
+                     VF *U, VF *V, VF *W) {
+    _Alignas(sizeof(VF)) float s[9][KT_W];
+    const VF in[9] = {ax, ay, bx, by, cx, cy, *U, *V, *W};
+    for (int k = 0; k < 9; k++)
+        V(store)(s[k], in[k]);
+    for (int j = 0; j < KT_W; j++) {
+        if (!((lanes >> j) & 1))
+            continue;
+        const double dax = s[0][j], day = s[1][j], dbx = s[2][j],
+                     dby = s[3][j], dcx = s[4][j], dcy = s[5][j];
+        s[6][j] = (float)(dcx * dby - dcy * dbx);
+        s[7][j] = (float)(dax * dcy - day * dcx);
+        s[8][j] = (float)(dbx * day - dby * dax);
+    }
+    *U = V(load)(s[6]);
+    *V = V(load)(s[7]);
+    *W = V(load)(s[8]);
+}
+
+/*
+ * Tests the triangles whose rows are r[0..KT_W-1] (rows may repeat);
+ * returns the lane mask of hits with tmin <= t <= tmax and their t, scaled
+ * V, W and det (u = V / det, v = W / det, as kd_tri_intersect computes
+ * them). When no lane passes the edge tests, the outputs are zero and t is
+ * never computed.
+ */
+KT_FN int KT(intersect)(const KT_PRE() *p, const float *const r[KT_W],
+                        VF tmin, VF tmax, VF *t_out, VF *V_out, VF *W_out,
+                        VF *det_out) {
+    VF A[3], B[3], C[3];
+    KT(load)(r, A, B, C);
+    /* vertices relative to the origin */
+    const VF Ax = V(sub)(A[p->kx], p->ox), Ay = V(sub)(A[p->ky], p->oy),
+             Az0 = V(sub)(A[p->kz], p->oz);
+    const VF Bx = V(sub)(B[p->kx], p->ox), By = V(sub)(B[p->ky], p->oy),
+             Bz0 = V(sub)(B[p->kz], p->oz);
+    const VF Cx = V(sub)(C[p->kx], p->ox), Cy = V(sub)(C[p->ky], p->oy),
+             Cz0 = V(sub)(C[p->kz], p->oz);
+    /* shear into ray space */
+    const VF ax = V(sub)(Ax, V(mul)(p->sx, Az0)),
+             ay = V(sub)(Ay, V(mul)(p->sy, Az0));
+    const VF bx = V(sub)(Bx, V(mul)(p->sx, Bz0)),
+             by = V(sub)(By, V(mul)(p->sy, Bz0));
+    const VF cx = V(sub)(Cx, V(mul)(p->sx, Cz0)),
+             cy = V(sub)(Cy, V(mul)(p->sy, Cz0));
+    /* scaled barycentrics */
+    VF U = V(sub)(V(mul)(cx, by), V(mul)(cy, bx));
+    VF V = V(sub)(V(mul)(ax, cy), V(mul)(ay, cx));
+    VF W = V(sub)(V(mul)(bx, ay), V(mul)(by, ax));
+    const VF zero = V(set1)(0.0f);
+    const int zl = V(bits)(
+        V(or)(V(or)(V(eq)(U, zero), V(eq)(V, zero)), V(eq)(W, zero)));
+    if (zl)
+        KT(exact)(zl, ax, ay, bx, by, cx, cy, &U, &V, &W);
+    const VF neg =
+        V(or)(V(or)(V(lt)(U, zero), V(lt)(V, zero)), V(lt)(W, zero));
+    const VF pos =
+        V(or)(V(or)(V(gt)(U, zero), V(gt)(V, zero)), V(gt)(W, zero));
+    const VF det = V(add)(V(add)(U, V), W);
+    const VF ok = V(andnot)(V(or)(V(and)(neg, pos), V(eq)(det, zero)),
+                            V(seti)(-1));
+    if (!V(bits)(ok)) {
+        *t_out = *V_out = *W_out = *det_out = zero;
+        return 0;
+    }
+    const VF az = V(mul)(p->sz, Az0), bz = V(mul)(p->sz, Bz0),
+             cz = V(mul)(p->sz, Cz0);
+    const VF T =
+        V(add)(V(add)(V(mul)(U, az), V(mul)(V, bz)), V(mul)(W, cz));
+    const VF t = V(div)(T, det);
+    *t_out = t;
+    *V_out = V;
+    *W_out = W;
+    *det_out = det;
+    return V(bits)(V(and)(ok, V(and)(V(le)(tmin, t), V(le)(t, tmax))));
+}
