@@ -35,9 +35,9 @@ KT_FN void KT_PRE(_init)(const kd_ray_pre *p, KT_PRE() *q) {
 
 /* The scalar double-precision recomputation for the lanes in `lanes`. */
 KT_FN void KT(exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
-                     VF *U, VF *V, VF *W) {
+                     VF *Ue, VF *Ve, VF *We) {
     _Alignas(sizeof(VF)) float s[9][KT_W];
-    const VF in[9] = {ax, ay, bx, by, cx, cy, *U, *V, *W};
+    const VF in[9] = {ax, ay, bx, by, cx, cy, *Ue, *Ve, *We};
     for (int k = 0; k < 9; k++)
         V(store)(s[k], in[k]);
     for (int j = 0; j < KT_W; j++) {
@@ -49,15 +49,16 @@ KT_FN void KT(exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
         s[7][j] = (float)(dax * dcy - day * dcx);
         s[8][j] = (float)(dbx * day - dby * dax);
     }
-    *U = V(load)(s[6]);
-    *V = V(load)(s[7]);
-    *W = V(load)(s[8]);
+    *Ue = V(load)(s[6]);
+    *Ve = V(load)(s[7]);
+    *We = V(load)(s[8]);
 }
 
 /*
  * Tests the triangles whose rows are r[0..KT_W-1] (rows may repeat);
  * returns the lane mask of hits with tmin <= t <= tmax and their t, scaled
- * V, W and det (u = V / det, v = W / det, as kd_tri_intersect computes
+ * edge functions Ve, We (kd_tri.h's V, W) and det (u = Ve / det,
+ * v = We / det, as kd_tri_intersect computes
  * them). When no lane passes the edge tests, the outputs are zero and t is
  * never computed.
  */
@@ -81,19 +82,19 @@ KT_FN int KT(intersect)(const KT_PRE() *p, const float *const r[KT_W],
     const VF cx = V(sub)(Cx, V(mul)(p->sx, Cz0)),
              cy = V(sub)(Cy, V(mul)(p->sy, Cz0));
     /* scaled barycentrics */
-    VF U = V(sub)(V(mul)(cx, by), V(mul)(cy, bx));
-    VF V = V(sub)(V(mul)(ax, cy), V(mul)(ay, cx));
-    VF W = V(sub)(V(mul)(bx, ay), V(mul)(by, ax));
+    VF Ue = V(sub)(V(mul)(cx, by), V(mul)(cy, bx));
+    VF Ve = V(sub)(V(mul)(ax, cy), V(mul)(ay, cx));
+    VF We = V(sub)(V(mul)(bx, ay), V(mul)(by, ax));
     const VF zero = V(set1)(0.0f);
     const int zl = V(bits)(
-        V(or)(V(or)(V(eq)(U, zero), V(eq)(V, zero)), V(eq)(W, zero)));
+        V(or)(V(or)(V(eq)(Ue, zero), V(eq)(Ve, zero)), V(eq)(We, zero)));
     if (zl)
-        KT(exact)(zl, ax, ay, bx, by, cx, cy, &U, &V, &W);
+        KT(exact)(zl, ax, ay, bx, by, cx, cy, &Ue, &Ve, &We);
     const VF neg =
-        V(or)(V(or)(V(lt)(U, zero), V(lt)(V, zero)), V(lt)(W, zero));
+        V(or)(V(or)(V(lt)(Ue, zero), V(lt)(Ve, zero)), V(lt)(We, zero));
     const VF pos =
-        V(or)(V(or)(V(gt)(U, zero), V(gt)(V, zero)), V(gt)(W, zero));
-    const VF det = V(add)(V(add)(U, V), W);
+        V(or)(V(or)(V(gt)(Ue, zero), V(gt)(Ve, zero)), V(gt)(We, zero));
+    const VF det = V(add)(V(add)(Ue, Ve), We);
     const VF ok = V(andnot)(V(or)(V(and)(neg, pos), V(eq)(det, zero)),
                             V(seti)(-1));
     if (!V(bits)(ok)) {
@@ -103,11 +104,11 @@ KT_FN int KT(intersect)(const KT_PRE() *p, const float *const r[KT_W],
     const VF az = V(mul)(p->sz, Az0), bz = V(mul)(p->sz, Bz0),
              cz = V(mul)(p->sz, Cz0);
     const VF T =
-        V(add)(V(add)(V(mul)(U, az), V(mul)(V, bz)), V(mul)(W, cz));
+        V(add)(V(add)(V(mul)(Ue, az), V(mul)(Ve, bz)), V(mul)(We, cz));
     const VF t = V(div)(T, det);
     *t_out = t;
-    *V_out = V;
-    *W_out = W;
+    *V_out = Ve;
+    *W_out = We;
     *det_out = det;
     return V(bits)(V(and)(ok, V(and)(V(le)(tmin, t), V(le)(t, tmax))));
 }
