@@ -50,6 +50,16 @@ static inline void kd_ray_precompute(const float org[3], const float dir[3],
     p->sz = 1.0f / dir[kz];
 }
 
+/* The edge functions in double precision: exact products, one rounding.
+ * The fallback of every version of the test when an edge function is 0. */
+static inline void kd_tri_edges_exact(float ax, float ay, float bx, float by,
+                                      float cx, float cy, float *U, float *V,
+                                      float *W) {
+    *U = (float)((double)cx * (double)by - (double)cy * (double)bx);
+    *V = (float)((double)ax * (double)cy - (double)ay * (double)cx);
+    *W = (float)((double)bx * (double)ay - (double)by * (double)ax);
+}
+
 /*
  * Tests triangle tri (9 floats) against the ray; on a hit with
  * tmin <= t <= tmax stores t, u, v and returns 1.
@@ -73,11 +83,8 @@ static inline int kd_tri_intersect(const kd_ray_pre *p, const float *tri,
     float U = cx * by - cy * bx;
     float V = ax * cy - ay * cx;
     float W = bx * ay - by * ax;
-    if (U == 0.0f || V == 0.0f || W == 0.0f) {
-        U = (float)((double)cx * (double)by - (double)cy * (double)bx);
-        V = (float)((double)ax * (double)cy - (double)ay * (double)cx);
-        W = (float)((double)bx * (double)ay - (double)by * (double)ax);
-    }
+    if (U == 0.0f || V == 0.0f || W == 0.0f)
+        kd_tri_edges_exact(ax, ay, bx, by, cx, cy, &U, &V, &W);
     if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f))
         return 0;
     const float det = U + V + W;

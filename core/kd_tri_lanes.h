@@ -43,11 +43,8 @@ KT_FN void KT(exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
     for (int j = 0; j < KT_W; j++) {
         if (!((lanes >> j) & 1))
             continue;
-        const double dax = s[0][j], day = s[1][j], dbx = s[2][j],
-                     dby = s[3][j], dcx = s[4][j], dcy = s[5][j];
-        s[6][j] = (float)(dcx * dby - dcy * dbx);
-        s[7][j] = (float)(dax * dcy - day * dcx);
-        s[8][j] = (float)(dbx * day - dby * dax);
+        kd_tri_edges_exact(s[0][j], s[1][j], s[2][j], s[3][j], s[4][j], s[5][j],
+                           &s[6][j], &s[7][j], &s[8][j]);
     }
     *Ue = V(load)(s[6]);
     *Ve = V(load)(s[7]);
