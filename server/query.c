@@ -76,18 +76,6 @@ static void problem_from(kdr_response *out, const kdr_proto_error *err) {
     kdr_route_problem(out, (unsigned)err->status, err->detail);
 }
 
-static void answer_buf(kdr_response *out, int rc, kdr_buf *b) {
-    if (rc != 0) {
-        kdr_buf_free(b);
-        kdr_route_problem(out, 500, "out of memory while encoding the answer");
-        return;
-    }
-    out->status = 200;
-    out->content_type = CT_JSON;
-    out->body = b->data;
-    out->len = b->len;
-}
-
 /* A core error after the protocol accepted the request is our bug. */
 static void core_failed(kdr_response *out, const char *what, int rc) {
     char detail[160];
@@ -131,7 +119,8 @@ static void run_hits(kdr_server *srv, query_job *j, kdr_pool_fn fn, size_t n,
     } else {
         kdr_buf b;
         kdr_buf_init(&b);
-        answer_buf(out, kdr_proto_encode_hits(&j->hits, n, j->query, enc, &b), &b);
+        kdr_route_answer_buf(out, kdr_proto_encode_hits(&j->hits, n, j->query, enc, &b), &b,
+                             CT_JSON);
     }
     hits_free(&j->hits);
 }
@@ -229,11 +218,11 @@ static void run_shadow(kdr_server *srv, const kdr_served_scene *s,
         else {
             kdr_buf b;
             kdr_buf_init(&b);
-            answer_buf(out,
+            kdr_route_answer_buf(out,
                        kdr_proto_encode_shadow(j.visibility, q->n, q->nlights,
                                                sr->want_stats ? &sum : NULL, sr->encoding,
                                                &b),
-                       &b);
+                       &b, CT_JSON);
             kdr_metrics_rays(KDR_RAYS_SHADOW, sum.rays_traced);
         }
     }

@@ -163,7 +163,7 @@ int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long conten
     return 0;
 }
 
-static void answer_buf(kdr_response *out, int rc, kdr_buf *b, const char *ct) {
+void kdr_route_answer_buf(kdr_response *out, int rc, kdr_buf *b, const char *ct) {
     if (rc != 0) {
         kdr_buf_free(b);
         kdr_route_problem(out, 500, "out of memory while encoding the answer");
@@ -210,7 +210,7 @@ static void answer_scenes(kdr_server *srv, const route *r, kdr_response *out) {
     if (rc == 0)
         rc = r->scene ? kdr_proto_encode_scene(&info[0], &b)
                       : kdr_proto_encode_scenes(info, n, &b);
-    answer_buf(out, rc, &b, CT_JSON);
+    kdr_route_answer_buf(out, rc, &b, CT_JSON);
     for (size_t i = 0; meshes && i < n; i++)
         free(meshes[i]);
     free(meshes);
@@ -238,7 +238,7 @@ void kdr_route_handle(kdr_server *srv, const kdr_request *req, kdr_response *out
     kdr_buf_init(&b);
     switch (r.ep) {
     case KDR_EP_HEALTH:
-        answer_buf(out,
+        kdr_route_answer_buf(out,
                    kdr_proto_encode_health("ok", kdr_registry_count(srv->registry), &b),
                    &b, CT_JSON);
         return;

@@ -52,6 +52,10 @@ int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long conten
 void kdr_route_handle(kdr_server *srv, const kdr_request *req, kdr_response *out);
 /* A problem+json answer (RFC 7807). */
 void kdr_route_problem(kdr_response *out, unsigned status, const char *detail);
+/* A 200 answer carrying b (content type ct), or a 500 when encoding it
+ * failed (rc != 0; b is freed then). */
+struct kdr_buf;
+void kdr_route_answer_buf(kdr_response *out, int rc, struct kdr_buf *b, const char *ct);
 
 /* Answers a bundle / cone-shadow / frustum request on scene (query.c). */
 void kdr_query_answer(kdr_server *srv, const kdr_served_scene *scene, kdr_endpoint ep,
