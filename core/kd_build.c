@@ -32,17 +32,8 @@
 
 #define KD_MAX_TRIS ((size_t)1 << 30)  /* triangle ids fit 30 bits */
 #define KD_MAX_NODES ((size_t)1 << 30) /* above-child index fits 30 bits */
-#define KD_BAD_REFINES 3               /* pbrt: costly splits tolerated */
-#define KD_BAD_SMALL 16                /* ... and not for nodes this small */
 #define KD_LOG_PHASES 1000000          /* log each phase above this size */
 #define KD_ROOT_PAD 0x1p-20f           /* root padding, relative (~8 ulps) */
-/* Default depth limit KD_DEPTH_BASE + KD_DEPTH_PER_LOG2 * log2(N): pbrt uses
- * 8 + 1.3 log2 N; 6 builds 20-25% faster and smaller trees with the same
- * single-ray speed (measured on haus, 2CylinderEngine, engine3), because
- * the last levels mostly re-split clusters of tiny triangles that no plane
- * separates. */
-#define KD_DEPTH_BASE 6.0
-#define KD_DEPTH_PER_LOG2 1.3
 
 enum { EV_END = 0, EV_PLANAR = 1, EV_START = 2 };
 enum { SIDE_BOTH = 0, SIDE_LEFT = 1, SIDE_RIGHT = 2 };

@@ -36,41 +36,7 @@
 #include "kd_tri.h"
 
 #define SHADOW_MAX_SAMPLES 4096u
-/* Tuning (bench/bench_cone.c): the whole-light cone gives up beyond
- * CONE_MAX_CANDS candidates or CONE_NODES_BASE + CONE_NODES_PER_SAMPLE *
- * samples nodes (a wasted walk then costs a fraction of a ray per sample).
- * The samples are then cut into packets of 4 or 8 neighbours on the light's
- * disc, each walking its own narrow cone; a packet's lanes still undecided
- * after GROUP_MAX_NODES nodes go through the tree one by one. */
-#define CONE_MAX_CANDS 32u
-#define CONE_NODES_BASE 24u
-#define CONE_NODES_PER_SAMPLE 6u
-#define GROUP_MAX_NODES 512u
-/* A packet whose cone is wider than this (radians) is traced as rays: a wide
- * cone reaches far more leaves than its rays do (measured on 2CylinderEngine:
- * packets win for a 3-degree light at 64+ spp, lose for a 30-degree one). */
-#define GROUP_MAX_ANGLE 0.035
-/* After a whole-light walk over budget the next 1, 3, 7, then 15 points of
- * that light skip the walk (neighbouring points see the same busy cone);
- * any successful walk resets the back-off. Answers are the same either way. */
-#define WALK_BACKOFF_MAX 15u
 #define NO_PRIM UINT32_MAX
-/* Samples of a point going through the tree above which closest hits are
- * spent to learn blockers first (learn_blockers), and how many. */
-#define LEARN_MIN 8u
-#define LEARN_ROUNDS 3u
-/* Below this many samples per point the whole-light walk is not tried and
- * the samples go through the tree as bundles (kdr_trace_batch, shared
- * origin): the walk culls every triangle of every leaf it reaches (leaves
- * hold ~12 refs) and only a decided cone repays it. bench_cone, Embree time /
- * cone time, walk -> bundles: at 8 spp 0.64-1.02x -> 0.73-1.58x, at 16 spp
- * 0.51-1.17x -> 0.66-1.55x on all four configurations; at 32 spp the walk
- * wins where most points are lit (default, small light: 1.3-1.4x vs 0.9-1.0x). */
-#define CONE_WALK_MIN_SAMPLES 32u
-/* Fewer pending samples than this go through the tree one by one: a batch's
- * set-up (grouping, sorting) costs more than a bundle saves (bench_cone at
- * 2 spp: bundles 0.0018 s vs single rays 0.0015 s on default/small). */
-#define TREE_MIN_RAYS 3u
 
 /* Per light, carried from point to point (points arrive in image order). */
 typedef struct light_state {

@@ -21,6 +21,7 @@
 #include <math.h>
 #include <stdint.h>
 
+#include "kd_tune.h"
 #include "kdray.h"
 
 typedef struct kd_node {

@@ -8,23 +8,6 @@
 
 #include "kd_internal.h"
 
-/*
- * SAH constants, the one place they are tuned (pbrt-v3's values). Measured
- * on 2CylinderEngine (121K triangles) and lat-long spheres (2K-1M) with
- * random and camera rays: trav_cost 1..40 and empty_bonus 0.5..0.8 change
- * rays/s by less than the run-to-run noise; empty_bonus <= 0.2 grows the
- * tree 5x (perfect splits then keep cutting straddlers) and is slower.
- * Since single-ray leaves are tested 4 and 8 triangles at a time (SIMD),
- * leaves of up to 12 triangles (pbrt: 1; 3 before the SIMD leaves) build
- * 15-35% faster and trace random, AO and shadow rays 10-40% faster on
- * default.glb, haus, 2CylinderEngine, engine3 and the 1M sphere; with them
- * the depth limit 6 + 1.3 log2 N (kd_build.c) no longer costs the 1M
- * sphere anything (depth 32 / leaf 12 beats pbrt's 34 / leaf 3 there).
- */
-#define KD_ISECT_COST 80.0f
-#define KD_TRAV_COST 1.0f
-#define KD_EMPTY_BONUS 0.5f
-#define KD_LEAF_SIZE 12
 
 const char *kdr_strerror(int status) {
     switch (status) {

@@ -69,8 +69,6 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
  * consecutive rays are incoherent (mean direction spread per 8 rays over
  * KB_SORT_SPREAD) and sort != 0, by direction octant, then by a coarse
  * Morton code of the direction, stable (kd_batch.c); else unchanged. */
-#define KB_CHUNK 256
-#define KB_SORT_SPREAD 0.5f
 void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
                     int sort, size_t *ids);
 

@@ -23,10 +23,6 @@
 #include "kd_tri.h"
 #include "kd_tri_multi.h"
 
-/* Leaves with at least this many references are tested four at a time,
- * and on AVX2 CPUs those with at least KD_LEAF_AVX2_MIN eight at a time. */
-#define KD_LEAF_SIMD_MIN 3
-#define KD_LEAF_AVX2_MIN 8
 
 typedef struct kd_todo {
     const kd_node *node;

@@ -1,0 +1,95 @@
+/*
+ * kd_tune.h — every performance knob of the core in one place (pbrt keeps
+ * its SAH constants in the accelerator's constructor; we keep all of ours
+ * here). Each value says what it trades and how it was measured. Nothing
+ * here changes an answer: every traversal returns the same hits whatever
+ * these are. Correctness margins (slacks, paddings, hard limits) stay
+ * beside the code they protect (kd_traverse.h, kd_internal.h, kd_build.c).
+ */
+#ifndef KD_TUNE_H
+#define KD_TUNE_H
+
+/* ---- SAH build (kd_build.c, defaults of kdr_build_opts) ------------------ */
+
+/*
+ * SAH constants (pbrt-v3's values). Measured
+ * on 2CylinderEngine (121K triangles) and lat-long spheres (2K-1M) with
+ * random and camera rays: trav_cost 1..40 and empty_bonus 0.5..0.8 change
+ * rays/s by less than the run-to-run noise; empty_bonus <= 0.2 grows the
+ * tree 5x (perfect splits then keep cutting straddlers) and is slower.
+ * Since single-ray leaves are tested 4 and 8 triangles at a time (SIMD),
+ * leaves of up to 12 triangles (pbrt: 1; 3 before the SIMD leaves) build
+ * 15-35% faster and trace random, AO and shadow rays 10-40% faster on
+ * default.glb, haus, 2CylinderEngine, engine3 and the 1M sphere; with them
+ * the depth limit 6 + 1.3 log2 N (kd_build.c) no longer costs the 1M
+ * sphere anything (depth 32 / leaf 12 beats pbrt's 34 / leaf 3 there).
+ */
+#define KD_ISECT_COST 80.0f
+#define KD_TRAV_COST 1.0f
+#define KD_EMPTY_BONUS 0.5f
+#define KD_LEAF_SIZE 12
+
+/* pbrt's termination: splits that cost more than the leaf they replace are
+ * tolerated KD_BAD_REFINES times on a path, and never below KD_BAD_SMALL
+ * references. */
+#define KD_BAD_REFINES 3
+#define KD_BAD_SMALL 16
+/* Default depth limit KD_DEPTH_BASE + KD_DEPTH_PER_LOG2 * log2(N): pbrt uses
+ * 8 + 1.3 log2 N; 6 builds 20-25% faster and smaller trees with the same
+ * single-ray speed (measured on haus, 2CylinderEngine, engine3), because
+ * the last levels mostly re-split clusters of tiny triangles that no plane
+ * separates. */
+#define KD_DEPTH_BASE 6.0
+#define KD_DEPTH_PER_LOG2 1.3
+
+/* ---- single rays (kd_traverse_single.c) ----------------------------------- */
+
+/* Leaves with at least this many references are tested four at a time,
+ * and on AVX2 CPUs those with at least KD_LEAF_AVX2_MIN eight at a time. */
+#define KD_LEAF_SIMD_MIN 3
+#define KD_LEAF_AVX2_MIN 8
+
+/* ---- bundles (kd_batch.c, kd_traverse_bundle.h) ----------------------------
+ * Rays are bundled in chunks of KB_CHUNK; a chunk whose mean direction
+ * spread per 8 rays exceeds KB_SORT_SPREAD is regrouped by direction first. */
+#define KB_CHUNK 256
+#define KB_SORT_SPREAD 0.5f
+
+/* ---- cone shadows (kd_cone.c) ---------------------------------------------- */
+
+/* Tuning (bench/bench_cone.c): the whole-light cone gives up beyond
+ * CONE_MAX_CANDS candidates or CONE_NODES_BASE + CONE_NODES_PER_SAMPLE *
+ * samples nodes (a wasted walk then costs a fraction of a ray per sample).
+ * The samples are then cut into packets of 4 or 8 neighbours on the light's
+ * disc, each walking its own narrow cone; a packet's lanes still undecided
+ * after GROUP_MAX_NODES nodes go through the tree one by one. */
+#define CONE_MAX_CANDS 32u
+#define CONE_NODES_BASE 24u
+#define CONE_NODES_PER_SAMPLE 6u
+#define GROUP_MAX_NODES 512u
+/* A packet whose cone is wider than this (radians) is traced as rays: a wide
+ * cone reaches far more leaves than its rays do (measured on 2CylinderEngine:
+ * packets win for a 3-degree light at 64+ spp, lose for a 30-degree one). */
+#define GROUP_MAX_ANGLE 0.035
+/* After a whole-light walk over budget the next 1, 3, 7, then 15 points of
+ * that light skip the walk (neighbouring points see the same busy cone);
+ * any successful walk resets the back-off. Answers are the same either way. */
+#define WALK_BACKOFF_MAX 15u
+/* Samples of a point going through the tree above which closest hits are
+ * spent to learn blockers first (learn_blockers), and how many. */
+#define LEARN_MIN 8u
+#define LEARN_ROUNDS 3u
+/* Below this many samples per point the whole-light walk is not tried and
+ * the samples go through the tree as bundles (kdr_trace_batch, shared
+ * origin): the walk culls every triangle of every leaf it reaches (leaves
+ * hold ~12 refs) and only a decided cone repays it. bench_cone, Embree time /
+ * cone time, walk -> bundles: at 8 spp 0.64-1.02x -> 0.73-1.58x, at 16 spp
+ * 0.51-1.17x -> 0.66-1.55x on all four configurations; at 32 spp the walk
+ * wins where most points are lit (default, small light: 1.3-1.4x vs 0.9-1.0x). */
+#define CONE_WALK_MIN_SAMPLES 32u
+/* Fewer pending samples than this go through the tree one by one: a batch's
+ * set-up (grouping, sorting) costs more than a bundle saves (bench_cone at
+ * 2 spp: bundles 0.0018 s vs single rays 0.0015 s on default/small). */
+#define TREE_MIN_RAYS 3u
+
+#endif /* KD_TUNE_H */
