@@ -13,13 +13,7 @@
 #include "log.h"
 #include "server.h"
 
-/* Work per chunk: large enough to amortise the pool hand-off, small enough
- * that a 2-core machine balances a 64K-ray request well. Frustum chunks are
- * a multiple of 4 tiles so that the 4-frusta grouping is never cut. */
-static const size_t CHUNK_RAYS = 4096;
-static const size_t CHUNK_TILES = 16;
-static const size_t CHUNK_POINTS = 64;
-
+/* Chunk sizes: KDR_CHUNK_* in pool.h (kdray-trace splits alike). */
 static const char *const CT_JSON = "application/json";
 
 /* What every chunk needs, plus the first core error any chunk saw. */
@@ -136,7 +130,7 @@ static void answer_bundle(kdr_server *srv, const kdr_served_scene *s,
     }
     query_job j = {.scene = s->scene,
                    .total = br.batch.n,
-                   .per_chunk = CHUNK_RAYS,
+                   .per_chunk = KDR_CHUNK_RAYS,
                    .query = br.query,
                    .batch = &br.batch};
     atomic_init(&j.rc, KDR_OK);
@@ -155,7 +149,7 @@ static void answer_frustum(kdr_server *srv, const kdr_served_scene *s,
     }
     query_job j = {.scene = s->scene,
                    .total = kdr_frustum_tile_count(&fr.camera, fr.tile),
-                   .per_chunk = CHUNK_TILES,
+                   .per_chunk = KDR_CHUNK_TILES,
                    .query = fr.query,
                    .frust = &fr};
     atomic_init(&j.rc, KDR_OK);
@@ -194,11 +188,11 @@ static void shadow_stats_sum(const kdr_shadow_stats *per, size_t n,
 static void run_shadow(kdr_server *srv, const kdr_served_scene *s,
                        const kdr_shadow_request *sr, kdr_response *out) {
     const kdr_shadow_query *q = &sr->query;
-    size_t nchunks = chunk_count(q->n, CHUNK_POINTS);
+    size_t nchunks = chunk_count(q->n, KDR_CHUNK_POINTS);
     size_t nvis = q->n * q->nlights;
     query_job j = {.scene = s->scene,
                    .total = q->n,
-                   .per_chunk = CHUNK_POINTS,
+                   .per_chunk = KDR_CHUNK_POINTS,
                    .shadow = q,
                    .visibility = malloc((nvis ? nvis : 1) * sizeof(float)),
                    .shadow_stats =

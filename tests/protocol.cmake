@@ -11,12 +11,12 @@ target_link_libraries(test_protocol_speed PRIVATE kdray_protocol)
 
 # libFuzzer target for the three request parsers and the base64 decoder,
 # with -DKDRAY_FUZZ=ON (the sanitizer pass of scripts/dev test). The project
-# builds with gcc, so the fuzzer is compiled separately with clang (when
-# installed) from the protocol and core sources (the core only for
+# builds with gcc, so the fuzzer is compiled separately with clang
+# (KDRAY_CLANG, required with KDRAY_FUZZ: tests/cmake/required_tools.cmake)
+# from the protocol and core sources (the core only for
 # kdr_camera_validate), linked against the system cJSON, then run for a
 # bounded time on the committed seed corpus.
-find_program(KDRAY_CLANG NAMES clang clang-14)
-if(KDRAY_FUZZ AND KDRAY_CLANG)
+if(KDRAY_FUZZ)
   set(KDRAY_FUZZ_BIN ${CMAKE_CURRENT_BINARY_DIR}/fuzz_request)
   file(GLOB KDRAY_FUZZ_PROTOCOL_SOURCES ${PROJECT_SOURCE_DIR}/protocol/*.c)
   file(GLOB KDRAY_FUZZ_PROTOCOL_HEADERS ${PROJECT_SOURCE_DIR}/protocol/*.h)
