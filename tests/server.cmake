@@ -20,3 +20,17 @@ if(Python3_Interpreter_FOUND AND KDRAY_CURL AND TARGET kdrayd)
                    $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
   set_tests_properties(server_curl_examples PROPERTIES TIMEOUT 600)
 endif()
+
+# Binary (CBOR) bodies over HTTP. Run by Debian's own Python, for which
+# python3-cbor2 is installed (scripts/dev); the test fails, never skips,
+# when the module or that interpreter is missing.
+find_program(KDRAY_DEBIAN_PYTHON python3 PATHS /usr/bin NO_DEFAULT_PATH)
+if(TARGET kdrayd)
+  if(NOT KDRAY_DEBIAN_PYTHON)
+    set(KDRAY_DEBIAN_PYTHON /usr/bin/python3) # absent: the test fails loudly
+  endif()
+  add_test(NAME server_codecs
+           COMMAND ${KDRAY_DEBIAN_PYTHON} ${CMAKE_CURRENT_SOURCE_DIR}/test_server_codecs.py
+                   $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+  set_tests_properties(server_codecs PROPERTIES TIMEOUT 600)
+endif()
