@@ -79,30 +79,30 @@ static const char digit_pairs[201] =
     "40414243444546474849505152535455565758596061626364656667686970717273747576777879"
     "8081828384858687888990919293949596979899";
 
-/* Writes the digits of c (< 10^10, no leading zeros) to dst, returns their
- * count. */
-static int put_digits(uint32_t c, char *dst) {
-    char tmp[12];
-    char *p = tmp + sizeof tmp;
+/* The number of decimal digits of c (1..10). */
+static int digit_count(uint32_t c) {
+    int n = 1;
+    while (n < 10 && c >= (uint32_t)exact_pow10[n])
+        n++;
+    return n;
+}
+
+/* The n digits of c into dst[0..n), two at a time from the right. */
+static void put_digits(uint32_t c, int n, char *dst) {
+    char *p = dst + n;
     while (c >= 100) {
         const uint32_t r = c % 100;
         c /= 100;
         p -= 2;
         memcpy(p, digit_pairs + 2 * r, 2);
     }
-    if (c >= 10) {
-        p -= 2;
-        memcpy(p, digit_pairs + 2 * c, 2);
-    } else {
-        *--p = (char)('0' + c);
-    }
-    const int n = (int)(tmp + sizeof tmp - p);
-    memcpy(dst, p, (size_t)n);
-    return n;
+    if (c >= 10)
+        memcpy(p - 2, digit_pairs + 2 * c, 2);
+    else
+        p[-1] = (char)('0' + c);
 }
 
-static size_t put_exponent(char *p, int e) {
-    char *s = p;
+static char *put_exponent(char *p, int e) {
     *p++ = 'e';
     if (e < 0) {
         *p++ = '-';
@@ -111,66 +111,65 @@ static size_t put_exponent(char *p, int e) {
     if (e >= 10)
         *p++ = (char)('0' + e / 10);
     *p++ = (char)('0' + e % 10);
-    return (size_t)(p - s);
+    return p;
 }
 
-/* Lays out c * 10^q in plain or scientific notation. */
-static size_t layout(uint32_t c, int q, char *p) {
-    char dig[12] = {0}; /* initialised: gcc -fsanitize cannot see put_digits fill it */
-    const int n = put_digits(c, dig);
+/* Lays out c * 10^q (c: n <= 9 digits, no trailing zeros) in plain or
+ * scientific notation at p, returns the end. Every copy has a fixed size
+ * (a few moves, never a memcpy call): dig holds the digits zero-padded,
+ * and the text fits in 16 bytes, so the over-long copies stay in the
+ * caller's 40-byte buffer. */
+static char *layout(uint32_t c, int q, char *p) {
+    char dig[16] = {0};
+    const int n = digit_count(c);
+    put_digits(c, n, dig);
     const int point = n + q; /* digits before the decimal point */
-    char *s = p;
     if (point > KDR_FLOAT_PLAIN_MAX || point < KDR_FLOAT_PLAIN_MIN) {
-        *p++ = dig[0];
-        if (n > 1) {
-            *p++ = '.';
-            memcpy(p, dig + 1, (size_t)n - 1);
-            p += n - 1;
-        }
-        return (size_t)(p - s) + put_exponent(p, point - 1);
+        p[0] = dig[0];
+        p[1] = '.';
+        memcpy(p + 2, dig + 1, 8);
+        p += n > 1 ? n + 1 : 1;
+        return put_exponent(p, point - 1);
     }
-    if (point <= 0) {
-        *p++ = '0';
-        *p++ = '.';
-        for (int i = 0; i < -point; i++)
-            *p++ = '0';
-        memcpy(p, dig, (size_t)n);
-        return (size_t)(p + n - s);
+    if (point <= 0) { /* 0.000ddd */
+        memcpy(p, "0.0000", 6);
+        p += 2 - point;
+        memcpy(p, dig, 16);
+        return p + n;
     }
-    if (q >= 0) {
-        memcpy(p, dig, (size_t)n);
-        p += n;
-        for (int i = 0; i < q; i++)
-            *p++ = '0';
-        return (size_t)(p - s);
+    memcpy(p, dig, 16);
+    if (q >= 0) { /* ddd000 */
+        memcpy(p + n, "000000000000", 12);
+        return p + n + q;
     }
-    memcpy(p, dig, (size_t)point);
-    p += point;
-    *p++ = '.';
-    memcpy(p, dig + point, (size_t)(n - point));
-    return (size_t)(p + (n - point) - s);
+    p[point] = '.'; /* ddd.ddd */
+    memcpy(p + point + 1, dig + point, 8);
+    return p + n + 1;
 }
 
+/* The text is made in a local buffer and copied out with one fixed-size
+ * copy of KDR_FLOAT_CHARS bytes (the most the contract lets us write). */
 size_t kdr_format_float(float f, char *dst) {
+    char buf[40];
+    char *p = buf;
     if (!isfinite(f)) {
         memcpy(dst, "null", 4);
         return 4;
     }
-    size_t neg = 0;
     if (signbit(f)) {
-        dst[neg++] = '-';
+        *p++ = '-';
         f = -f;
     }
     if (f == 0.0f) {
-        dst[neg] = '0';
-        return neg + 1;
+        *p++ = '0';
+    } else {
+        uint32_t c;
+        int q;
+        kdr_float_shortest(f, &c, &q);
+        if ((float)decimal_to_double(c, q) != f)
+            safe_digits(f, digit_count(c) + 1, &c, &q);
+        p = layout(c, q, p);
     }
-    uint32_t c;
-    int q;
-    kdr_float_shortest(f, &c, &q);
-    if ((float)decimal_to_double(c, q) != f) {
-        char tmp[12];
-        safe_digits(f, put_digits(c, tmp) + 1, &c, &q);
-    }
-    return neg + layout(c, q, dst + neg);
+    memcpy(dst, buf, KDR_FLOAT_CHARS);
+    return (size_t)(p - buf);
 }
