@@ -73,7 +73,11 @@ add_executable(float_exhaustive ${CMAKE_CURRENT_SOURCE_DIR}/float_exhaustive.c
 target_include_directories(float_exhaustive PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
 target_link_libraries(float_exhaustive PRIVATE kdray_protocol Threads::Threads)
 
-# CBOR bodies and answers, answer fields, media negotiation.
-add_executable(test_protocol_cbor ${CMAKE_CURRENT_SOURCE_DIR}/test_protocol_cbor.c)
-target_link_libraries(test_protocol_cbor PRIVATE kdray_protocol)
-add_test(NAME protocol_cbor COMMAND test_protocol_cbor)
+# CBOR bodies and answers (JSON twins, in place, answers read back), CBOR
+# errors, answer fields and media negotiation.
+foreach(t cbor cbor_errors fields)
+  add_executable(test_protocol_${t} ${CMAKE_CURRENT_SOURCE_DIR}/test_protocol_${t}.c)
+  target_include_directories(test_protocol_${t} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
+  target_link_libraries(test_protocol_${t} PRIVATE kdray_protocol)
+  add_test(NAME protocol_${t} COMMAND test_protocol_${t})
+endforeach()
