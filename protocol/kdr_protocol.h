@@ -2,7 +2,7 @@
  * kdr_protocol.h — the HTTP/JSON contract (shared/API.md) as C: request
  * bodies in, typed queries for the core out; core results in, response
  * bodies out. No sockets, no scene loading: server/ moves the bytes,
- * protocol/ gives them meaning.
+ * protocol/ gives them meaning. Bodies are JSON or CBOR (kdr_media).
  *
  * Conventions:
  *  - Parsers take the body as bytes + length (not NUL-terminated). They
@@ -10,10 +10,12 @@
  *    also stored in err->status together with a detail naming the field and
  *    element at fault ("directions[17]: not a finite number"). On failure the
  *    request struct holds nothing to free (freeing it is still harmless).
- *  - err and out must not be NULL. Flat JSON number arrays are converted
- *    while the body is walked, so up to about twice the body size in floats
+ *  - err and out must not be NULL. Flat JSON number arrays (and CBOR arrays
+ *    of numbers) are converted while the body is walked, so up to about
+ *    twice (CBOR: four times, one-byte integers) the body size in floats
  *    may be allocated before a 413 is known (bodies are limited by the
- *    server); base64 arrays are decoded only after the limit check.
+ *    server); base64 arrays are decoded, and CBOR typed arrays copied, only
+ *    after the limit check.
  *  - Parsed requests own their arrays; the embedded core structs
  *    (kdr_ray_batch, kdr_shadow_query) point into them. Do not copy a request
  *    struct by value and free both copies; free exactly once.
