@@ -16,3 +16,12 @@ add_test(NAME server_curl_examples
          COMMAND ${CMAKE_CURRENT_SOURCE_DIR}/test_server_curl.sh
                  $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
 set_tests_properties(server_curl_examples PROPERTIES TIMEOUT 600)
+
+# Binary (CBOR) bodies over HTTP. Run by Debian's own Python, for which
+# python3-cbor2 is installed (scripts/dev): the python3 on PATH may be
+# another interpreter without Debian's modules. The test fails, never
+# skips, when that interpreter or the module is missing.
+add_test(NAME server_codecs
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_server_codecs.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(server_codecs PROPERTIES TIMEOUT 600)
