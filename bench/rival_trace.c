@@ -5,9 +5,11 @@
  * work generates them).
  *
  * Ray conversion is written once. Embree's packet structs RTCRayHit4/8/16
- * are the same 20 four-byte fields, each an array of K lanes (the static
- * asserts below hold that), so one function fills lane j of a packet of
- * any width; single rays and streams use struct RTCRayHit.
+ * are the same 20 four-byte fields, each an array of K lanes, and RTCRayK
+ * is their first 12 (the static asserts below hold that), so one function
+ * fills lane j of a packet of any width; single rays and streams use
+ * struct RTCRayHit. Any-hit work gets the ray alone (RTCRay, RTCRayK:
+ * 48 bytes a ray instead of 80), as a user tracing shadow rays would.
  */
 #define _POSIX_C_SOURCE 200809L
 #include "rival.h"
@@ -23,15 +25,16 @@
 /* ---- Embree's structs ---------------------------------------------------------- */
 
 enum { F_ORG = 0, F_TNEAR = 3, F_DIR = 4, F_TIME = 7, F_TFAR = 8, F_MASK = 9,
-       F_ID = 10, F_FLAGS = 11, F_U = 15, F_V = 16, F_PRIM = 17, F_GEOM = 18,
-       F_INST = 19, F_COUNT = 20 };
+       F_ID = 10, F_FLAGS = 11, F_RAY = 12, F_U = 15, F_V = 16, F_PRIM = 17,
+       F_GEOM = 18, F_INST = 19, F_COUNT = 20 };
 
 #define PACKET_LAYOUT(K)                                                              \
     _Static_assert(sizeof(struct RTCRayHit##K) == F_COUNT * 4 * K, "RTCRayHit" #K);   \
     _Static_assert(offsetof(struct RTCRayHit##K, ray.tfar) == F_TFAR * 4 * K, "tfar"); \
     _Static_assert(offsetof(struct RTCRayHit##K, hit.u) == F_U * 4 * K, "u");         \
     _Static_assert(offsetof(struct RTCRayHit##K, hit.primID) == F_PRIM * 4 * K, "p"); \
-    _Static_assert(offsetof(struct RTCRayHit##K, hit.instID) == F_INST * 4 * K, "i")
+    _Static_assert(offsetof(struct RTCRayHit##K, hit.instID) == F_INST * 4 * K, "i"); \
+    _Static_assert(sizeof(struct RTCRay##K) == F_RAY * 4 * K, "RTCRay" #K)
 PACKET_LAYOUT(4);
 PACKET_LAYOUT(8);
 PACKET_LAYOUT(16);
@@ -48,8 +51,11 @@ static float bitsf(uint32_t u) {
     return f;
 }
 
-/* Lane j of a K-wide packet (p: F_COUNT * K words). */
-static void packet_put(uint32_t *p, int K, int j, const kdr_ray *r) {
+/* Four-byte words per lane: the ray alone for any hit, ray and hit else. */
+static size_t lane_words(kdr_query q) { return q == KDR_ANY ? F_RAY : F_COUNT; }
+
+/* Lane j of a K-wide packet (p: lane_words(q) * K words). */
+static void packet_put(uint32_t *p, int K, int j, kdr_query q, const kdr_ray *r) {
     for (int k = 0; k < 3; k++) {
         p[(F_ORG + k) * K + j] = fbits(r->org[k]);
         p[(F_DIR + k) * K + j] = fbits(r->dir[k]);
@@ -60,15 +66,30 @@ static void packet_put(uint32_t *p, int K, int j, const kdr_ray *r) {
     p[F_MASK * K + j] = 0xFFFFFFFFu;
     p[F_ID * K + j] = (uint32_t)j;
     p[F_FLAGS * K + j] = 0;
+    if (q == KDR_ANY)
+        return;
     p[F_GEOM * K + j] = RTC_INVALID_GEOMETRY_ID;
     p[F_INST * K + j] = RTC_INVALID_GEOMETRY_ID;
 }
 
-static void single_put(struct RTCRayHit *h, const kdr_ray *r) {
-    h->ray.org_x = r->org[0], h->ray.org_y = r->org[1], h->ray.org_z = r->org[2];
-    h->ray.dir_x = r->dir[0], h->ray.dir_y = r->dir[1], h->ray.dir_z = r->dir[2];
-    h->ray.tnear = r->tmin, h->ray.tfar = r->tmax, h->ray.time = 0.0f;
-    h->ray.mask = 0xFFFFFFFFu, h->ray.id = 0, h->ray.flags = 0;
+/* Single rays and streams: arrays of struct RTCRay (any) or RTCRayHit. */
+static size_t single_bytes(kdr_query q) {
+    return q == KDR_ANY ? sizeof(struct RTCRay) : sizeof(struct RTCRayHit);
+}
+
+static struct RTCRay *single_at(void *base, size_t i, kdr_query q) {
+    return (struct RTCRay *)((char *)base + i * single_bytes(q));
+}
+
+static void single_put(void *base, size_t i, kdr_query q, const kdr_ray *r) {
+    struct RTCRay *ray = single_at(base, i, q);
+    ray->org_x = r->org[0], ray->org_y = r->org[1], ray->org_z = r->org[2];
+    ray->dir_x = r->dir[0], ray->dir_y = r->dir[1], ray->dir_z = r->dir[2];
+    ray->tnear = r->tmin, ray->tfar = r->tmax, ray->time = 0.0f;
+    ray->mask = 0xFFFFFFFFu, ray->id = 0, ray->flags = 0;
+    if (q == KDR_ANY)
+        return;
+    struct RTCRayHit *h = (struct RTCRayHit *)ray;
     h->hit.geomID = RTC_INVALID_GEOMETRY_ID;
     h->hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
 }
@@ -80,9 +101,11 @@ static int packet_hit(const uint32_t *p, int K, int j, kdr_query q) {
     return p[F_GEOM * K + j] != RTC_INVALID_GEOMETRY_ID;
 }
 
-static int single_hit(const struct RTCRayHit *h, kdr_query q) {
-    return q == KDR_ANY ? h->ray.tfar == -INFINITY
-                        : h->hit.geomID != RTC_INVALID_GEOMETRY_ID;
+static int single_hit(void *base, size_t i, kdr_query q) {
+    const struct RTCRay *ray = single_at(base, i, q);
+    return q == KDR_ANY ? ray->tfar == -INFINITY
+                        : ((const struct RTCRayHit *)ray)->hit.geomID !=
+                              RTC_INVALID_GEOMETRY_ID;
 }
 
 /* Every lane valid; Embree wants the mask as aligned as the packet. */
@@ -120,26 +143,26 @@ static void packet_call(RTCScene sc, struct RTCIntersectContext *ctx, int K,
 }
 
 static void single_call(RTCScene sc, struct RTCIntersectContext *ctx, kdr_query q,
-                        struct RTCRayHit *h) {
+                        void *base, size_t i) {
     if (q == KDR_ANY)
-        rtcOccluded1(sc, ctx, &h->ray);
+        rtcOccluded1(sc, ctx, single_at(base, i, q));
     else
-        rtcIntersect1(sc, ctx, h);
+        rtcIntersect1(sc, ctx, (struct RTCRayHit *)single_at(base, i, q));
 }
 
 static void stream_call(RTCScene sc, struct RTCIntersectContext *ctx, kdr_query q,
-                        struct RTCRayHit *h, size_t n) {
+                        void *base, size_t n) {
     if (q == KDR_ANY)
-        rtcOccluded1M(sc, ctx, &h->ray, (unsigned)n, sizeof *h);
+        rtcOccluded1M(sc, ctx, base, (unsigned)n, single_bytes(q));
     else
-        rtcIntersect1M(sc, ctx, h, (unsigned)n, sizeof *h);
+        rtcIntersect1M(sc, ctx, base, (unsigned)n, single_bytes(q));
 }
 
-static size_t api_bytes(rival_api api, size_t n) {
+static size_t api_bytes(rival_api api, kdr_query q, size_t n) {
     if (api.width <= 1)
-        return n * sizeof(struct RTCRayHit);
+        return n * single_bytes(q);
     const size_t K = (size_t)api.width;
-    return (n + K - 1) / K * F_COUNT * 4 * K;
+    return (n + K - 1) / K * lane_words(q) * 4 * K;
 }
 
 static void *alloc_aligned(size_t bytes) {
@@ -153,7 +176,7 @@ int rival_job_init(rival_job *j, const rival *r, rival_api api, kdr_query q,
     memset(j, 0, sizeof *j);
     j->r = r, j->api = api, j->query = q, j->rays = rays, j->n = n;
     rival_api_name(r, api, q, j->name, sizeof j->name);
-    j->buf = alloc_aligned(api_bytes(api, n ? n : 1));
+    j->buf = alloc_aligned(api_bytes(api, q, n ? n : 1));
     j->valid_last = alloc_aligned(16 * sizeof(int));
     if (!j->buf || !j->valid_last) {
         rival_job_free(j);
@@ -175,16 +198,15 @@ void rival_job_free(rival_job *j) {
 static void job_convert(void *ctx) {
     rival_job *j = ctx;
     if (j->api.width <= 1) {
-        struct RTCRayHit *h = j->buf;
         for (size_t i = 0; i < j->n; i++)
-            single_put(&h[i], &j->rays[i]);
+            single_put(j->buf, i, j->query, &j->rays[i]);
         return;
     }
-    const int K = j->api.width;
+    const size_t K = (size_t)j->api.width, words = lane_words(j->query) * K;
     uint32_t *p = j->buf;
-    const size_t np = (j->n + (size_t)K - 1) / (size_t)K;
-    for (size_t i = 0; i < np * (size_t)K; i++) /* idle lanes repeat the last ray */
-        packet_put(p + i / (size_t)K * F_COUNT * (size_t)K, K, (int)(i % (size_t)K),
+    const size_t np = (j->n + K - 1) / K;
+    for (size_t i = 0; i < np * K; i++) /* idle lanes repeat the last ray */
+        packet_put(p + i / K * words, (int)K, (int)(i % K), j->query,
                    &j->rays[i < j->n ? i : j->n - 1]);
 }
 
@@ -196,15 +218,15 @@ static void job_trace(void *ctx) {
     if (j->api.width == RIVAL_STREAM) {
         stream_call(sc, &c, j->query, j->buf, j->n);
     } else if (j->api.width == 1) {
-        struct RTCRayHit *h = j->buf;
         for (size_t i = 0; i < j->n; i++)
-            single_call(sc, &c, j->query, &h[i]);
+            single_call(sc, &c, j->query, j->buf, i);
     } else {
         const size_t K = (size_t)j->api.width, np = (j->n + K - 1) / K;
+        const size_t words = lane_words(j->query) * K;
         uint32_t *p = j->buf;
         for (size_t k = 0; k < np; k++)
             packet_call(sc, &c, (int)K, j->query,
-                        k + 1 < np ? g_all_valid : j->valid_last, p + k * F_COUNT * K);
+                        k + 1 < np ? g_all_valid : j->valid_last, p + k * words);
     }
 }
 
@@ -217,14 +239,14 @@ void rival_job_answers(const rival_job *j, uint8_t *hit, int32_t *prim) {
         int h;
         uint32_t p;
         if (j->api.width <= 1) {
-            const struct RTCRayHit *rh = (const struct RTCRayHit *)j->buf + i;
-            h = single_hit(rh, j->query);
-            p = rh->hit.primID;
+            h = single_hit(j->buf, i, j->query);
+            p = h && j->query == KDR_CLOSEST
+                    ? ((const struct RTCRayHit *)j->buf)[i].hit.primID : 0;
         } else {
             const size_t K = (size_t)j->api.width;
-            const uint32_t *pk = (const uint32_t *)j->buf + i / K * F_COUNT * K;
+            const uint32_t *pk = (const uint32_t *)j->buf + i / K * lane_words(j->query) * K;
             h = packet_hit(pk, (int)K, (int)(i % K), j->query);
-            p = pk[F_PRIM * K + i % K];
+            p = j->query == KDR_CLOSEST ? pk[F_PRIM * K + i % K] : 0;
         }
         hit[i] = (uint8_t)h;
         if (prim)
@@ -240,7 +262,8 @@ int rival_camera_job_init(rival_camera_job *j, const rival *r, rival_api api,
     j->r = r, j->api = api, j->cam = cam, j->out = out, j->trace = 1;
     rival_api_name(r, api, KDR_CLOSEST, j->name, sizeof j->name);
     const size_t pixels = (size_t)cam->width * cam->height;
-    j->buf = alloc_aligned(api_bytes(api, api.width == RIVAL_STREAM ? pixels : 16));
+    j->buf = alloc_aligned(
+        api_bytes(api, KDR_CLOSEST, api.width == RIVAL_STREAM ? pixels : 16));
     j->sx = malloc(cam->width * sizeof *j->sx);
     j->sy = malloc(cam->height * sizeof *j->sy);
     if (!j->buf || !j->sx || !j->sy || cam->width % 4 || cam->height % 4) {
@@ -293,14 +316,14 @@ static void camera_tile(rival_camera_job *j, const kd_camera_basis *b,
             tile_pixel(k, &dx, &dy);
             camera_put(j, b, x0 + dx, y0 + dy, ray);
             if (K == 1)
-                single_put(h, ray);
+                single_put(h, 0, KDR_CLOSEST, ray);
             else
-                packet_put(p, K, k - k0, ray);
+                packet_put(p, K, k - k0, KDR_CLOSEST, ray);
         }
         if (!j->trace)
             continue;
         if (K == 1)
-            single_call(sc, c, KDR_CLOSEST, h);
+            single_call(sc, c, KDR_CLOSEST, h, 0);
         else
             packet_call(sc, c, K, KDR_CLOSEST, g_all_valid, p);
         for (int k = k0; k < k0 + K; k++) {
@@ -308,7 +331,7 @@ static void camera_tile(rival_camera_job *j, const kd_camera_basis *b,
             tile_pixel(k, &dx, &dy);
             const size_t pix = (size_t)(y0 + dy) * w + x0 + dx;
             if (K == 1) {
-                camera_out(j, pix, single_hit(h, KDR_CLOSEST), h->ray.tfar,
+                camera_out(j, pix, single_hit(h, 0, KDR_CLOSEST), h->ray.tfar,
                            h->hit.primID, h->hit.u, h->hit.v);
             } else {
                 const int l = k - k0;
@@ -332,7 +355,7 @@ static void camera_stream(rival_camera_job *j, const kd_camera_basis *b,
                 uint32_t dx, dy;
                 tile_pixel(k, &dx, &dy);
                 camera_put(j, b, x0 + dx, y0 + dy, ray);
-                single_put(&h[i], ray);
+                single_put(h, i, KDR_CLOSEST, ray);
             }
     if (j->trace)
         stream_call(rival_rtc_scene(j->r), c, KDR_CLOSEST, h, i);
@@ -343,7 +366,7 @@ static void camera_stream(rival_camera_job *j, const kd_camera_basis *b,
                 uint32_t dx, dy;
                 tile_pixel(k, &dx, &dy);
                 camera_out(j, (size_t)(y0 + dy) * w + x0 + dx,
-                           single_hit(&h[i], KDR_CLOSEST), h[i].ray.tfar,
+                           single_hit(h, i, KDR_CLOSEST), h[i].ray.tfar,
                            h[i].hit.primID, h[i].hit.u, h[i].hit.v);
             }
 }
@@ -388,7 +411,7 @@ int rival_shadow_job_init(rival_shadow_job *j, const rival *r, rival_api api,
     memset(j, 0, sizeof *j);
     j->r = r, j->api = api, j->kd = kd, j->q = q, j->vis = vis, j->trace = 1;
     rival_api_name(r, api, KDR_ANY, j->name, sizeof j->name);
-    j->buf = alloc_aligned(api_bytes(api, shadow_capacity(api)));
+    j->buf = alloc_aligned(api_bytes(api, KDR_ANY, shadow_capacity(api)));
     j->owner = malloc(shadow_capacity(api) * sizeof *j->owner);
     if (!j->buf || !j->owner) {
         rival_shadow_job_free(j);
@@ -412,13 +435,12 @@ static void shadow_flush(rival_shadow_job *j, struct RTCIntersectContext *c,
     if (!j->trace)
         return;
     if (K <= 1) {
-        struct RTCRayHit *h = j->buf;
         if (K == 1)
-            single_call(sc, c, KDR_ANY, h);
+            single_call(sc, c, KDR_ANY, j->buf, 0);
         else
-            stream_call(sc, c, KDR_ANY, h, used);
+            stream_call(sc, c, KDR_ANY, j->buf, used);
         for (size_t k = 0; k < used; k++)
-            j->vis[j->owner[k]] += single_hit(&h[k], KDR_ANY) ? 0.0f : 1.0f;
+            j->vis[j->owner[k]] += single_hit(j->buf, k, KDR_ANY) ? 0.0f : 1.0f;
         return;
     }
     _Alignas(64) int valid[16];
@@ -451,9 +473,9 @@ static void shadow_run(void *ctx) {
                 kdr_ray ray;
                 kd_shadow_frame_ray(&f, s, q->samples, &ray);
                 if (j->api.width <= 1)
-                    single_put((struct RTCRayHit *)j->buf + used, &ray);
+                    single_put(j->buf, used, KDR_ANY, &ray);
                 else
-                    packet_put(j->buf, j->api.width, (int)used, &ray);
+                    packet_put(j->buf, j->api.width, (int)used, KDR_ANY, &ray);
                 j->owner[used++] = o;
                 if (used == cap) {
                     shadow_flush(j, &c, used);
