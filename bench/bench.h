@@ -32,6 +32,10 @@
  *   --ref-samples N    cone RMSE reference samples (default 4096; 0: none)
  *   --res N            cone points: an N x N camera's hits (default 64)
  *   --out PREFIX       cone CSV/plot data files PREFIX.csv/.dat/.png
+ *   --method PREFIX    time only the methods whose name starts with PREFIX
+ *                      (repeatable), e.g. under a profiler: kdray_bench_cone
+ *                      --method kd_cone --ref-samples 0; checks that need a
+ *                      method left out are skipped
  *   --csv PATH         also write the summary CSV to PATH
  */
 #ifndef KDRAY_BENCH_H
@@ -109,8 +113,13 @@ typedef struct bench_method {
 
 /* The one timing loop: rounds of every method in turn until each has run
  * `repeat` passes and the rounds took min_ms of CPU time in all; each
- * method keeps its fastest pass. */
+ * method keeps its fastest pass. A method --method left out is not run
+ * and gets best_ms = NAN. */
 void bench_measure(bench_method *m, size_t n, int repeat, double min_ms);
+/* 1 unless --method was given and no prefix matches the name. */
+int bench_method_wanted(const char *name);
+/* 1 if --method was given (sections then skip their extra measurements). */
+int bench_method_filtered(void);
 
 /* ---- summary ------------------------------------------------------------------ */
 

@@ -202,23 +202,28 @@ static int one_count(const bench_scene *s, const kdr_shadow_query *q, const floa
         bench_measure(m, nm, o->repeat, o->quick ? CONE_QUICK_MIN_MS : CONE_MIN_MS);
         kdr_shadow_stats st = {0};
         ks[0].stats = &st;
-        kd_shadow_run(&ks[0]); /* untimed: how many cones were decided */
+        if (!isnan(m[0].best_ms))
+            kd_shadow_run(&ks[0]); /* untimed: how many cones were decided */
         *decided = st.cones_decided;
         rc = ks[0].rc || ks[1].rc;
     }
-    size_t best = 2;
+    /* the strongest Embree API that ran (best == nm: none did) */
+    size_t best = nm;
     for (size_t i = 2; i < 2 + napi && !rc; i++) {
         rc |= rj[i - 2].failed;
-        if (m[i].best_ms < m[best].best_ms)
+        if (!isnan(m[i].best_ms) && (best == nm || m[i].best_ms < m[best].best_ms))
             best = i;
     }
     const size_t samples = q->n * q->samples;
+    const int have_rays = !isnan(m[1].best_ms); /* kd_rays: the reference answers */
     for (size_t i = 0; i < nm && !rc; i++) {
+        if (isnan(m[i].best_ms))
+            continue; /* left out by --method */
         bench_summary_add(s, work, m[i].name, samples, m[i].best_ms, -1);
-        if (i == 1 && memcmp(vis[0], vis[1], q->n * sizeof(float)))
+        if (i == 0 && have_rays && memcmp(vis[0], vis[1], q->n * sizeof(float)))
             bench_fail("%s %s: kd_cone and kd_rays answers differ", s->name, work);
         double diff = 0.0;
-        for (size_t p = 0; i >= 2 && i < 2 + napi && p < q->n; p++)
+        for (size_t p = 0; have_rays && i >= 2 && i < 2 + napi && p < q->n; p++)
             diff += fabs((double)vis[i][p] - vis[1][p]) * q->samples;
         if (diff > SAMPLE_TOLERANCE * (double)samples)
             bench_fail("%s %s: %s disagrees with kd on %.0f of %zu samples", s->name,
@@ -227,13 +232,15 @@ static int one_count(const bench_scene *s, const kdr_shadow_query *q, const floa
     if (!rc) {
         const size_t pick[3] = {0, 1, best};
         for (int k = 0; k < 3; k++)
-            out[k] =
-                (row_out){m[pick[k]].best_ms, ref ? rmse(vis[pick[k]], ref, q->n) : NAN};
+            out[k] = pick[k] < nm && !isnan(m[pick[k]].best_ms)
+                         ? (row_out){m[pick[k]].best_ms,
+                                     ref ? rmse(vis[pick[k]], ref, q->n) : NAN}
+                         : (row_out){NAN, NAN};
         printf("%8u %10.3f %10.3f %10.3f %-30s %8.2fx %8.2fx %9.5f %8.1f%%\n", q->samples,
-               out[0].ms, out[1].ms, out[2].ms, m[best].name + 7, out[2].ms / out[0].ms,
-               out[2].ms / out[1].ms, out[0].rmse,
+               out[0].ms, out[1].ms, out[2].ms, best < nm ? m[best].name + 7 : "-",
+               out[2].ms / out[0].ms, out[2].ms / out[1].ms, out[0].rmse,
                100.0 * (double)*decided / (double)q->n);
-        if (nr > napi)
+        if (nr > napi && !isnan(m[nm - 1].best_ms))
             printf("%8s Embree's sample generation alone: %.3f ms\n", "",
                    m[nm - 1].best_ms);
     }

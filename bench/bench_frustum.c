@@ -140,12 +140,14 @@ static int one_camera(const bench_scene *s, const kdr_camera *cam, int k,
     snprintf(work, sizeof work, "frustum_cam%d", k);
     printf("camera %d (eye %.3g %.3g %.3g), %ux%u:\n", k, cam->eye[0], cam->eye[1],
            cam->eye[2], cam->width, cam->height);
-    const size_t ref = count_hits(&hits[2], n);
+    const size_t ref = isnan(m[2].best_ms) ? 0 : count_hits(&hits[2], n); /* kd_rays */
     double best = INFINITY;
     for (size_t i = 3; i < 3 + napi; i++)
         best = fmin(best, m[i].best_ms);
     for (size_t i = 0; rc == 0 && i < nm; i++) {
         double npr = -1.0;
+        if (isnan(m[i].best_ms))
+            continue; /* left out by --method */
         if (i < 3 && !o->quick) {
             kdr_trav_stats st = {0};
             kf[i].stats = &st;
@@ -164,11 +166,11 @@ static int one_camera(const bench_scene *s, const kdr_camera *cam, int k,
         printf("\n");
         bench_summary_add(s, work, m[i].name, n, m[i].best_ms, npr);
         const size_t diff = h > ref ? h - ref : ref - h;
-        if (traced && (double)diff > HIT_TOLERANCE * (double)n)
+        if (ref && traced && (double)diff > HIT_TOLERANCE * (double)n)
             bench_fail("%s %s: %s hits %zu, kd_rays %zu", s->name, work, m[i].name, h,
                        ref);
     }
-    if (rc == 0 && !o->quick)
+    if (rc == 0 && !o->quick && !bench_method_filtered())
         sweep(s, kf, work, o->repeat);
     for (size_t i = 0; i < nm; i++)
         free_hits(&hits[i]);
@@ -193,25 +195,30 @@ static int frustum_run(const bench_scene *s, const bench_opts *o) {
     return 0;
 }
 
+/* One geometric-mean line, or nothing when the method did not run. */
+static void mean_line(const char *name) {
+    const double g = bench_summary_geomean("frustum_cam", name, 1);
+    if (g > 0)
+        printf("  %-32s x best Embree %.2f\n", name, g);
+}
+
 static void frustum_finish(const bench_opts *o) {
     rival_api apis[RIVAL_MAX_APIS];
     const size_t napi = rival_apis(RIVAL_WORK_CAMERA, apis);
     printf("\n== frustum: geometric means over every camera of every scene\n");
     for (int i = 0; i < 3; i++)
-        printf("  %-32s x best Embree %.2f\n", kd_names[i],
-               bench_summary_geomean("frustum_cam", kd_names[i], 1));
+        mean_line(kd_names[i]);
     for (size_t i = 0; i < napi; i++) {
         char name[64];
         rival_api_name(NULL, apis[i], KDR_CLOSEST, name, sizeof name);
-        printf("  %-32s x best Embree %.2f\n", name,
-               bench_summary_geomean("frustum_cam", name, 1));
+        mean_line(name);
     }
     /* ratio of two methods' times over the same workloads: exp(mean log) */
     const double f4 = bench_summary_geomean("frustum_cam", "kd_frustum4", 0);
     const double f1 = bench_summary_geomean("frustum_cam", "kd_frustum1", 0);
-    printf("  4-frustum / 1-frustum at tile %d: %.2fx\n", DEFAULT_TILE,
-           f4 > 0 ? f1 / f4 : 0);
-    if (o->quick)
+    if (f4 > 0 && f1 > 0)
+        printf("  4-frustum / 1-frustum at tile %d: %.2fx\n", DEFAULT_TILE, f1 / f4);
+    if (o->quick || bench_method_filtered())
         return;
     printf("  tile sweep, 4-frustum / 1-frustum at the same tile:");
     for (int t = 0; t < NSWEEP; t++) {

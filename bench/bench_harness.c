@@ -41,15 +41,34 @@ static double time_pass(bench_method *m) {
     return dt;
 }
 
+static struct {
+    const char *prefix[MAX_SELECT];
+    int n;
+} g_methods;
+
+int bench_method_wanted(const char *name) {
+    for (int i = 0; i < g_methods.n; i++)
+        if (!strncmp(name, g_methods.prefix[i], strlen(g_methods.prefix[i])))
+            return 1;
+    return g_methods.n == 0;
+}
+
+int bench_method_filtered(void) { return g_methods.n > 0; }
+
 void bench_measure(bench_method *m, size_t n, int repeat, double min_ms) {
-    for (size_t i = 0; i < n; i++)
-        m[i].best_ms = INFINITY;
+    int any = 0;
+    for (size_t i = 0; i < n; i++) {
+        const int wanted = bench_method_wanted(m[i].name);
+        m[i].best_ms = wanted ? INFINITY : NAN;
+        any |= wanted;
+    }
     const double start = bench_cpu_ms();
-    for (int round = 0; round < (repeat > 0 ? repeat : 1) ||
-                        bench_cpu_ms() - start < min_ms;
+    for (int round = 0; any && (round < (repeat > 0 ? repeat : 1) ||
+                                bench_cpu_ms() - start < min_ms);
          round++)
         for (size_t i = 0; i < n; i++)
-            m[i].best_ms = fmin(m[i].best_ms, time_pass(&m[i]));
+            if (!isnan(m[i].best_ms))
+                m[i].best_ms = fmin(m[i].best_ms, time_pass(&m[i]));
 }
 
 /* ---- summary ------------------------------------------------------------------- */
@@ -241,6 +260,8 @@ static int parse_flags(int argc, char **argv, driver *d) {
             d->only[d->nonly++] = v;
         else if (!strcmp(f, "--section") && d->nsections < MAX_SELECT)
             d->sections[d->nsections++] = v;
+        else if (!strcmp(f, "--method") && g_methods.n < MAX_SELECT)
+            g_methods.prefix[g_methods.n++] = v;
         else
             return -1;
     }
@@ -256,7 +277,8 @@ static void usage(const char *program) {
     fprintf(stderr,
             "usage: %s [--dir DIR] [--only SCENE]... [--max-tris N] [--section NAME]...\n"
             "       [--rays N] [--repeat R] [--quick] [--frame N] [--samples A,B,..]\n"
-            "       [--ref-samples N] [--res N] [--out PREFIX] [--csv PATH]\n"
+            "       [--ref-samples N] [--res N] [--out PREFIX] [--method PREFIX]...\n"
+            "       [--csv PATH]\n"
             "sections: core, bundle, frustum, cone (see bench/bench.h)\n",
             program);
 }

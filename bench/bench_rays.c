@@ -256,11 +256,13 @@ int bench_run_workload(const bench_scene *s, const bench_workload *w,
         bench_measure(m, nm, o->repeat, 0.0);
 
     uint8_t *hit = malloc(w->n);
-    const size_t ref = nk && kj[0].mode == BENCH_KD_SINGLE ? kd_job_hits(&kj[0]) : 0;
-    double best_ms = 0.0;
+    /* kd_single's hit count is the reference, when it ran */
+    const size_t ref = nk && kj[0].mode == BENCH_KD_SINGLE && !isnan(m[0].best_ms)
+                           ? kd_job_hits(&kj[0]) : 0;
+    double best_ms = NAN;
     const char *best = NULL;
     for (size_t i = nk; i < nm; i++)
-        if (!best || m[i].best_ms < best_ms)
+        if (!isnan(m[i].best_ms) && (!best || m[i].best_ms < best_ms))
             best = m[i].name, best_ms = m[i].best_ms;
     printf("\n%s: %s, %zu rays (%s, %s)\n", s->name, w->name, w->n,
            w->query == KDR_ANY ? "any hit" : "closest hit",
@@ -271,6 +273,8 @@ int bench_run_workload(const bench_scene *s, const bench_workload *w,
     for (size_t i = 0; rc == 0 && hit && i < nm; i++) {
         size_t hits;
         double npr = -1.0;
+        if (isnan(m[i].best_ms))
+            continue; /* left out by --method */
         if (i < nk) {
             hits = kd_job_hits(&kj[i]);
             if (!o->quick) { /* one untimed pass for the node count */

@@ -136,7 +136,7 @@ def bundle_table(bun):
 
 def frustum_table(fru):
     print("| scene | camera | kd 4-frustum Mrays/s | ×1-frustum | ×kd per ray | "
-          "×I1 | ×best (API) | Embree ray generation share |")
+          "×I1 | ×best (API) | Embree raygen share |")
     print("|---|---|---|---|---|---|---|---|")
     g = {"f4_f1": [], "f4_best": [], "f4_i1": [], "f1_best": [], "rays_best": []}
     for s, rows in fru.items():
