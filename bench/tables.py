@@ -48,6 +48,12 @@ def vs_best(rows, w, m):
     return (t / tm if t and tm else None), api
 
 
+def fms(v):
+    """A time in ms: two decimals below 10 ms (the small scenes build in
+    microseconds), one above."""
+    return "-" if v is None else ("%.2f" % v if v < 10 else "%.1f" % v)
+
+
 def f2(v):
     return "-" if v is None else "%.2f" % v
 
@@ -77,17 +83,33 @@ def tris(rows):
     return next(iter(rows.values()))["triangles"]
 
 
-def core_tables(core):
+def bytes_per_tri(out):
+    """{scene: (kd, embree)} bytes per triangle from core.txt's last table
+    (the summary CSV holds times only)."""
+    path, got, on = os.path.join(out, "core.txt"), {}, False
+    if not os.path.exists(path):
+        return got
+    for line in open(path):
+        if line.startswith("== kd build and single rays"):
+            on = True
+        elif on and "|" in line and not line.startswith("scene"):
+            cells = [c.split() for c in line.split("|")]
+            if len(cells) > 2 and len(cells[2]) == 2 and cells[0]:
+                got[cells[0][0]] = (cells[2][0], cells[2][1])
+    return got
+
+
+def core_tables(core, bpt):
     print("#### kd build and memory\n")
     print("| scene | triangles | kd build ms | Embree HIGH ms | kd / HIGH (time) | "
-          "Embree MEDIUM ms | kd / MEDIUM |")
-    print("|---|---|---|---|---|---|---|")
+          "Embree MEDIUM ms | kd / MEDIUM | bytes/triangle kd / Embree HIGH |")
+    print("|---|---|---|---|---|---|---|---|")
     for s, rows in core.items():
         kd, hi, med = (ms(rows, "build", m) for m in
                        ("kd_build", "embree_build_high", "embree_build_medium"))
-        print("| %s | %s | %.1f | %.1f | %s | %s | %s |" % (
-            s, tris(rows), kd, hi, f2(kd / hi), "%.1f" % med if med else "-",
-            f2(kd / med) if med else "-"))
+        print("| %s | %s | %s | %s | %s | %s | %s | %s |" % (
+            s, tris(rows), fms(kd), fms(hi), f2(kd / hi), fms(med),
+            f2(kd / med) if med else "-", " / ".join(bpt.get(s, ("-", "-")))))
     print("\n#### Single rays: kd_single against each Embree API (speed ratio; "
           "Mrays/s of kd and of the strongest API)\n")
     apis = {"camera": ["rtcIntersect1", "rtcIntersect1M_coherent",
@@ -244,7 +266,7 @@ def main():
     core, bun, fru, cone = (load(os.path.join(out, n + ".csv"))
                             for n in ("core", "bundle", "frustum", "cone"))
     if core:
-        core_tables(core)
+        core_tables(core, bytes_per_tri(out))
     if bun:
         print("#### Bundles (kd_bundle8, the daemon's AUTO on this CPU)\n")
         bundle_table(bun)
