@@ -21,7 +21,7 @@
 #include "kd_internal.h"
 #include "kd_traverse.h"
 #include "kd_tri.h"
-#include "kd_tri_multi.h"
+#include "kd_tri_ntri.h"
 
 
 typedef struct kd_todo {
@@ -85,7 +85,7 @@ static inline void keep_hit(walk_out *o, float t, int32_t prim, float u,
  * the start of the group as tmax: a hit the scalar loop would reject with a
  * tighter tmax loses the tie rule anyway, so the best hit is the same. */
 static inline int test_group(const kdr_scene *s, const uint32_t *ref,
-                             uint32_t left, const kd_ray_pre4 *pre4,
+                             uint32_t left, const kd_ntri_pre4 *pre4,
                              float tmin, const int any, walk_out *o) {
     const float *rows[4];
     int32_t prims[4];
@@ -94,7 +94,7 @@ static inline int test_group(const kdr_scene *s, const uint32_t *ref,
         rows[j] = s->tris + 9 * (size_t)prims[j];
     }
     f4 t, V, W, det;
-    const int hits = kd_tri4_intersect(pre4, rows, f4_set1(tmin), f4_set1(o->t),
+    const int hits = kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(o->t),
                                        &t, &V, &W, &det);
     if (!hits)
         return 0;
@@ -118,8 +118,8 @@ static inline int test_group(const kdr_scene *s, const uint32_t *ref,
 KD_AVX2 __attribute__((noinline)) static int
 test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
            const kd_ray_pre *pre, float tmin, const int any, walk_out *o) {
-    kd_ray_pre8 pre8;
-    kd_ray_pre8_init(pre, &pre8);
+    kd_ntri_pre8 pre8;
+    kd_ntri_pre_init8(pre, &pre8);
     const f8 tmin8 = f8_set1(tmin);
     for (uint32_t i = 0; i < count; i += 8) {
         const uint32_t base = i + 8 <= count ? i : count - 8;
@@ -127,7 +127,7 @@ test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
         for (int j = 0; j < 8; j++)
             rows[j] = s->tris + 9 * (size_t)ref[base + j];
         f8 t, V, W, det;
-        const int hits = kd_tri8_intersect(&pre8, rows, tmin8, f8_set1(o->t), &t,
+        const int hits = kd_ntri_test8(&pre8, rows, tmin8, f8_set1(o->t), &t,
                                            &V, &W, &det);
         if (!hits)
             continue;
@@ -151,7 +151,7 @@ test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
  * the tie rule; returns 1 at the first hit when any != 0. Leaves of at least
  * KD_LEAF_SIMD_MIN references go four at a time. */
 static inline int test_leaf(const kdr_scene *s, const kd_node *n,
-                            const kd_ray_pre *pre, const kd_ray_pre4 *pre4,
+                            const kd_ray_pre *pre, const kd_ntri_pre4 *pre4,
                             float tmin, const int any, const int avx2,
                             walk_out *o) {
     const uint32_t *ref = s->refs + n->u.first;
@@ -196,8 +196,8 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
         return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
-    kd_ray_pre4 pre4;
-    kd_ray_pre4_init(&pre, &pre4);
+    kd_ntri_pre4 pre4;
+    kd_ntri_pre_init4(&pre, &pre4);
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     const kd_node *nodes = s->nodes;
     kd_todo stack[KD_MAX_DEPTH];
