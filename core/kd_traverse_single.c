@@ -35,7 +35,9 @@ typedef struct walk_out {
     uint64_t nodes, tests;
 } walk_out;
 
-/* Descends from n to a leaf, pushing far children; returns the leaf. */
+/* Descends from n to a non-empty leaf, pushing far children; returns the
+ * leaf, or NULL when the rest of this subtree is empty for the ray (a child
+ * flagged empty is never entered). */
 static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
                                      const float org[3], const float inv[3],
                                      const float ss[3], const unsigned neg[3],
@@ -52,11 +54,23 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
         __builtin_prefetch(above);
         const kd_node *nearc = neg[axis] ? above : below;
         const kd_node *farc = neg[axis] ? below : above;
+        const int near_empty = neg[axis] ? kd_above_empty(n) : kd_below_empty(n);
+        const int far_empty = neg[axis] ? kd_below_empty(n) : kd_above_empty(n);
         if (t_lo > *tf) {
+            if (near_empty)
+                return NULL;
             n = nearc;
         } else if (t_hi < *tn) {
+            if (far_empty)
+                return NULL;
             n = farc;
-        } else { /* both, and also a NaN (ray in the plane) */
+        } else if (far_empty) { /* both, and also a NaN (ray in the plane) */
+            n = nearc;
+            *tf = t_hi < *tf ? t_hi : *tf;
+        } else if (near_empty) {
+            n = farc;
+            *tn = t_lo > *tn ? t_lo : *tn;
+        } else {
             stack[*sp].node = farc;
             stack[*sp].tn = t_lo > *tn ? t_lo : *tn;
             stack[*sp].tf = *tf;
@@ -205,7 +219,7 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     const kd_node *n = nodes;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
-        if (test_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
+        if (n && test_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
             return 1;
         const float bound = kd_term_bound(o->t);
         do {
