@@ -65,6 +65,7 @@ struct kdr_scene {
     kdr_bounds root;      /* bounds padded outward by a few ulps: the box
                              traversals clip rays against */
     float diagonal;
+    float root_mag;       /* largest |coordinate| of root (kd_layout) */
     kdr_tree_stats stats;
 };
 

@@ -19,6 +19,13 @@ int kd_layout(kdr_scene *s) {
         return KDR_OK;
     if (s->nnodes >= KD_LAYOUT_MAX_NODES)
         return KDR_ERANGE;
+    /* kd_ray_slack's scene part, once per scene instead of once per ray */
+    float m = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        m = -s->root.min[k] > m ? -s->root.min[k] : m;
+        m = s->root.max[k] > m ? s->root.max[k] : m;
+    }
+    s->root_mag = m;
     /* a child's emptiness reads only leaf bits, which are never rewritten */
     for (size_t i = 0; i < s->nnodes; i++) {
         kd_node *n = &s->nodes[i];

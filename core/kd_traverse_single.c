@@ -192,21 +192,60 @@ static inline int test_leaf(const kdr_scene *s, const kd_node *n,
     return 0;
 }
 
+/* The ray's set-up, three axes per SSE operation: validity (kd_ray_valid),
+ * 1 / dir, the signed slack (kd_ray_slack, kd_signed_slack) and the root
+ * clip (kd_clip_root_slack), every lane with the scalar operations, so the
+ * interval is the scalar one bit for bit (max and min of the same non-NaN
+ * values in another order). Lane 3 carries neutral values. Returns 0 when
+ * the ray cannot be traced or misses the root box. */
+static inline int setup(const kdr_scene *s, const kdr_ray *r, float inv[3],
+                        float ss[3], unsigned neg[3], float *tn, float *tf) {
+    /* org[0..2] and dir[0..2], each loaded with the next float of kdr_ray */
+    const f4 org = f4_loadu(r->org), dir = f4_loadu(r->dir);
+    const f4 zero = f4_set1(0.0f);
+    const int finite = f4_bits(f4_eq(f4_sub(org, org), zero)) &
+                       f4_bits(f4_eq(f4_sub(dir, dir), zero)) & 7;
+    const int flat = f4_bits(f4_eq(dir, zero)) | 8;
+    if (finite != 7 || flat == 15 || !(r->tmin <= r->tmax))
+        return 0;
+    const f4 iv = f4_div(f4_set1(1.0f), f4_lane3(dir, 1.0f));
+    const f4 sgn = f4_set1(-0.0f);
+    const float slack =
+        f4_hmax(f4_lane3(f4_max(f4_andnot(sgn, org), f4_set1(s->root_mag)), 0.0f)) *
+        KD_SLACK_REL;
+    const f4 sl = f4_set1(slack);
+    _Alignas(16) float ivv[4], ssv[4];
+    f4_store(ivv, iv);
+    f4_store(ssv, f4_xor(sl, f4_and(iv, sgn)));
+    const int sign = f4_bits(dir);
+    for (int k = 0; k < 3; k++) {
+        inv[k] = ivv[k];
+        ss[k] = ssv[k];
+        neg[k] = (unsigned)(sign >> k) & 1u;
+    }
+    /* the root clip; a flat axis (direction 0) only rejects an origin
+     * outside the grown slab (kdr_bounds: max follows min in memory) */
+    const f4 lo = f4_sub(f4_loadu(s->root.min), sl);
+    const f4 hi = f4_add(f4_loadu(s->root.max), sl);
+    const f4 fl = f4_bitmask(flat);
+    if (f4_bits(f4_and(fl, f4_or(f4_lt(org, lo), f4_gt(org, hi)))) & 7)
+        return 0;
+    const f4 t0 = f4_mul(f4_sub(lo, org), iv), t1 = f4_mul(f4_sub(hi, org), iv);
+    /* entry min(t1, t0) and exit max(t0, t1): the scalar swap's result,
+     * NaN included; flat axes and lane 3 constrain nothing */
+    const f4 ent = f4_sel(fl, f4_set1(-INFINITY), f4_min(t1, t0));
+    const f4 ext = f4_sel(fl, f4_set1(INFINITY), f4_max(t0, t1));
+    *tn = f4_hmax(f4_max(ent, f4_set1(r->tmin)));
+    *tf = f4_hmin(f4_min(ext, f4_set1(r->tmax)));
+    return *tn <= *tf;
+}
+
 /* The walk shared by both queries; any != 0 stops at the first hit. */
 static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
                        walk_out *o) {
     float inv[3], ss[3], tn, tf;
     unsigned neg[3];
-    if (!s || !s->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax))
-        return 0;
-    for (int k = 0; k < 3; k++) {
-        inv[k] = 1.0f / r->dir[k];
-        neg[k] = signbit(r->dir[k]) ? 1u : 0u;
-    }
-    const float slack = kd_ray_slack(s, r->org);
-    kd_signed_slack(slack, inv, ss);
-    if (!kd_clip_root_slack(s, r->org, r->dir, inv, slack, r->tmin, r->tmax, &tn,
-                            &tf))
+    if (!s || !s->nodes || !setup(s, r, inv, ss, neg, &tn, &tf))
         return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);

@@ -30,6 +30,7 @@ typedef __m128 f4;
 
 static inline f4 f4_set1(float x) { return _mm_set1_ps(x); }
 static inline f4 f4_load(const float *p) { return _mm_load_ps(p); }
+static inline f4 f4_loadu(const float *p) { return _mm_loadu_ps(p); }
 static inline void f4_store(float *p, f4 a) { _mm_store_ps(p, a); }
 static inline f4 f4_add(f4 a, f4 b) { return _mm_add_ps(a, b); }
 static inline f4 f4_sub(f4 a, f4 b) { return _mm_sub_ps(a, b); }
@@ -91,6 +92,21 @@ static inline void f4_rows4(const float *const r[4], int off, f4 c[4]) {
        d = _mm_loadu_ps(r[2] + off), e = _mm_loadu_ps(r[3] + off);
     _MM_TRANSPOSE4_PS(a, b, d, e);
     c[0] = a, c[1] = b, c[2] = d, c[3] = e;
+}
+
+/* The largest / smallest lane (no NaN lanes). */
+static inline float f4_hmax(f4 a) {
+    const f4 b = _mm_max_ps(a, _mm_movehl_ps(a, a));
+    return _mm_cvtss_f32(_mm_max_ss(b, _mm_shuffle_ps(b, b, 1)));
+}
+static inline float f4_hmin(f4 a) {
+    const f4 b = _mm_min_ps(a, _mm_movehl_ps(a, a));
+    return _mm_cvtss_f32(_mm_min_ss(b, _mm_shuffle_ps(b, b, 1)));
+}
+/* Lane 3 replaced by x (lanes 0..2 of a ray's 3-vectors, loaded as 4). */
+static inline f4 f4_lane3(f4 a, float x) {
+    const f4 m = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+    return f4_sel(m, a, _mm_set1_ps(x));
 }
 
 /* Number of set bits in a lane mask (<= 8 lanes). A table, because the
