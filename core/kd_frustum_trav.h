@@ -226,6 +226,8 @@ KD_TARGET static void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const floa
     if (nsel == 0)
         return;
     const uint32_t *refs = c->s->refs + n->u.first;
+    if (c->s->prefetch_leaves) /* every row in flight at once (kd_tune.h) */
+        kd_prefetch_tris(c->s, refs, cnt);
     for (uint32_t r = 0; r < cnt; r++) {
         kf_tri_rel tr;
         kf_tri_rel_init(c, c->s->tris + 9 * (size_t)refs[r], &tr);

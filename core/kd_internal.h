@@ -66,8 +66,18 @@ struct kdr_scene {
                              traversals clip rays against */
     float diagonal;
     float root_mag;       /* largest |coordinate| of root (kd_layout) */
+    int prefetch_leaves;  /* scene larger than a core's caches: walks
+                             request a leaf's triangles before testing them
+                             (kd_layout, KD_PREFETCH_MIN_BYTES) */
     kdr_tree_stats stats;
 };
+
+/* Requests the rows of triangles refs[0..count) (two lines may hold a
+ * 36-byte row); walks call it at a leaf when scene->prefetch_leaves. Kept
+ * out of line so that leaf loops of small scenes keep their shape. */
+__attribute__((noinline)) void kd_prefetch_tris(const kdr_scene *s,
+                                                const uint32_t *refs,
+                                                uint32_t count);
 
 /* The post-build pass: rewrites the built tree into the traversal layout
  * above (core/kd_layout.c). KDR_ERANGE when the tree has KD_LAYOUT_MAX_NODES

@@ -26,6 +26,9 @@ int kd_layout(kdr_scene *s) {
         m = s->root.max[k] > m ? s->root.max[k] : m;
     }
     s->root_mag = m;
+    const size_t bytes = s->nnodes * sizeof(kd_node) + s->nrefs * sizeof(uint32_t) +
+                         9 * s->ntris * sizeof(float);
+    s->prefetch_leaves = bytes >= KD_PREFETCH_MIN_BYTES;
     /* a child's emptiness reads only leaf bits, which are never rewritten */
     for (size_t i = 0; i < s->nnodes; i++) {
         kd_node *n = &s->nodes[i];
@@ -37,4 +40,12 @@ int kd_layout(kdr_scene *s) {
         n->bits = above << 4 | ea << 3 | eb << 2 | axis;
     }
     return KDR_OK;
+}
+
+void kd_prefetch_tris(const kdr_scene *s, const uint32_t *refs, uint32_t count) {
+    for (uint32_t r = 0; r < count; r++) {
+        const float *tri = s->tris + 9 * (size_t)refs[r];
+        __builtin_prefetch(tri);
+        __builtin_prefetch(tri + 8);
+    }
 }

@@ -156,6 +156,10 @@ KD_FN void KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) 
                     VF act) {
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
+    /* request every triangle of the leaf at once: the tests then find
+     * their rows arriving in parallel instead of one miss after another */
+    if (s->prefetch_leaves)
+        kd_prefetch_tris(s, refs, cnt);
     for (uint32_t r = 0; r < cnt; r++) {
         const int32_t prim = (int32_t)refs[r];
         VF t, Vv, W, det;
