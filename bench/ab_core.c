@@ -23,6 +23,10 @@
  *   b8ao     ao64 through kdr_trace_batch(AUTO): 8-wide bundles per point
  *   b8cam    camera rays in 4x2 pixel blocks through kdr_trace_batch(AUTO)
  *   frustum  the camera through kdr_frustum_trace(MULTI4, tile 8)
+ *   cone16   kdr_shadow_trace(CONE), 16 samples per point toward a small
+ *            light (bench_cone's, r = 0.03 diagonal), points and normals
+ *            of ao's surface points (rays / 16 points)
+ *   cone64   the same with bench_cone's large light (r = 0.25) at 64 spp
  *
  *   kdray_ab [--dir DIR] [--only NAME]... [--rays N] [--rounds R]
  *            [--set NAME]...
@@ -57,7 +61,9 @@
     int P##kdr_frustum_trace(const kdr_scene *, const kdr_camera *, uint32_t,   \
                              size_t, size_t, kdr_query, kdr_frustum_mode,       \
                              kdr_hits *, kdr_trav_stats *);                     \
-    size_t P##kdr_frustum_tile_count(const kdr_camera *, uint32_t);
+    size_t P##kdr_frustum_tile_count(const kdr_camera *, uint32_t);             \
+    int P##kdr_shadow_trace(const kdr_scene *, const kdr_shadow_query *, size_t, \
+                            size_t, kdr_shadow_mode, float *, kdr_shadow_stats *);
 AB_DECLARE(A_)
 AB_DECLARE(B_)
 
@@ -75,12 +81,14 @@ typedef struct core_api {
                    size_t, kdr_query, kdr_frustum_mode, kdr_hits *,
                    kdr_trav_stats *);
     size_t (*tiles)(const kdr_camera *, uint32_t);
+    int (*shadow)(const kdr_scene *, const kdr_shadow_query *, size_t, size_t,
+                  kdr_shadow_mode, float *, kdr_shadow_stats *);
 } core_api;
 
 #define AB_API(P)                                                               \
     {P##kdr_scene_build,  P##kdr_scene_free,    P##kdr_scene_tree_stats,        \
      P##kdr_intersect1,   P##kdr_occluded1,     P##kdr_trace_batch,             \
-     P##kdr_frustum_trace, P##kdr_frustum_tile_count}
+     P##kdr_frustum_trace, P##kdr_frustum_tile_count, P##kdr_shadow_trace}
 static const core_api cores[2] = {AB_API(A_), AB_API(B_)};
 
 /* ---- clocks ------------------------------------------------------------------ */
@@ -93,9 +101,13 @@ static double cpu_s(void) {
 
 /* ---- ray sets ------------------------------------------------------------------ */
 
-enum { SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM, NSETS };
-static const char *const set_names[NSETS] = {"camera", "random", "ao",     "ao64",
-                                             "b8ao",   "b8cam",  "frustum"};
+enum {
+    SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
+    SET_CONE16, SET_CONE64, NSETS
+};
+static const char *const set_names[NSETS] = {"camera", "random",  "ao",
+                                             "ao64",   "b8ao",    "b8cam",
+                                             "frustum", "cone16", "cone64"};
 
 typedef struct scene_in {
     const float *tris;
@@ -200,6 +212,41 @@ static void ao_rays(const scene_in *s, size_t n, size_t per_point, kdr_ray *out)
     }
 }
 
+/* Points on random triangles (ao_rays' points) outside bench_cone's light,
+ * each with a direction on its normal's side as the "normal" (the query
+ * only uses it to offset the point toward the light), written to pts
+ * (3 floats per point, then 3 per normal). */
+static void cone_query(const scene_in *s, size_t npts, int large, uint32_t spp,
+                       kdr_ray *scratch, float *pts, kdr_sphere_light *li,
+                       kdr_shadow_query *q) {
+    static const float dir[3] = {-0.35f, 0.85f, 0.40f};
+    const float dist = large ? 0.55f : 0.9f;
+    for (int k = 0; k < 3; k++)
+        li->center[k] = 0.5f * (s->lo[k] + s->hi[k]) + dist * s->diag * dir[k];
+    li->radius = (large ? 0.25f : 0.03f) * s->diag;
+    float *nrm = pts + 3 * npts;
+    ao_rays(s, npts, 1, scratch);
+    size_t m = 0;
+    for (size_t i = 0; i < npts; i++) {
+        double d2 = 0;
+        for (int k = 0; k < 3; k++) {
+            const double d = scratch[i].org[k] - li->center[k];
+            d2 += d * d;
+        }
+        if (d2 <= 1.01 * li->radius * li->radius)
+            continue;
+        for (int k = 0; k < 3; k++) {
+            pts[3 * m + k] = scratch[i].org[k];
+            nrm[3 * m + k] = scratch[i].dir[k]; /* the hemisphere side */
+        }
+        m++;
+    }
+    memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
+    *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
+                            .lights = li, .nlights = 1, .samples = spp,
+                            .seed = 7, .epsilon = 1e-4f};
+}
+
 /* ---- one ray set, traced by A, B and Embree -------------------------------- */
 
 typedef struct job {
@@ -209,6 +256,7 @@ typedef struct job {
     size_t n, group; /* batches: rays per kdr_trace_batch call (shared origin) */
     const kdr_camera *cam;
     float *bdir; /* batch directions, 3n */
+    const kdr_shadow_query *sq; /* cone sets: n = points * samples */
 } job;
 
 typedef struct result {
@@ -220,6 +268,14 @@ typedef struct result {
 
 static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
                      result *o, kdr_trav_stats *st) {
+    if (j->sq) { /* visibility per point, as the t column */
+        kdr_shadow_stats ss = {0, 0, 0};
+        c->shadow(s, j->sq, 0, j->sq->n, KDR_SHADOW_CONE, o->t, &ss);
+        st->rays += j->n;
+        st->nodes_visited += ss.nodes_visited;
+        st->tri_tests += ss.rays_traced;
+        return;
+    }
     if (j->set == SET_FRUSTUM) {
         kdr_hits h = {o->t, o->prim, o->u, o->v, o->hit};
         c->frustum(s, j->cam, 8, 0, c->tiles(j->cam, 8), j->q, KDR_FRUSTUM_MULTI4,
@@ -278,6 +334,11 @@ static int cmp_double(const void *a, const void *b) {
 
 static size_t result_diffs(const job *j, const result *a, const result *b) {
     size_t d = 0;
+    if (j->sq) {
+        for (size_t i = 0; i < j->sq->n; i++)
+            d += memcmp(&a->t[i], &b->t[i], 4) != 0;
+        return d;
+    }
     for (size_t i = 0; i < j->n; i++) {
         if (j->q == KDR_ANY)
             d += a->hit[i] != b->hit[i];
@@ -430,8 +491,18 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             ao_rays(&si, n, 64, rays), j.q = KDR_ANY, j.group = 64;
             break;
         }
-        for (size_t i = 0; i < j.n; i++)
-            memcpy(bdir + 3 * i, rays[i].dir, 12);
+        kdr_shadow_query sq;
+        kdr_sphere_light li;
+        if (set == SET_CONE16 || set == SET_CONE64) {
+            const int large = set == SET_CONE64;
+            const uint32_t spp = large ? 64 : 16;
+            cone_query(&si, n / spp, large, spp, rays, bdir, &li, &sq);
+            j.sq = &sq;
+            j.n = sq.n * spp;
+        } else {
+            for (size_t i = 0; i < j.n; i++)
+                memcpy(bdir + 3 * i, rays[i].dir, 12);
+        }
         run_job(&j, kd, oracle_rtc_scene(orc), o->rounds, out);
     }
     for (int c = 0; c < 2; c++)
@@ -485,7 +556,7 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &o) != 0) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
-                        "frustum]...\n", argv[0]);
+                        "frustum|cone16|cone64]...\n", argv[0]);
         return 2;
     }
     ladder_entry *v;

@@ -315,12 +315,17 @@ KD_TARGET static void kf_traverse(kf_ctx *c) {
         const int axis = kd_axis(n);
         const float split = n->u.split, dist = split - c->b->eye[axis];
         const uint32_t below = cur.node + 1, above = kd_above(n);
+        const int below_empty = kd_below_empty(n), above_empty = kd_above_empty(n);
         if (dist == 0.0f) { /* eye on the plane: both children, whole */
-            stack[sp] = cur;
-            stack[sp].node = above;
-            stack[sp++].lo[axis] = split;
+            if (!above_empty) {
+                stack[sp] = cur;
+                stack[sp].node = above;
+                stack[sp++].lo[axis] = split;
+            }
             cur.node = below;
             cur.hi[axis] = split;
+            if (below_empty)
+                cur.tn = f4_set1(INFINITY); /* pop */
             continue;
         }
         f4 lo, hi;
@@ -328,8 +333,11 @@ KD_TARGET static void kf_traverse(kf_ctx *c) {
             kf_cross(dist, f4_load(rmax[axis]), f4_load(rmin[axis]), &lo, &hi);
         else
             kf_cross(dist, f4_load(rmin[axis]), f4_load(rmax[axis]), &lo, &hi);
-        const f4 fm = f4_and(act, f4_le(cur.tn, hi));
-        const f4 bm = f4_and(act, f4_le(lo, cur.tf));
+        /* an empty child (kd_layout's flags) needs no visit */
+        const int front_empty = dist > 0.0f ? below_empty : above_empty;
+        const int back_empty = dist > 0.0f ? above_empty : below_empty;
+        const f4 fm = front_empty ? f4_seti(0) : f4_and(act, f4_le(cur.tn, hi));
+        const f4 bm = back_empty ? f4_seti(0) : f4_and(act, f4_le(lo, cur.tf));
         kf_entry back = cur;
         back.node = dist > 0.0f ? above : below;
         back.tn = f4_sel(bm, f4_max(cur.tn, lo), f4_set1(INFINITY));

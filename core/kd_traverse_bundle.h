@@ -245,7 +245,10 @@ KD_FN int KD_WN(kb_step_shared)(const KD_WN(kb_state) *st, const kd_node *n, flo
     const VF b_act = V(and)(c->act, KD_WN(kb_active)(st, b.t_near, b.t_far));
     const uint32_t front = a < 0.0f ? kd_above(n) : c->node + 1;
     const uint32_t back = a < 0.0f ? c->node + 1 : kd_above(n);
-    const int fb = V(bits)(f_act), bb = V(bits)(b_act);
+    /* an empty child (kd_layout's flags) needs no visit */
+    const int f_empty = a < 0.0f ? kd_above_empty(n) : kd_below_empty(n);
+    const int b_empty = a < 0.0f ? kd_below_empty(n) : kd_above_empty(n);
+    const int fb = f_empty ? 0 : V(bits)(f_act), bb = b_empty ? 0 : V(bits)(b_act);
     if (fb && bb)
         KD_WN(kb_push)(stack, sp, back, b.t_near, b.t_far);
     if (fb) {
@@ -284,7 +287,9 @@ KD_FN int KD_WN(kb_step_general)(const KD_WN(kb_state) *st, const kd_node *n,
                          V(sel)(above_front, f.t_far, b.t_far)};
     const VF lo_act = V(and)(c->act, KD_WN(kb_active)(st, lo.t_near, lo.t_far));
     const VF hi_act = V(and)(c->act, KD_WN(kb_active)(st, hi.t_near, hi.t_far));
-    const int lb = V(bits)(lo_act), hb = V(bits)(hi_act);
+    /* an empty child (kd_layout's flags) needs no visit */
+    const int lb = kd_below_empty(n) ? 0 : V(bits)(lo_act);
+    const int hb = kd_above_empty(n) ? 0 : V(bits)(hi_act);
     if (!lb && !hb)
         return 0;
     int go_above = !lb;
