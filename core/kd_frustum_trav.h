@@ -128,8 +128,8 @@ KD_TARGET static void kf_tri_rel_init(const kf_ctx *c, const float *tri, kf_tri_
 
 /* kd_nray_test for a uniformly shearing group of rays from the eye, over
  * [0, +inf]: the same operations from the shear on. */
-KD_TARGET static VF kf_tri_test_eye(const KD_WN(kd_nray_pre) *p, const kf_tri_rel *tr, VF act,
-                         VF *t_out, VF *u_out, VF *v_out) {
+KD_TARGET static VF kf_tri_test_eye(const KD_WN(kd_nray_pre) *p, const kf_tri_rel *tr,
+                                    VF act, VF *t_out, VF *u_out, VF *v_out) {
     const VF Ax = tr->r[0][p->kx], Ay = tr->r[0][p->ky], Az0 = tr->r[0][p->kz];
     const VF Bx = tr->r[1][p->kx], By = tr->r[1][p->ky], Bz0 = tr->r[1][p->kz];
     const VF Cx = tr->r[2][p->kx], Cy = tr->r[2][p->ky], Cz0 = tr->r[2][p->kz];
@@ -165,10 +165,11 @@ KD_TARGET static void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t pri
                        const kf_tri_rel *tr) {
     const float *tri = c->s->tris + 9 * (size_t)prim;
     VF t = V(set1)(0.0f), u = t, v = t; /* set by the test on a hit */
-    const VF hit = g->pre.uniform
-                       ? kf_tri_test_eye(&g->pre, tr, V(bitmask)(*bits), &t, &u, &v)
-                       : KD_WN(kd_nray_test)(&g->pre, tri, V(bitmask)(*bits), V(set1)(0.0f),
-                                      V(set1)(INFINITY), &t, &u, &v);
+    const VF hit =
+        g->pre.uniform
+            ? kf_tri_test_eye(&g->pre, tr, V(bitmask)(*bits), &t, &u, &v)
+            : KD_WN(kd_nray_test)(&g->pre, tri, V(bitmask)(*bits), V(set1)(0.0f),
+                                  V(set1)(INFINITY), &t, &u, &v);
     c->tri_tests += (uint64_t)kf_popcount(*bits);
     if (!V(bits)(hit))
         return;
@@ -193,8 +194,8 @@ KD_TARGET static void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t pri
 
 /* Selects the groups of lane l whose rays may still meet box [rlo, rhi]
  * before their termination bound. */
-KD_TARGET static size_t kf_select(kf_ctx *c, const kf_tile *ft, float tn, const float rlo[3],
-                        const float rhi[3], size_t nsel) {
+KD_TARGET static size_t kf_select(kf_ctx *c, const kf_tile *ft, float tn,
+                                  const float rlo[3], const float rhi[3], size_t nsel) {
     for (size_t k = 0; k < ft->ng; k++) {
         kf_group *g = &c->groups[ft->g0 + k];
         if (!g->live || g->term < tn)
@@ -233,7 +234,8 @@ KD_TARGET static void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const floa
         kf_tri_rel_init(c, c->s->tris + 9 * (size_t)refs[r], &tr);
         for (size_t k = 0; k < nsel; k++)
             if (c->selbits[k])
-                kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r], &tr);
+                kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r],
+                            &tr);
     }
     /* a lane's bound can only fall when a group holding it fell */
     int dirty = 0;

@@ -322,7 +322,7 @@ KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF
         if (!kd_is_leaf(n)) {
             const float a = n->u.split - st->sorg[kd_axis(n)];
             if (st->shared && a != 0.0f ? KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp)
-                                           : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
+                                        : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
                 continue;
         } else {
             KD_WN(kb_leaf)(s, n, st, c.act);

@@ -232,8 +232,8 @@ KD_FN VF KD_WN(kd_nray_test_raw)(const KD_WN(kd_nray_pre) *p, const float *tri, 
 }
 
 /* The same with u, v computed for every hit lane. */
-KD_FN VF KD_WN(kd_nray_test)(const KD_WN(kd_nray_pre) *p, const float *tri, VF act, VF tmin,
-                      VF tmax, VF *t_out, VF *u_out, VF *v_out) {
+KD_FN VF KD_WN(kd_nray_test)(const KD_WN(kd_nray_pre) *p, const float *tri, VF act,
+                             VF tmin, VF tmax, VF *t_out, VF *u_out, VF *v_out) {
     VF Vv, W, det;
     VF ok = KD_WN(kd_nray_test_raw)(p, tri, act, tmin, tmax, t_out, &Vv, &W, &det);
     *u_out = *v_out = V(set1)(0.0f);
