@@ -99,6 +99,8 @@ int kdr_pf_int(const cJSON *item, const char *name, double lo, double hi,
                const char *range_text, uint64_t *out, kdr_proto_error *err);
 int kdr_pf_query(const cJSON *root, kdr_query *out, kdr_proto_error *err);
 int kdr_pf_encoding(const cJSON *root, kdr_encoding *out, kdr_proto_error *err);
+/* "deadline_ms": absent gives 0, else a number in (0, KDR_PROTO_MAX_DEADLINE_MS]. */
+int kdr_pf_deadline(const cJSON *root, double *out, kdr_proto_error *err);
 
 int kdr_pf_too_many(kdr_proto_error *err, uint64_t rays, size_t max_rays,
                     const char *what);

@@ -59,6 +59,8 @@ extern "C" {
 #define KDR_PROTO_MIN_TILE 4
 #define KDR_PROTO_MAX_TILE 64
 #define KDR_PROTO_MAX_IMAGE_SIDE 16384
+/* "deadline_ms" (every query kind): 0 < ms <= this (one day). */
+#define KDR_PROTO_MAX_DEADLINE_MS 86400000.0
 
 /* ---- output buffer ------------------------------------------------------ */
 
@@ -106,6 +108,7 @@ typedef struct kdr_bundle_request {
     kdr_ray_batch batch; /* ready for kdr_trace_batch */
     kdr_query query;
     kdr_encoding encoding;
+    double deadline_ms;  /* "deadline_ms": 0 when absent */
     float *owned[4];     /* org, dir, tmin, tmax storage (internal) */
 } kdr_bundle_request;
 
@@ -118,6 +121,7 @@ typedef struct kdr_shadow_request {
     kdr_shadow_query query; /* ready for kdr_shadow_trace */
     int want_stats;         /* "stats": true */
     kdr_encoding encoding;
+    double deadline_ms;     /* "deadline_ms": 0 when absent */
     float *owned_points, *owned_normals; /* internal */
     kdr_sphere_light *owned_lights;      /* internal */
 } kdr_shadow_request;
@@ -132,6 +136,7 @@ typedef struct kdr_frustum_request {
     uint32_t tile;
     kdr_query query;
     kdr_encoding encoding;
+    double deadline_ms; /* "deadline_ms": 0 when absent */
     size_t rays;       /* width * height */
 } kdr_frustum_request;
 
