@@ -1,9 +1,6 @@
 # Server integration tests (owner: server): the real kdrayd on a free
 # loopback port, driven over HTTP by the Python client and by curl, answers
-# compared with direct core calls (kdray-trace); plus the job pool unit test.
-add_executable(test_server_pool ${CMAKE_CURRENT_SOURCE_DIR}/test_server_pool.c)
-target_link_libraries(test_server_pool PRIVATE kdray_server)
-add_test(NAME server_pool COMMAND test_server_pool)
+# compared with direct core calls (kdray-trace).
 
 find_package(Python3 COMPONENTS Interpreter)
 find_program(KDRAY_CURL curl)
