@@ -385,6 +385,7 @@ static int exhausted(kdr_exec_job *j) {
 
 static void *worker_main(void *arg) {
     kdr_exec *ex = arg;
+    if (ex->cfg.on_worker_start) ex->cfg.on_worker_start(ex->cfg.worker_ctx);
     pthread_mutex_lock(&ex->lock);
     for (;;) {
         int prepare = 0;

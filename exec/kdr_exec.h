@@ -47,10 +47,15 @@ extern "C" {
 #endif
 
 /* Rays, tiles and points per chunk. A frustum chunk is a multiple of 4
- * tiles so that the four frusta traversed together are never split. */
+ * tiles so that the four frusta traversed together are never split. A
+ * cone-shadow chunk has at most CHUNK_POINTS points and, when there are
+ * many lights and samples, only as many as keep its worst case near
+ * CHUNK_SHADOW_RAYS shadow rays (at least one point), so that a deadline
+ * or a cancel is noticed within tens of milliseconds there too. */
 #define KDR_EXEC_CHUNK_RAYS 4096
 #define KDR_EXEC_CHUNK_TILES 16
 #define KDR_EXEC_CHUNK_POINTS 64
+#define KDR_EXEC_CHUNK_SHADOW_RAYS 65536
 /* Bytes charged per body byte for parsing it: protocol/ converts flat JSON
  * number arrays while it walks the body, to at most about twice the body
  * in floats (kdr_protocol.h); base64 decodes to less. The body itself is
@@ -63,6 +68,10 @@ typedef struct kdr_exec_config {
     unsigned workers; /* threads that parse, trace and encode; >= 1 */
     size_t max_queue; /* queries admitted beyond one per worker */
     size_t max_bytes; /* bytes in flight over all claims; 0 = no limit */
+    /* optional: run first on every worker thread (kdrayd lowers their
+     * scheduling priority there, so its HTTP threads answer at once) */
+    void (*on_worker_start)(void *ctx);
+    void *worker_ctx;
 } kdr_exec_config;
 
 /* NULL on failure (errno set). */

@@ -79,6 +79,7 @@ struct kdr_exec_job {
             kdr_shadow_request req;
             float *visibility;
             kdr_shadow_stats *stats; /* one per chunk, summed by encode */
+            size_t per_chunk;        /* points */
         } shadow;
     } k;
 };

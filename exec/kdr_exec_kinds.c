@@ -154,7 +154,9 @@ static int shadow_parse(kdr_exec_job *j) {
     }
     const kdr_shadow_query *q = &r->query;
     size_t nvis = q->n * q->nlights;
-    j->nchunks = chunks_of(q->n, KDR_EXEC_CHUNK_POINTS);
+    size_t per = KDR_EXEC_CHUNK_SHADOW_RAYS / (q->nlights * q->samples);
+    j->k.shadow.per_chunk = per < 1 ? 1 : per > KDR_EXEC_CHUNK_POINTS ? KDR_EXEC_CHUNK_POINTS : per;
+    j->nchunks = chunks_of(q->n, j->k.shadow.per_chunk);
     j->parsed_bytes = (q->normals ? 6 : 3) * q->n * sizeof(float) +
                       q->nlights * sizeof(kdr_sphere_light);
     j->answer_estimate =
@@ -175,7 +177,7 @@ static int shadow_alloc(kdr_exec_job *j) {
 static void shadow_chunk(kdr_exec_job *j, size_t c) {
     const kdr_shadow_query *q = &j->k.shadow.req.query;
     size_t first, count;
-    kdr_exec_chunk_range(q->n, KDR_EXEC_CHUNK_POINTS, c, &first, &count);
+    kdr_exec_chunk_range(q->n, j->k.shadow.per_chunk, c, &first, &count);
     kdr_shadow_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS;
     kdr_exec_note_rc(j, kdr_shadow_trace(j->q->scene, q, first, count, mode,
                                          j->k.shadow.visibility, &j->k.shadow.stats[c]));

@@ -385,13 +385,16 @@ static int answer_now(struct MHD_Connection *c, long long clen, size_t max_body)
 
 /* A query body's admission: a slot and the bytes of its announced length,
  * before anything is allocated for it. 0, or 1 with rs->refusal set. */
-static int admit(kdr_http *h, req_state *rs, long long clen) {
+static int admit(kdr_http *h, req_state *rs, long long clen, const char *path) {
     size_t need = clen > 0 ? kdr_exec_body_charge((size_t)clen) : 0;
     kdr_admit a = kdr_exec_admit(h->srv->exec, &rs->claim, need);
     if (a != KDR_ADMIT_OK) {
         kdr_route_refusal(h->srv, a, need, &rs->refusal);
-        kdr_log_debug("%s: %u %s", rs->path[0] ? rs->path : "query", rs->refusal.status,
-                      a == KDR_ADMIT_QUEUE_FULL ? "queue full" : "memory full");
+        kdr_log_debug("%s: %u %s", path, rs->refusal.status,
+                      a == KDR_ADMIT_QUEUE_FULL   ? "queue full"
+                      : a == KDR_ADMIT_TOO_LARGE  ? "over the whole in-flight budget"
+                      : a == KDR_ADMIT_STOPPED    ? "shutting down"
+                                                  : "memory full");
         return 1;
     }
     if (clen > 0) {
@@ -416,7 +419,7 @@ static enum MHD_Result on_first(kdr_http *h, struct MHD_Connection *c,
     *req_cls = rs;
     int refused = kdr_route_precheck(h->srv, req, clen, &rs->refusal);
     rs->ep = rs->refusal.ep;
-    if (!refused && kdr_route_is_query(rs->ep)) refused = admit(h, rs, clen);
+    if (!refused && kdr_route_is_query(rs->ep)) refused = admit(h, rs, clen, req->path);
     if (refused) {
         rs->refused = 1;
         rs->refusal.ep = rs->ep;

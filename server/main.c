@@ -14,7 +14,7 @@
  * scene files in the background of serving, swap them in) and a
  * SIGINT/SIGTERM (stop accepting, let requests in flight finish, exit 0).
  */
-#define _POSIX_C_SOURCE 200809L
+#define _GNU_SOURCE /* gettid: a thread's own nice value */
 #include <errno.h>
 #include <pthread.h>
 #include <signal.h>
@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -37,8 +38,6 @@
 #define KDRAY_VERSION "0.0.0"
 #endif
 
-/* Seconds a shutdown waits for requests in flight before stopping them. */
-static const double SHUTDOWN_GRACE_S = 30.0;
 /* Descriptors beyond the connections: listen socket, logs, scene files. */
 static const rlim_t SPARE_FILES = 64;
 /* A 64K-ray request frees ~5 MiB (body, rays, hits, answer); glibc's
@@ -191,6 +190,21 @@ static void raise_file_limit(unsigned connections) {
                      (unsigned long long)SPARE_FILES);
 }
 
+/* Each worker lowers its own priority (Linux: setpriority on a thread id
+ * applies to that thread only). Raising a nice value needs no privilege;
+ * a seccomp filter may still refuse it, which is logged once. */
+static void lower_worker_priority(void *ctx) {
+    const kdr_server *srv = ctx;
+    static atomic_int warned;
+    if (srv->worker_nice <= 0) return;
+    pid_t tid = (pid_t)syscall(SYS_gettid);
+    int now = getpriority(PRIO_PROCESS, (id_t)tid);
+    if (setpriority(PRIO_PROCESS, (id_t)tid, now + srv->worker_nice) != 0 &&
+        atomic_exchange(&warned, 1) == 0)
+        kdr_log_warn("--worker-nice %d: cannot lower the workers' priority: %s",
+                     srv->worker_nice, strerror(errno));
+}
+
 static void tune_malloc(void) {
 #ifdef __GLIBC__
     mallopt(M_TRIM_THRESHOLD, MALLOC_TRIM_BYTES);
@@ -205,7 +219,8 @@ static int serve(kdr_server *srv, const kdr_options *o) {
         kdr_log_error("cannot set up signal handling");
         return 1;
     }
-    kdr_exec_config cfg = {srv->threads, o->max_queue, srv->max_inflight};
+    kdr_exec_config cfg = {srv->threads, o->max_queue, srv->max_inflight,
+                           lower_worker_priority, srv};
     srv->exec = kdr_exec_create(&cfg);
     if (!srv->exec) {
         kdr_log_error("cannot start %u worker threads: %s", srv->threads, strerror(errno));
@@ -215,12 +230,12 @@ static int serve(kdr_server *srv, const kdr_options *o) {
     raise_file_limit(srv->max_connections);
     char deadline[32] = "none";
     if (srv->deadline_ms > 0) snprintf(deadline, sizeof deadline, "%.0f ms", srv->deadline_ms);
-    kdr_log("kdrayd %s starting: %zu scene%s, %u worker threads, %u HTTP threads, queue "
-            "%zu, in flight %zu MiB, max body %zu MiB, max rays %zu, deadline %s, %u "
-            "connections, %s bundles",
+    kdr_log("kdrayd %s starting: %zu scene%s, %u worker threads (nice +%d), %u HTTP "
+            "threads, queue %zu, in flight %zu MiB, max body %zu MiB, max rays %zu, "
+            "deadline %s, %u connections, %s bundles",
             KDRAY_VERSION, kdr_registry_count(srv->registry),
-            kdr_registry_count(srv->registry) == 1 ? "" : "s", srv->threads, srv->http_threads,
-            o->max_queue,
+            kdr_registry_count(srv->registry) == 1 ? "" : "s", srv->threads, srv->worker_nice,
+            srv->http_threads, o->max_queue,
             o->max_inflight_mb, o->max_body_mb, srv->max_rays, deadline,
             srv->max_connections, kdr_cpu_has_avx2() ? "8-wide (AVX2)" : "4-wide");
     kdr_http *h = kdr_http_start(srv, o->listen);
@@ -234,7 +249,7 @@ static int serve(kdr_server *srv, const kdr_options *o) {
         kdr_notify("STOPPING=1\nSTATUS=shutting down");
         kdr_log("shutdown: %ld request%s in flight", kdr_metrics_inflight_now(),
                 kdr_metrics_inflight_now() == 1 ? "" : "s");
-        kdr_http_stop(h, SHUTDOWN_GRACE_S);
+        kdr_http_stop(h, o->grace_s);
     }
     end_signals(&sw);
     kdr_log("stopped (exit %d)", status);
@@ -266,6 +281,7 @@ int main(int argc, char **argv) {
         srv.max_inflight = o.max_inflight_mb << 20;
         srv.max_connections = o.max_connections;
         srv.deadline_ms = o.deadline_ms;
+        srv.worker_nice = o.worker_nice;
         rc = serve(&srv, &o);
     }
     kdr_exec_destroy(srv.exec);

@@ -14,6 +14,8 @@ typedef struct kdr_options {
     size_t max_body_mb, max_rays, max_inflight_mb, max_queue;
     unsigned max_connections;
     double deadline_ms;     /* 0: none */
+    double grace_s;         /* shutdown: seconds for requests in flight */
+    int worker_nice;        /* added to the workers' nice value */
     const char *access_log; /* NULL: off; "-": stdout */
     int log_level;          /* kdr_log_level */
     char **scene_args;      /* NAME=PATH, pointing into argv */

@@ -26,6 +26,7 @@ typedef struct kdr_server {
     unsigned http_threads;    /* libmicrohttpd's thread pool */
     unsigned max_connections; /* HTTP connections at once */
     double deadline_ms;       /* --deadline-ms, 0 = none */
+    int worker_nice;          /* --worker-nice */
     kdr_access_log access_log;
     atomic_int stopping;
 } kdr_server;

@@ -219,7 +219,7 @@ int main(int argc, char **argv) {
     if (parse_cli(&c, argc, argv)) return usage();
     if (!c.scene_path) c.scene_path = kdr_default_scene_path(default_path, sizeof default_path);
     kdr_scene *scene = load_scene(c.scene_path);
-    kdr_exec_config cfg = {c.threads, (size_t)c.nrequests, 0};
+    kdr_exec_config cfg = {c.threads, (size_t)c.nrequests, 0, NULL, NULL};
     kdr_exec *ex = scene ? kdr_exec_create(&cfg) : NULL;
     int rc = !scene || !ex;
     for (int i = 0; i < c.nrequests && !rc; i++)

@@ -248,7 +248,7 @@ static void *submit_main(void *arg) {
 
 static void test_answers(cases *c) {
     for (unsigned workers = 1; workers <= 3; workers++) {
-        kdr_exec_config cfg = {workers, 64, 0};
+        kdr_exec_config cfg = {workers, 64, 0, NULL, NULL};
         kdr_exec *ex = kdr_exec_create(&cfg);
         for (int m = 0; m < 2; m++)
             for (int i = 0; i < NCASES; i++)
@@ -274,7 +274,7 @@ static void test_answers(cases *c) {
 /* ---- admission ---------------------------------------------------------------- */
 
 static void test_admission(void) {
-    kdr_exec_config cfg = {1, 1, 1000};
+    kdr_exec_config cfg = {1, 1, 1000, NULL, NULL};
     kdr_exec *ex = kdr_exec_create(&cfg);
     kdr_exec_claim a = {0}, b = {0}, c = {0};
     CHECK(kdr_exec_admit(ex, &a, 600) == KDR_ADMIT_OK && a.slot && a.bytes == 600, "a");
@@ -305,7 +305,7 @@ static void test_admission(void) {
 
 /* The answer's estimate is charged before its arrays exist. */
 static void test_answer_charge(const kdr_scene *s) {
-    kdr_exec_config cfg = {2, 4, 1 << 20};
+    kdr_exec_config cfg = {2, 4, 1 << 20, NULL, NULL};
     kdr_exec *ex = kdr_exec_create(&cfg);
     body big = frustum_body(1000, 1000, "closest", ""); /* ~16 MB of hits alone */
     kdr_exec_claim cl = {0};
@@ -365,8 +365,14 @@ static void wait_running(kdr_exec *ex, unsigned busy) {
 }
 
 static void test_stops(const kdr_scene *s) {
-    kdr_exec_config cfg = {1, 8, 0};
+    atomic_int started;
+    atomic_init(&started, 0);
+    kdr_exec_config cfg = {1, 8, 0, count_done, &started};
     kdr_exec *ex = kdr_exec_create(&cfg);
+    for (int k = 0; k < 100000 && atomic_load(&started) == 0; k++)
+        nanosleep(&(struct timespec){0, 10000}, NULL);
+    CHECK(atomic_load(&started) == 1, "on_worker_start ran once per worker: %d",
+          atomic_load(&started));
     /* 1 s of work at the very least: 2000x2000 per-pixel rays */
     body longb = frustum_body(2000, 2000, "closest", "");
     body shortdl = frustum_body(2000, 2000, "closest", ",\"deadline_ms\":30");

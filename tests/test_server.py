@@ -90,15 +90,7 @@ def test_health_and_scenes(t, c, d):
     t.check("kd-tree built" in log, "scene statistics are logged")
 
 
-def metric(text, name, **labels):
-    want = ",".join('%s="%s"' % kv for kv in sorted(labels.items()))
-    for line in text.splitlines():
-        if line.startswith(name + "{") or line.startswith(name + " "):
-            head, _, value = line.rpartition(" ")
-            got = head[len(name):].strip("{}")
-            if ",".join(sorted(got.split(","))) == want or (not labels and not got):
-                return float(value)
-    return 0.0
+metric = lib.metric
 
 
 def test_metrics(t, c, d):
