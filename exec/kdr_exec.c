@@ -236,7 +236,7 @@ static void stopped_result(kdr_exec_job *j, kdr_exec_stop why) {
 
 /* Parses the body, charges and allocates; sets nchunks (0 when the job
  * already has its answer: an error, or a stop before it began). */
-static void prepare_job(kdr_exec *ex, kdr_exec_job *j) {
+static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
     kdr_exec_query *q = j->q;
     j->t_pick = kdr_exec_now();
     apply_deadline(j, 0);
@@ -264,6 +264,12 @@ static void prepare_job(kdr_exec *ex, kdr_exec_job *j) {
         ok = 0;
     }
     if (!ok) j->nchunks = 0;
+}
+
+/* A worker's first step on a queued job: prepare it, then open its chunks
+ * to every worker. */
+static void prepare_job(kdr_exec *ex, kdr_exec_job *j) {
+    prepare_work(ex, j);
     pthread_mutex_lock(&ex->lock);
     j->state = JOB_RUNNING;
     if (j->nchunks > 1) pthread_cond_broadcast(&ex->work);
@@ -350,7 +356,8 @@ static void finish_job(kdr_exec_job *j) {
     ex->out_of_memory += out_of_memory(r);
     pthread_mutex_unlock(&ex->lock);
 
-    void (*on_done)(void *) = q->on_done; /* q may be gone once finished */
+    /* q may be gone once finished; an inline run's caller needs no call */
+    void (*on_done)(void *) = j->inline_run ? NULL : q->on_done;
     void *done_ctx = q->done_ctx;
     pthread_mutex_lock(&j->m);
     j->finished = 1;
@@ -415,11 +422,13 @@ static void *worker_main(void *arg) {
 
 /* ---- the caller's side ------------------------------------------------------------- */
 
-int kdr_exec_submit(kdr_exec *ex, kdr_exec_query *q) {
+static kdr_exec_job *job_new(kdr_exec_query *q, kdr_exec *ex, int *rc) {
     const kdr_exec_kind_ops *ops = kdr_exec_ops_for(q->kind);
-    if (!ops || !q->scene || (!q->body && q->len)) return KDR_EINVAL;
+    *rc = KDR_EINVAL;
+    if (!ops || !q->scene || (!q->body && q->len)) return NULL;
+    *rc = KDR_ENOMEM;
     kdr_exec_job *j = calloc(1, sizeof *j);
-    if (!j) return KDR_ENOMEM;
+    if (!j) return NULL;
     pthread_condattr_t ca;
     pthread_condattr_init(&ca);
     pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
@@ -428,7 +437,7 @@ int kdr_exec_submit(kdr_exec *ex, kdr_exec_query *q) {
     if (bad || pthread_mutex_init(&j->m, NULL) != 0) {
         if (!bad) pthread_cond_destroy(&j->cv);
         free(j);
-        return KDR_ENOMEM;
+        return NULL;
     }
     j->ex = ex;
     j->q = q;
@@ -442,16 +451,58 @@ int kdr_exec_submit(kdr_exec *ex, kdr_exec_query *q) {
     memset(&q->result, 0, sizeof q->result);
     q->job = j;
     j->t_submit = kdr_exec_now();
-    pthread_mutex_lock(&ex->lock);
+    *rc = 0;
+    return j;
+}
+
+/* Under lock: appends j to the list. */
+static void link_job(kdr_exec *ex, kdr_exec_job *j) {
     if (ex->tail)
         ex->tail->link = j;
     else
         ex->head = j;
     ex->tail = j;
+}
+
+int kdr_exec_submit(kdr_exec *ex, kdr_exec_query *q) {
+    int rc;
+    kdr_exec_job *j = job_new(q, ex, &rc);
+    if (!j) return rc;
+    pthread_mutex_lock(&ex->lock);
+    link_job(ex, j);
     ex->queued++;
     pthread_cond_signal(&ex->work);
     pthread_mutex_unlock(&ex->lock);
     return 0;
+}
+
+int kdr_exec_try_inline(kdr_exec *ex, kdr_exec_query *q, size_t inline_rays) {
+    int rc;
+    kdr_exec_job *j = job_new(q, ex, &rc);
+    if (!j) return rc;
+    pthread_mutex_lock(&ex->lock);
+    j->state = JOB_PREPARING; /* not on the list: no worker sees it */
+    j->picked = 1;
+    ex->running++;
+    pthread_mutex_unlock(&ex->lock);
+    prepare_work(ex, j);
+    if (j->nchunks > 1 || (j->nchunks == 1 && j->work_rays > inline_rays)) return 0;
+    j->inline_run = 1;
+    j->t_trace0 = kdr_exec_now();
+    drain(j);
+    j->state = JOB_FINISHING;
+    finish_job(j);
+    return 1;
+}
+
+void kdr_exec_enqueue(kdr_exec *ex, kdr_exec_query *q) {
+    kdr_exec_job *j = q->job;
+    j->t_trace0 = kdr_exec_now();
+    pthread_mutex_lock(&ex->lock);
+    j->state = JOB_RUNNING; /* parsed: any worker may claim its chunks */
+    link_job(ex, j);
+    pthread_cond_broadcast(&ex->work);
+    pthread_mutex_unlock(&ex->lock);
 }
 
 /* Takes j to finish it here if no worker is inside it (queued, or running

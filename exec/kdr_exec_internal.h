@@ -43,10 +43,13 @@ struct kdr_exec_job {
     job_state state;
     unsigned users; /* workers inside the job */
     int picked;     /* a worker has taken it (it counts as running) */
+    int inline_run; /* traced on the caller's thread (kdr_exec_try_inline) */
     kdr_exec_job *link;
 
     /* set by parse, read by every worker once the job runs */
     size_t nchunks;
+    uint64_t work_rays;     /* worst-case rays: bundle N, frustum pixels,
+                               cone-shadow points x lights x samples */
     size_t parsed_bytes;    /* the parsed request's arrays */
     size_t answer_estimate; /* result arrays + encoded answer */
     double deadline;        /* absolute (kdr_exec_now), 0 = none */

@@ -75,6 +75,7 @@ static int bundle_parse(kdr_exec_job *j) {
     j->parsed_bytes = floats * sizeof(float);
     j->answer_estimate = hits_estimate(b->n, r->query, r->encoding);
     j->nchunks = chunks_of(b->n, KDR_EXEC_CHUNK_RAYS);
+    j->work_rays = b->n;
     j->deadline_ms = r->deadline_ms;
     return 0;
 }
@@ -116,6 +117,7 @@ static int frustum_parse(kdr_exec_job *j) {
     j->parsed_bytes = 0; /* a camera: nothing beyond the job itself */
     j->answer_estimate = hits_estimate(r->rays, r->query, r->encoding);
     j->nchunks = chunks_of(kdr_frustum_tile_count(&r->camera, r->tile), KDR_EXEC_CHUNK_TILES);
+    j->work_rays = r->rays;
     j->deadline_ms = r->deadline_ms;
     return 0;
 }
@@ -157,6 +159,7 @@ static int shadow_parse(kdr_exec_job *j) {
     size_t per = KDR_EXEC_CHUNK_SHADOW_RAYS / (q->nlights * q->samples);
     j->k.shadow.per_chunk = per < 1 ? 1 : per > KDR_EXEC_CHUNK_POINTS ? KDR_EXEC_CHUNK_POINTS : per;
     j->nchunks = chunks_of(q->n, j->k.shadow.per_chunk);
+    j->work_rays = (uint64_t)q->n * q->nlights * q->samples;
     j->parsed_bytes = (q->normals ? 6 : 3) * q->n * sizeof(float) +
                       q->nlights * sizeof(kdr_sphere_light);
     j->answer_estimate =

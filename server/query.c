@@ -28,9 +28,10 @@ static kdr_ray_kind ray_kind_of(kdr_endpoint ep) {
                                       : KDR_RAYS_BUNDLE;
 }
 
-int kdr_query_start(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoint ep,
-                    const kdr_request *req, void (*on_done)(void *), void *ctx,
-                    kdr_response *out) {
+/* Holds the scene's current version and fills the executor query. */
+static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoint ep,
+                 const kdr_request *req, void (*on_done)(void *), void *ctx,
+                 kdr_response *out) {
     memset(call, 0, sizeof *call);
     call->scene = kdr_registry_acquire(srv->registry, scene);
     if (!call->scene) {
@@ -50,14 +51,36 @@ int kdr_query_start(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_end
                                .claim = req->claim,
                                .on_done = on_done,
                                .done_ctx = ctx};
-    if (kdr_exec_submit(srv->exec, &call->q) != 0) {
-        kdr_registry_release(call->scene);
-        call->scene = NULL;
-        kdr_route_problem(out, 503, "out of memory while queueing the query");
-        out->retry_after = 1;
-        return -1;
-    }
     return 0;
+}
+
+static int not_started(kdr_query_call *call, kdr_response *out) {
+    kdr_registry_release(call->scene);
+    call->scene = NULL;
+    kdr_route_problem(out, 503, "out of memory while queueing the query");
+    out->retry_after = 1;
+    return -1;
+}
+
+int kdr_query_start(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoint ep,
+                    const kdr_request *req, void (*on_done)(void *), void *ctx,
+                    kdr_response *out) {
+    if (setup(srv, call, scene, ep, req, on_done, ctx, out) != 0) return -1;
+    return kdr_exec_submit(srv->exec, &call->q) == 0 ? 0 : not_started(call, out);
+}
+
+int kdr_query_try_inline(kdr_server *srv, kdr_query_call *call, size_t scene,
+                         kdr_endpoint ep, const kdr_request *req, size_t inline_rays,
+                         void (*on_done)(void *), void *ctx, kdr_response *out) {
+    if (setup(srv, call, scene, ep, req, on_done, ctx, out) != 0) return -1;
+    int rc = kdr_exec_try_inline(srv->exec, &call->q, inline_rays);
+    if (rc < 0) return not_started(call, out);
+    if (rc == 1) kdr_query_finish(call, out);
+    return rc;
+}
+
+void kdr_query_enqueue(kdr_server *srv, kdr_query_call *call) {
+    kdr_exec_enqueue(srv->exec, &call->q);
 }
 
 void kdr_query_watch(kdr_query_call *call, int client_gone) {

@@ -271,6 +271,44 @@ static void test_answers(cases *c) {
     }
 }
 
+/* Small work is answered on the caller's thread; larger work is parsed
+ * there and handed over; both give the answers of the workers. */
+static void test_inline(cases *c) {
+    kdr_exec_config cfg = {2, 8, 0, NULL, NULL};
+    kdr_exec *ex = kdr_exec_create(&cfg);
+    for (int i = 0; i < NCASES; i++) {
+        kdr_exec_query q = query_of(c->scene, c->kinds[i], KDR_EXEC_FAST, &c->bodies[i]);
+        atomic_int done;
+        atomic_init(&done, 0);
+        q.on_done = count_done;
+        q.done_ctx = &done;
+        int rc = kdr_exec_try_inline(ex, &q, 4096);
+        int small = i == 2 || i == 6; /* 1 ray; 1 point x 2 lights x 64 samples */
+        CHECK(rc == small, "case %d: try_inline %d", i, rc);
+        if (rc == 0) {
+            kdr_exec_enqueue(ex, &q);
+            kdr_exec_wait(&q, -1);
+            for (int k = 0; k < 100000 && atomic_load(&done) == 0; k++)
+                nanosleep(&(struct timespec){0, 10000}, NULL);
+        }
+        CHECK(atomic_load(&done) == !small, "case %d: on_done %d", i, atomic_load(&done));
+        CHECK(same_answer(&q, &c->want[KDR_EXEC_FAST][i]), "case %d inline: %d %s", i,
+              q.result.status, q.result.detail);
+        kdr_exec_query_done(&q);
+    }
+    body bad = {0};
+    put(&bad, "{\"origins\": [0,0,0]}");
+    kdr_exec_query q = query_of(c->scene, KDR_EXEC_BUNDLE, KDR_EXEC_FAST, &bad);
+    CHECK(kdr_exec_try_inline(ex, &q, 4096) == 1 && q.result.status == 400,
+          "a bad body is answered inline: %d", q.result.status);
+    kdr_exec_query_done(&q);
+    free(bad.s);
+    kdr_exec_stats st;
+    kdr_exec_get_stats(ex, &st);
+    CHECK(st.running == 0 && st.queued == 0 && st.completed == NCASES + 1, "inline books");
+    kdr_exec_destroy(ex);
+}
+
 /* ---- admission ---------------------------------------------------------------- */
 
 static void test_admission(void) {
@@ -449,6 +487,7 @@ int main(void) {
     cases c;
     make_cases(&c, s);
     test_answers(&c);
+    test_inline(&c);
     test_admission();
     test_answer_charge(s);
     test_stops(s);
