@@ -46,7 +46,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "clients"))
 from kdray_client import Client, f32_b64  # noqa: E402
 
 BATCHES = (1, 1024, 65536)
-SERVER_CHUNK_RAYS = 4096  # server/query.c CHUNK_RAYS: rays per pool job
+SERVER_CHUNK_RAYS = 4096  # exec/kdr_exec.h KDR_EXEC_CHUNK_RAYS: rays per chunk
 LATENCY_REQUESTS = 400
 WRK_LUA = """
 wrk.method = "POST"

@@ -157,9 +157,14 @@ static void reload(kdr_server *srv) {
                       strerror(errno));
     double t0 = kdr_now();
     size_t failed = kdr_registry_reload(srv->registry);
-    kdr_log("reload: done in %.1f ms, %zu of %zu scene%s failed (kept)",
-            (kdr_now() - t0) * 1e3, failed, kdr_registry_count(srv->registry),
-            kdr_registry_count(srv->registry) == 1 ? "" : "s");
+    size_t n = kdr_registry_count(srv->registry);
+    if (failed)
+        kdr_log("reload: done in %.1f ms; %zu of %zu scene%s kept the previous version "
+                "(see above)",
+                (kdr_now() - t0) * 1e3, failed, n, n == 1 ? "" : "s");
+    else
+        kdr_log("reload: done in %.1f ms; %zu scene%s current", (kdr_now() - t0) * 1e3, n,
+                n == 1 ? "" : "s");
     kdr_notify(failed ? "READY=1\nSTATUS=serving; the last reload kept old scenes (see log)"
                       : "READY=1\nSTATUS=serving");
 }

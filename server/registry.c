@@ -263,9 +263,13 @@ static int reload_one(kdr_registry *r, entry *e) {
     e->id = id;
     e->have_id = 1;
     long in_use = old ? atomic_load(&old->refs) - 1 : 0;
-    kdr_log("scene %s: generation %u serving; generation %u is freed when the %ld "
-            "quer%s still on it end",
-            e->name, gen + 1, gen, in_use, in_use == 1 ? "y" : "ies");
+    if (in_use > 0)
+        kdr_log("scene %s: generation %u serving; generation %u is freed when the %ld "
+                "quer%s still on it end",
+                e->name, gen + 1, gen, in_use, in_use == 1 ? "y" : "ies");
+    else
+        kdr_log("scene %s: generation %u serving; generation %u freed", e->name, gen + 1,
+                gen);
     kdr_registry_release(old);
     return 0;
 }

@@ -176,8 +176,19 @@ int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long conten
     return 0;
 }
 
+/* "512 B", "12.5 KiB", "3.0 MiB": sizes in refusals, readable at any scale. */
+static const char *size_text(size_t bytes, char *buf, size_t n) {
+    if (bytes < 1024)
+        snprintf(buf, n, "%zu B", bytes);
+    else if (bytes < ((size_t)1 << 20))
+        snprintf(buf, n, "%.1f KiB", (double)bytes / 1024.0);
+    else
+        snprintf(buf, n, "%.1f MiB", (double)bytes / 1048576.0);
+    return buf;
+}
+
 void kdr_route_refusal(kdr_server *srv, kdr_admit why, size_t bytes, kdr_response *out) {
-    char detail[192];
+    char detail[192], a[24], b[24], c[24];
     kdr_exec_stats st;
     kdr_exec_get_stats(srv->exec, &st);
     switch (why) {
@@ -188,9 +199,8 @@ void kdr_route_refusal(kdr_server *srv, kdr_admit why, size_t bytes, kdr_respons
         break;
     case KDR_ADMIT_TOO_LARGE:
         snprintf(detail, sizeof detail,
-                 "body: needs about %.1f MiB in flight, over the limit of %.1f MiB "
-                 "(--max-inflight-mb)",
-                 (double)bytes / 1048576.0, (double)st.bytes_max / 1048576.0);
+                 "body: needs about %s in flight, over the limit of %s (--max-inflight-mb)",
+                 size_text(bytes, a, sizeof a), size_text(st.bytes_max, b, sizeof b));
         kdr_route_problem(out, 413, detail);
         return;
     case KDR_ADMIT_STOPPED:
@@ -198,10 +208,9 @@ void kdr_route_refusal(kdr_server *srv, kdr_admit why, size_t bytes, kdr_respons
         return;
     default:
         snprintf(detail, sizeof detail,
-                 "memory: %.1f of %.1f MiB in flight, no room for %.1f MiB more "
-                 "(--max-inflight-mb)",
-                 (double)st.bytes_used / 1048576.0, (double)st.bytes_max / 1048576.0,
-                 (double)bytes / 1048576.0);
+                 "memory: %s of %s in flight, no room for %s more (--max-inflight-mb)",
+                 size_text(st.bytes_used, a, sizeof a), size_text(st.bytes_max, b, sizeof b),
+                 size_text(bytes, c, sizeof c));
         break;
     }
     kdr_route_problem(out, 503, detail);

@@ -180,7 +180,7 @@ def test_memory_budget(t):
         t.eq(wait_metric(c, "kdray_inflight_bytes", 3 << 20), float(3 << 20),
              "an announced 1 MiB body is charged 3 MiB at its headers")
         p, h = problem(t, post(c, BUNDLE, small_bundle()), 503, "second query",
-                       "memory: 3.0 of 3.0 MiB in flight")
+                       "memory: 3.0 MiB of 3.0 MiB in flight, no room for 672 B more")
         retry_after(t, h, "memory full")
         big.send_rest()
         t.check(big.reply().startswith(b"HTTP/1.1 200"), "the admitted body is answered")
