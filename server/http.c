@@ -48,13 +48,15 @@ static const unsigned CONNECTION_TIMEOUT_S = 60;
 /* How often the watcher looks at the clients of suspended queries. */
 static const long WATCH_TICK_MS = 20;
 /* A body this small is parsed on the HTTP thread (tens of microseconds),
- * and a query whose whole work is at most INLINE_RAYS rays (one bundle
- * chunk, about a millisecond at worst) is answered there too: no hand-off
- * to a worker and back. A 1-ray query's round trip (wrk, 1 connection,
- * median) went from 94-107 us through a (niced) worker to 21-22 us, as
- * with the old thread-pool daemon (20-21 us). */
+ * and a query whose whole work is at most INLINE_RAYS rays is answered
+ * there too: no hand-off to a worker and back. 1024 incoherent single rays
+ * on the 1M-triangle scenes (about 1 Mray/s per core) hold the thread for
+ * about a millisecond at worst; a new connection goes to the other HTTP
+ * thread meanwhile. A 1-ray query's round trip (wrk, 1 connection, median)
+ * went from 94-107 us through a (niced) worker to 21-22 us, as with the old
+ * thread-pool daemon (20-21 us). */
 static const size_t INLINE_BODY_MAX = 64 * 1024;
-static const size_t INLINE_RAYS = 4096;
+static const size_t INLINE_RAYS = 1024;
 /* A body past the limit, or refused, is drained (so the client reads our
  * answer) for at most this many bytes, then the connection is dropped. */
 static const size_t DRAIN_MAX = 16u << 20;
