@@ -53,6 +53,14 @@ double kdr_exec_now(void) {
     return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
+/* CPU time of the calling thread, ns: what a step cost whatever the
+ * scheduler did meanwhile (wall times on a shared box include waiting). */
+static long long thread_cpu_ns(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
 void kdr_exec_chunk_range(size_t total, size_t per, size_t c, size_t *first,
                           size_t *count) {
     *first = c * per;
@@ -238,6 +246,7 @@ static void stopped_result(kdr_exec_job *j, kdr_exec_stop why) {
  * already has its answer: an error, or a stop before it began). */
 static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
     kdr_exec_query *q = j->q;
+    long long cpu0 = thread_cpu_ns();
     j->t_pick = kdr_exec_now();
     apply_deadline(j, 0);
     int ok = check_stop(j) == KDR_STOP_NONE && j->ops->parse(j) == 0;
@@ -264,6 +273,7 @@ static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
         ok = 0;
     }
     if (!ok) j->nchunks = 0;
+    atomic_fetch_add(&j->cpu_ns, thread_cpu_ns() - cpu0);
 }
 
 /* A worker's first step on a queued job: prepare it, then open its chunks
@@ -278,13 +288,15 @@ static void prepare_job(kdr_exec *ex, kdr_exec_job *j) {
 }
 
 static void drain(kdr_exec_job *j) {
+    long long cpu0 = thread_cpu_ns();
     for (;;) {
-        if (check_stop(j) != KDR_STOP_NONE) return;
+        if (check_stop(j) != KDR_STOP_NONE) break;
         size_t c = atomic_fetch_add(&j->next, 1);
-        if (c >= j->nchunks) return;
+        if (c >= j->nchunks) break;
         j->ops->chunk(j, c);
         atomic_fetch_add(&j->done, 1);
     }
+    atomic_fetch_add(&j->cpu_ns, thread_cpu_ns() - cpu0);
 }
 
 /* Under lock: unlinks j from the list. */
@@ -313,6 +325,7 @@ static void finish_job(kdr_exec_job *j) {
     kdr_exec_query *q = j->q;
     kdr_exec_result *r = &q->result;
     double t_end = kdr_exec_now();
+    long long cpu0 = thread_cpu_ns();
     kdr_exec_stop stop = (kdr_exec_stop)atomic_load(&j->stop);
     int rc = atomic_load(&j->core_rc);
     r->chunks = j->nchunks;
@@ -331,10 +344,12 @@ static void finish_job(kdr_exec_job *j) {
         r->rays = 0;
     }
     double t_done = kdr_exec_now();
+    r->cpu_s = (double)(atomic_load(&j->cpu_ns) + thread_cpu_ns() - cpu0) * 1e-9;
     j->ops->release(j);
     if (q->claim) kdr_exec_settle(ex, q->claim, q->len + r->body.len);
     r->stopped = stop;
     r->deadline_ms = j->deadline_ms;
+    r->work_rays = j->work_rays;
     r->queued_s = (j->picked ? j->t_pick : t_end) - j->t_submit;
     r->parse_s = j->picked ? j->t_trace0 - j->t_pick : 0;
     r->trace_s = j->picked ? t_end - j->t_trace0 : 0;
@@ -448,6 +463,7 @@ static kdr_exec_job *job_new(kdr_exec_query *q, kdr_exec *ex, int *rc) {
     atomic_init(&j->stop, KDR_STOP_NONE);
     atomic_init(&j->cancel, 0);
     atomic_init(&j->core_rc, KDR_OK);
+    atomic_init(&j->cpu_ns, 0);
     memset(&q->result, 0, sizeof q->result);
     q->job = j;
     j->t_submit = kdr_exec_now();

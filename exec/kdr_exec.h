@@ -137,9 +137,12 @@ typedef struct kdr_exec_result {
     kdr_buf body;         /* the 200 answer (application/json) */
     unsigned retry_after; /* > 0 on a 503 that a later retry may cure */
     kdr_exec_stop stopped;
-    uint64_t rays; /* bundle rays, frustum pixels, shadow rays traced */
+    uint64_t rays;      /* bundle rays, frustum pixels, shadow rays traced */
+    uint64_t work_rays; /* the worst case the request asked for: bundle
+                           rays, frustum pixels, points x lights x samples */
     size_t chunks, chunks_done;
     double queued_s, parse_s, trace_s, encode_s; /* wall times */
+    double cpu_s; /* thread CPU time of parsing, every chunk and encoding */
     double deadline_ms;                          /* the deadline applied, 0: none */
 } kdr_exec_result;
 
@@ -178,7 +181,7 @@ int kdr_exec_submit(kdr_exec *ex, kdr_exec_query *q);
  * must get ready for on_done first, such as suspending a connection, does
  * that in between). < 0: KDR_ENOMEM / KDR_EINVAL, nothing started. For
  * kdrayd a 1-ray query then costs no thread hand-off (wrk, 1 connection,
- * shared 2-core box: median 21-22 us, against 94-107 us through a worker). */
+ * shared 2-core box: median 20-22 us, against 94-107 us through a worker). */
 int kdr_exec_try_inline(kdr_exec *ex, kdr_exec_query *q, size_t inline_rays);
 void kdr_exec_enqueue(kdr_exec *ex, kdr_exec_query *q);
 /* Waits up to timeout_s seconds (< 0: no limit). 1 when q is done and

@@ -60,6 +60,7 @@ struct kdr_exec_job {
     atomic_int stop;    /* kdr_exec_stop, first reason wins */
     atomic_int cancel;  /* kdr_exec_cancel was called */
     atomic_int core_rc; /* first core error of any chunk */
+    atomic_llong cpu_ns; /* thread CPU time spent on it, summed */
 
     double t_submit, t_pick, t_trace0, t_trace1;
 

@@ -48,15 +48,12 @@ static const unsigned CONNECTION_TIMEOUT_S = 60;
 /* How often the watcher looks at the clients of suspended queries. */
 static const long WATCH_TICK_MS = 20;
 /* A body this small is parsed on the HTTP thread (tens of microseconds),
- * and a query whose whole work is at most INLINE_RAYS rays is answered
- * there too: no hand-off to a worker and back. 1024 incoherent single rays
- * on the 1M-triangle scenes (about 1 Mray/s per core) hold the thread for
- * about a millisecond at worst; a new connection goes to the other HTTP
- * thread meanwhile. A 1-ray query's round trip (wrk, 1 connection, median)
- * went from 94-107 us through a (niced) worker to 21-22 us, as with the old
+ * and answered there too when its work should take under 0.2 ms (query.c
+ * decides from the scene's measured cost per ray): no hand-off to a worker
+ * and back. A 1-ray query's round trip (wrk, 1 connection, median) went
+ * from 94-107 us through a (niced) worker to 20-22 us, as with the old
  * thread-pool daemon (20-21 us). */
 static const size_t INLINE_BODY_MAX = 64 * 1024;
-static const size_t INLINE_RAYS = 1024;
 /* A body past the limit, or refused, is drained (so the client reads our
  * answer) for at most this many bytes, then the connection is dropped. */
 static const size_t DRAIN_MAX = 16u << 20;
@@ -338,7 +335,7 @@ static enum MHD_Result start_query(kdr_http *h, struct MHD_Connection *c, req_st
     if (scene < 0) {
         kdr_route_problem(&now, 404, "no such scene");
     } else if (req->len <= INLINE_BODY_MAX) {
-        rc = kdr_query_try_inline(h->srv, &rs->call, (size_t)scene, rs->ep, req, INLINE_RAYS,
+        rc = kdr_query_try_inline(h->srv, &rs->call, (size_t)scene, rs->ep, req,
                                   on_query_done, rs, &now);
         if (rc == 0) {
             MHD_suspend_connection(c);

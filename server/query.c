@@ -16,10 +16,47 @@
 
 static const char *const CT_JSON = "application/json";
 
+/* A query answered on the HTTP thread may hold it this long (estimated from
+ * the scene's measured cost per ray for that kind of query); until a cost
+ * is known, only queries of INLINE_RAYS_UNKNOWN rays or fewer. Bigger ones
+ * go to the workers, which costs a hand-off: on the shared 2-core box a
+ * 1024-ray base64 bundle took kdrayd 158-174 us of CPU answered inline and
+ * 246-273 us through a worker (the data crosses cores), while 4096
+ * incoherent rays on the 1.09M-triangle scene would hold a thread 11-19 ms. */
+static const double INLINE_BUDGET_NS = 200e3;
+static const size_t INLINE_RAYS_UNKNOWN = 256;
+static const size_t INLINE_RAYS_MAX = 4096; /* one bundle chunk */
+/* Weight of a new sample in the running cost (1/8). */
+static const unsigned COST_SHIFT = 3;
+
 static kdr_exec_kind kind_of(kdr_endpoint ep) {
     return ep == KDR_EP_FRUSTUM       ? KDR_EXEC_FRUSTUM
            : ep == KDR_EP_CONE_SHADOW ? KDR_EXEC_CONE_SHADOW
                                       : KDR_EXEC_BUNDLE;
+}
+
+static size_t inline_rays(const kdr_scene_version *v, kdr_endpoint ep) {
+    unsigned ns = atomic_load_explicit(&((kdr_scene_version *)v)->ns_per_ray[kind_of(ep)],
+                                       memory_order_relaxed);
+    if (ns == 0) return INLINE_RAYS_UNKNOWN;
+    double r = INLINE_BUDGET_NS / ns;
+    return r >= (double)INLINE_RAYS_MAX ? INLINE_RAYS_MAX : (size_t)r;
+}
+
+/* Folds an answered query's CPU time per ray (parse, chunks, encode:
+ * thread CPU time, so a busy box's waiting is not counted) into the
+ * scene's running mean. Racy by design: a lost update only delays the mean
+ * a little. */
+static void learn_cost(kdr_scene_version *v, kdr_endpoint ep, const kdr_exec_result *r) {
+    if (r->status != 200 || r->work_rays == 0) return;
+    double ns = r->cpu_s * 1e9 / (double)r->work_rays;
+    unsigned sample = ns < 1 ? 1 : ns > 4e9 ? 4000000000u : (unsigned)ns;
+    atomic_uint *slot = &v->ns_per_ray[kind_of(ep)];
+    unsigned old = atomic_load_explicit(slot, memory_order_relaxed);
+    unsigned next = old == 0 ? sample
+                             : (unsigned)((long long)old +
+                                          (((long long)sample - (long long)old) >> COST_SHIFT));
+    atomic_store_explicit(slot, next ? next : 1, memory_order_relaxed);
 }
 
 static kdr_ray_kind ray_kind_of(kdr_endpoint ep) {
@@ -70,10 +107,10 @@ int kdr_query_start(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_end
 }
 
 int kdr_query_try_inline(kdr_server *srv, kdr_query_call *call, size_t scene,
-                         kdr_endpoint ep, const kdr_request *req, size_t inline_rays,
-                         void (*on_done)(void *), void *ctx, kdr_response *out) {
+                         kdr_endpoint ep, const kdr_request *req, void (*on_done)(void *),
+                         void *ctx, kdr_response *out) {
     if (setup(srv, call, scene, ep, req, on_done, ctx, out) != 0) return -1;
-    int rc = kdr_exec_try_inline(srv->exec, &call->q, inline_rays);
+    int rc = kdr_exec_try_inline(srv->exec, &call->q, inline_rays(call->scene, ep));
     if (rc < 0) return not_started(call, out);
     if (rc == 1) kdr_query_finish(call, out);
     return rc;
@@ -90,6 +127,7 @@ void kdr_query_watch(kdr_query_call *call, int client_gone) {
 
 void kdr_query_finish(kdr_query_call *call, kdr_response *out) {
     kdr_exec_result *r = &call->q.result;
+    learn_cost(call->scene, call->ep, r);
     if (r->status == 200) {
         out->status = 200;
         out->content_type = CT_JSON;

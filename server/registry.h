@@ -32,6 +32,10 @@ typedef struct kdr_scene_version {
     double load_ms, build_ms;
     unsigned generation; /* 1 for the start-up build, +1 per reload */
     atomic_long refs;
+    /* Running mean cost of one ray of work, in ns of one thread, per query
+     * kind (bundle, cone-shadow, frustum; 0 = not measured yet): how much a
+     * query of N rays would hold an HTTP thread if answered inline. */
+    atomic_uint ns_per_ray[3];
 } kdr_scene_version;
 
 typedef struct kdr_registry kdr_registry;
