@@ -1,7 +1,8 @@
 /*
  * kdr_exec.c — the executor's scheduler and its books (see kdr_exec.h).
  *
- * One mutex guards the job list, the admission counters and the statistics;
+ * One mutex guards the job list, the admission counters and the statistics
+ * (the books themselves are kept in kdr_exec_admit.c);
  * it is held for a few pointer moves at a time, never while a body is
  * parsed, a chunk traced or an answer encoded, so a metrics scrape or an
  * admission never waits behind a query. Jobs sit in one FIFO list from
@@ -25,27 +26,6 @@
 
 /* Weight of the newest query in the running mean behind Retry-After. */
 static const double MEAN_WEIGHT = 0.2;
-static const unsigned RETRY_MIN_S = 1, RETRY_MAX_S = 60;
-/* Saturated when less than 1/SATURATED_FREE_PART of the byte budget is free. */
-static const size_t SATURATED_FREE_PART = 10;
-
-struct kdr_exec {
-    pthread_mutex_t lock;
-    pthread_cond_t work; /* a job may be ready for a worker, or stop */
-    kdr_exec_job *head, *tail;
-    int stop;
-    atomic_int shutting_down;
-    kdr_exec_config cfg;
-    size_t slots;
-    /* books, under lock */
-    size_t slots_used, queued, running, bytes_used;
-    unsigned busy;
-    uint64_t admitted, rejected_queue, rejected_memory, rejected_too_large;
-    uint64_t completed, deadlines, cancelled, shutdown, out_of_memory;
-    double mean_s;
-    unsigned nthreads;
-    pthread_t threads[];
-};
 
 double kdr_exec_now(void) {
     struct timespec ts;
@@ -65,98 +45,6 @@ void kdr_exec_chunk_range(size_t total, size_t per, size_t c, size_t *first,
                           size_t *count) {
     *first = c * per;
     *count = total - *first < per ? total - *first : per;
-}
-
-/* ---- admission ------------------------------------------------------------------- */
-
-size_t kdr_exec_body_charge(size_t len) {
-    const size_t k = 1 + KDR_EXEC_PARSE_BYTES_PER_BODY_BYTE;
-    return len > SIZE_MAX / k ? SIZE_MAX : len * k;
-}
-
-/* Under lock: does `more` fit in the budget on top of what is charged? */
-static int fits(const kdr_exec *ex, size_t more) {
-    const size_t max = ex->cfg.max_bytes;
-    return max == 0 || (more <= max && ex->bytes_used <= max - more);
-}
-
-static int too_large(const kdr_exec *ex, size_t total) {
-    return ex->cfg.max_bytes != 0 && total > ex->cfg.max_bytes;
-}
-
-kdr_admit kdr_exec_admit(kdr_exec *ex, kdr_exec_claim *c, size_t bytes) {
-    kdr_admit a = KDR_ADMIT_OK;
-    pthread_mutex_lock(&ex->lock);
-    if (atomic_load(&ex->shutting_down)) {
-        a = KDR_ADMIT_STOPPED;
-    } else if (too_large(ex, bytes)) {
-        a = KDR_ADMIT_TOO_LARGE;
-        ex->rejected_too_large++;
-    } else if (ex->slots_used >= ex->slots) {
-        a = KDR_ADMIT_QUEUE_FULL;
-        ex->rejected_queue++;
-    } else if (!fits(ex, bytes)) {
-        a = KDR_ADMIT_MEMORY_FULL;
-        ex->rejected_memory++;
-    } else {
-        ex->slots_used++;
-        ex->bytes_used += bytes;
-        ex->admitted++;
-        c->slot = 1;
-        c->bytes = bytes;
-    }
-    pthread_mutex_unlock(&ex->lock);
-    return a;
-}
-
-kdr_admit kdr_exec_charge(kdr_exec *ex, kdr_exec_claim *c, size_t more) {
-    kdr_admit a = KDR_ADMIT_OK;
-    pthread_mutex_lock(&ex->lock);
-    if (more > SIZE_MAX - c->bytes || too_large(ex, c->bytes + more)) {
-        a = KDR_ADMIT_TOO_LARGE;
-        ex->rejected_too_large++;
-    } else if (!fits(ex, more)) {
-        a = KDR_ADMIT_MEMORY_FULL;
-        ex->rejected_memory++;
-    } else {
-        ex->bytes_used += more;
-        c->bytes += more;
-    }
-    pthread_mutex_unlock(&ex->lock);
-    return a;
-}
-
-void kdr_exec_settle(kdr_exec *ex, kdr_exec_claim *c, size_t bytes) {
-    pthread_mutex_lock(&ex->lock);
-    ex->bytes_used = ex->bytes_used - c->bytes + bytes;
-    c->bytes = bytes;
-    pthread_mutex_unlock(&ex->lock);
-}
-
-/* Under lock. */
-static void drop_slot(kdr_exec *ex, kdr_exec_claim *c) {
-    if (c && c->slot) {
-        ex->slots_used--;
-        c->slot = 0;
-    }
-}
-
-void kdr_exec_release(kdr_exec *ex, kdr_exec_claim *c) {
-    if (!ex || !c) return;
-    pthread_mutex_lock(&ex->lock);
-    drop_slot(ex, c);
-    ex->bytes_used -= c->bytes;
-    c->bytes = 0;
-    pthread_mutex_unlock(&ex->lock);
-}
-
-unsigned kdr_exec_retry_after(kdr_exec *ex) {
-    pthread_mutex_lock(&ex->lock);
-    size_t ahead = ex->queued + ex->running;
-    double s = ex->mean_s * (double)(ahead ? ahead : 1) / ex->cfg.workers;
-    pthread_mutex_unlock(&ex->lock);
-    s = ceil(s);
-    return s < RETRY_MIN_S ? RETRY_MIN_S : s > RETRY_MAX_S ? RETRY_MAX_S : (unsigned)s;
 }
 
 /* ---- failures, recorded on the result --------------------------------------------- */
@@ -221,9 +109,9 @@ static void stopped_result(kdr_exec_job *j, kdr_exec_stop why) {
     size_t done = atomic_load(&j->done);
     switch (why) {
     case KDR_STOP_DEADLINE:
-        kdr_exec_fail(j, 503,
-                      "deadline: %g ms exceeded after %.0f ms (%zu of %zu chunks traced)",
-                      j->deadline_ms, (kdr_exec_now() - j->q->start) * 1e3, done, j->nchunks);
+        kdr_exec_fail(
+            j, 503, "deadline: %g ms exceeded after %.0f ms (%zu of %zu chunks traced)",
+            j->deadline_ms, (kdr_exec_now() - j->q->start) * 1e3, done, j->nchunks);
         r->retry_after = 0; /* the same query would run out of time again */
         break;
     case KDR_STOP_CANCELLED:
@@ -240,7 +128,8 @@ static void stopped_result(kdr_exec_job *j, kdr_exec_stop why) {
     }
 }
 
-/* ---- one job ------------------------------------------------------------------------- */
+/* ---- one job -------------------------------------------------------------------------
+ */
 
 /* Parses the body, charges and allocates; sets nchunks (0 when the job
  * already has its answer: an error, or a stop before it began). */
@@ -359,11 +248,12 @@ static void finish_job(kdr_exec_job *j) {
     if (j->picked) {
         ex->running--;
         double dt = t_done - j->t_pick;
-        ex->mean_s = ex->mean_s > 0 ? (1 - MEAN_WEIGHT) * ex->mean_s + MEAN_WEIGHT * dt : dt;
+        ex->mean_s =
+            ex->mean_s > 0 ? (1 - MEAN_WEIGHT) * ex->mean_s + MEAN_WEIGHT * dt : dt;
     } else {
         ex->queued--;
     }
-    drop_slot(ex, q->claim);
+    kdr_exec_drop_slot(ex, q->claim);
     ex->completed++;
     ex->deadlines += stop == KDR_STOP_DEADLINE;
     ex->cancelled += stop == KDR_STOP_CANCELLED;
@@ -605,7 +495,8 @@ void kdr_exec_shutdown(kdr_exec *ex) {
     pthread_mutex_unlock(&ex->lock);
 }
 
-/* ---- life and statistics ------------------------------------------------------------ */
+/* ---- life and statistics ------------------------------------------------------------
+ */
 
 kdr_exec *kdr_exec_create(const kdr_exec_config *cfg) {
     if (!cfg || cfg->workers < 1) {
@@ -616,7 +507,7 @@ kdr_exec *kdr_exec_create(const kdr_exec_config *cfg) {
     if (!ex) return NULL;
     ex->cfg = *cfg;
     ex->slots = cfg->max_queue > SIZE_MAX - cfg->workers ? SIZE_MAX
-                                                          : cfg->workers + cfg->max_queue;
+                                                         : cfg->workers + cfg->max_queue;
     atomic_init(&ex->shutting_down, 0);
     pthread_mutex_init(&ex->lock, NULL);
     pthread_cond_init(&ex->work, NULL);
@@ -642,34 +533,4 @@ void kdr_exec_destroy(kdr_exec *ex) {
     pthread_cond_destroy(&ex->work);
     pthread_mutex_destroy(&ex->lock);
     free(ex);
-}
-
-void kdr_exec_get_stats(kdr_exec *ex, kdr_exec_stats *s) {
-    pthread_mutex_lock(&ex->lock);
-    *s = (kdr_exec_stats){.workers = ex->cfg.workers,
-                          .busy = ex->busy,
-                          .slots = ex->slots,
-                          .slots_used = ex->slots_used,
-                          .queued = ex->queued,
-                          .running = ex->running,
-                          .bytes_max = ex->cfg.max_bytes,
-                          .bytes_used = ex->bytes_used,
-                          .admitted = ex->admitted,
-                          .rejected_queue = ex->rejected_queue,
-                          .rejected_memory = ex->rejected_memory,
-                          .rejected_too_large = ex->rejected_too_large,
-                          .completed = ex->completed,
-                          .deadlines = ex->deadlines,
-                          .cancelled = ex->cancelled,
-                          .shutdown = ex->shutdown,
-                          .out_of_memory = ex->out_of_memory,
-                          .mean_query_s = ex->mean_s};
-    pthread_mutex_unlock(&ex->lock);
-}
-
-int kdr_exec_saturated(const kdr_exec_stats *s) {
-    if (s->slots_used >= s->slots) return 1;
-    if (s->bytes_max == 0) return 0;
-    size_t free_bytes = s->bytes_used < s->bytes_max ? s->bytes_max - s->bytes_used : 0;
-    return free_bytes < s->bytes_max / SATURATED_FREE_PART;
 }

@@ -142,8 +142,8 @@ typedef struct kdr_exec_result {
                            rays, frustum pixels, points x lights x samples */
     size_t chunks, chunks_done;
     double queued_s, parse_s, trace_s, encode_s; /* wall times */
-    double cpu_s; /* thread CPU time of parsing, every chunk and encoding */
-    double deadline_ms;                          /* the deadline applied, 0: none */
+    double cpu_s;       /* thread CPU time of parsing, every chunk and encoding */
+    double deadline_ms; /* the deadline applied, 0: none */
 } kdr_exec_result;
 
 typedef struct kdr_exec_job kdr_exec_job;
@@ -155,10 +155,10 @@ typedef struct kdr_exec_query {
     const kdr_scene *scene;
     const char *body; /* not NUL-terminated */
     size_t len;
-    size_t max_rays;      /* protocol limit (0: the protocol default) */
-    double start;         /* kdr_exec_now() when the request began */
-    double deadline_ms;   /* the caller's deadline from start, 0 = none; a
-                             request's "deadline_ms" can only shorten it */
+    size_t max_rays;       /* protocol limit (0: the protocol default) */
+    double start;          /* kdr_exec_now() when the request began */
+    double deadline_ms;    /* the caller's deadline from start, 0 = none; a
+                              request's "deadline_ms" can only shorten it */
     kdr_exec_claim *claim; /* charged as the query grows; NULL: unlimited */
     /* optional: called once, by the thread that finished q, after the
      * result is filled (kdr_exec_wait already returns 1). It must not block;
@@ -203,9 +203,9 @@ double kdr_exec_now(void);
 /* ---- statistics -------------------------------------------------------------- */
 
 typedef struct kdr_exec_stats {
-    unsigned workers, busy;     /* busy: workers inside a query */
-    size_t slots, slots_used;   /* slots = workers + max_queue */
-    size_t queued, running;     /* submitted, waiting / started */
+    unsigned workers, busy;   /* busy: workers inside a query */
+    size_t slots, slots_used; /* slots = workers + max_queue */
+    size_t queued, running;   /* submitted, waiting / started */
     size_t bytes_max, bytes_used;
     uint64_t admitted, rejected_queue, rejected_memory, rejected_too_large;
     uint64_t completed, deadlines, cancelled, shutdown, out_of_memory;

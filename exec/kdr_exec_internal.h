@@ -1,8 +1,8 @@
 /*
- * kdr_exec_internal.h — what the scheduler (kdr_exec.c) and the query kinds
- * (kdr_exec_kinds.c) share: the job that carries one query through the
- * executor, and the table of steps each kind implements. Not installed, not
- * used outside exec/.
+ * kdr_exec_internal.h — what the scheduler (kdr_exec.c), its books
+ * (kdr_exec_admit.c) and the query kinds (kdr_exec_kinds.c) share: the
+ * executor struct, the job that carries one query through it, and the table
+ * of steps each kind implements. Not installed, not used outside exec/.
  */
 #ifndef KDR_EXEC_INTERNAL_H
 #define KDR_EXEC_INTERNAL_H
@@ -55,11 +55,11 @@ struct kdr_exec_job {
     double deadline;        /* absolute (kdr_exec_now), 0 = none */
     double deadline_ms;     /* the one applied, for the message */
 
-    atomic_size_t next; /* next chunk to claim */
-    atomic_size_t done; /* chunks finished */
-    atomic_int stop;    /* kdr_exec_stop, first reason wins */
-    atomic_int cancel;  /* kdr_exec_cancel was called */
-    atomic_int core_rc; /* first core error of any chunk */
+    atomic_size_t next;  /* next chunk to claim */
+    atomic_size_t done;  /* chunks finished */
+    atomic_int stop;     /* kdr_exec_stop, first reason wins */
+    atomic_int cancel;   /* kdr_exec_cancel was called */
+    atomic_int core_rc;  /* first core error of any chunk */
     atomic_llong cpu_ns; /* thread CPU time spent on it, summed */
 
     double t_submit, t_pick, t_trace0, t_trace1;
@@ -87,6 +87,28 @@ struct kdr_exec_job {
         } shadow;
     } k;
 };
+
+/* The executor: its job list, its threads and its books. */
+struct kdr_exec {
+    pthread_mutex_t lock;
+    pthread_cond_t work; /* a job may be ready for a worker, or stop */
+    kdr_exec_job *head, *tail;
+    int stop;
+    atomic_int shutting_down;
+    kdr_exec_config cfg;
+    size_t slots;
+    /* books, under lock */
+    size_t slots_used, queued, running, bytes_used;
+    unsigned busy;
+    uint64_t admitted, rejected_queue, rejected_memory, rejected_too_large;
+    uint64_t completed, deadlines, cancelled, shutdown, out_of_memory;
+    double mean_s;
+    unsigned nthreads;
+    pthread_t threads[];
+};
+
+/* Under ex->lock: returns c's queue slot if it still holds one. */
+void kdr_exec_drop_slot(kdr_exec *ex, kdr_exec_claim *c);
 
 /* The step table of a kind (kdr_exec_kinds.c). */
 const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind);

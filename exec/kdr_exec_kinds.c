@@ -28,7 +28,8 @@ static size_t hits_estimate(size_t n, kdr_query q, kdr_encoding enc) {
     if (enc == KDR_ENCODING_BASE64)
         text = n * EST_B64_VALUE * (q == KDR_ANY ? 1 : 4);
     else
-        text = q == KDR_ANY ? n * EST_JSON_FLAG : n * (3 * EST_JSON_FLOAT + EST_JSON_PRIM);
+        text =
+            q == KDR_ANY ? n * EST_JSON_FLAG : n * (3 * EST_JSON_FLOAT + EST_JSON_PRIM);
     return arrays + text + EST_FIXED;
 }
 
@@ -55,8 +56,7 @@ static void hits_free(kdr_hits *h) {
 static size_t chunks_of(size_t total, size_t per) { return (total + per - 1) / per; }
 
 static int encoded(kdr_exec_job *j, int rc) {
-    if (rc != 0)
-        kdr_exec_fail(j, 503, "out of memory while encoding the answer");
+    if (rc != 0) kdr_exec_fail(j, 503, "out of memory while encoding the answer");
     return rc;
 }
 
@@ -116,7 +116,8 @@ static int frustum_parse(kdr_exec_job *j) {
     }
     j->parsed_bytes = 0; /* a camera: nothing beyond the job itself */
     j->answer_estimate = hits_estimate(r->rays, r->query, r->encoding);
-    j->nchunks = chunks_of(kdr_frustum_tile_count(&r->camera, r->tile), KDR_EXEC_CHUNK_TILES);
+    j->nchunks =
+        chunks_of(kdr_frustum_tile_count(&r->camera, r->tile), KDR_EXEC_CHUNK_TILES);
     j->work_rays = r->rays;
     j->deadline_ms = r->deadline_ms;
     return 0;
@@ -129,9 +130,10 @@ static int frustum_alloc(kdr_exec_job *j) {
 static void frustum_chunk(kdr_exec_job *j, size_t c) {
     const kdr_frustum_request *r = &j->k.frustum.req;
     size_t first, count;
-    kdr_exec_chunk_range(kdr_frustum_tile_count(&r->camera, r->tile), KDR_EXEC_CHUNK_TILES, c,
-                         &first, &count);
-    kdr_frustum_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_FRUSTUM_MULTI4 : KDR_FRUSTUM_RAYS;
+    kdr_exec_chunk_range(kdr_frustum_tile_count(&r->camera, r->tile),
+                         KDR_EXEC_CHUNK_TILES, c, &first, &count);
+    kdr_frustum_mode mode =
+        j->q->mode == KDR_EXEC_FAST ? KDR_FRUSTUM_MULTI4 : KDR_FRUSTUM_RAYS;
     kdr_exec_note_rc(j, kdr_frustum_trace(j->q->scene, &r->camera, r->tile, first, count,
                                           r->query, mode, &j->k.frustum.hits, NULL));
 }
@@ -157,7 +159,9 @@ static int shadow_parse(kdr_exec_job *j) {
     const kdr_shadow_query *q = &r->query;
     size_t nvis = q->n * q->nlights;
     size_t per = KDR_EXEC_CHUNK_SHADOW_RAYS / (q->nlights * q->samples);
-    j->k.shadow.per_chunk = per < 1 ? 1 : per > KDR_EXEC_CHUNK_POINTS ? KDR_EXEC_CHUNK_POINTS : per;
+    j->k.shadow.per_chunk = per < 1                       ? 1
+                            : per > KDR_EXEC_CHUNK_POINTS ? KDR_EXEC_CHUNK_POINTS
+                                                          : per;
     j->nchunks = chunks_of(q->n, j->k.shadow.per_chunk);
     j->work_rays = (uint64_t)q->n * q->nlights * q->samples;
     j->parsed_bytes = (q->normals ? 6 : 3) * q->n * sizeof(float) +
@@ -181,7 +185,8 @@ static void shadow_chunk(kdr_exec_job *j, size_t c) {
     const kdr_shadow_query *q = &j->k.shadow.req.query;
     size_t first, count;
     kdr_exec_chunk_range(q->n, j->k.shadow.per_chunk, c, &first, &count);
-    kdr_shadow_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS;
+    kdr_shadow_mode mode =
+        j->q->mode == KDR_EXEC_FAST ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS;
     kdr_exec_note_rc(j, kdr_shadow_trace(j->q->scene, q, first, count, mode,
                                          j->k.shadow.visibility, &j->k.shadow.stats[c]));
 }
@@ -211,9 +216,9 @@ static int shadow_encode(kdr_exec_job *j) {
         sum.nodes_visited += j->k.shadow.stats[c].nodes_visited;
     }
     j->q->result.rays = sum.rays_traced;
-    return encoded(j, kdr_proto_encode_shadow(j->k.shadow.visibility, r->query.n,
-                                              r->query.nlights, r->want_stats ? &sum : NULL,
-                                              r->encoding, &j->q->result.body));
+    return encoded(j, kdr_proto_encode_shadow(
+                          j->k.shadow.visibility, r->query.n, r->query.nlights,
+                          r->want_stats ? &sum : NULL, r->encoding, &j->q->result.body));
 }
 
 static void shadow_release(kdr_exec_job *j) {
@@ -238,14 +243,18 @@ static const kdr_exec_kind_ops BUNDLE = {bundle_parse,  bundle_alloc,   bundle_c
                                          bundle_encode, bundle_release, NULL};
 static const kdr_exec_kind_ops FRUSTUM = {frustum_parse,  frustum_alloc,   frustum_chunk,
                                           frustum_encode, frustum_release, NULL};
-static const kdr_exec_kind_ops SHADOW = {shadow_parse,  shadow_alloc,   shadow_chunk,
-                                         shadow_encode, shadow_release, shadow_core_error};
+static const kdr_exec_kind_ops SHADOW = {shadow_parse,   shadow_alloc,
+                                         shadow_chunk,   shadow_encode,
+                                         shadow_release, shadow_core_error};
 
 const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
     switch (kind) {
-    case KDR_EXEC_BUNDLE: return &BUNDLE;
-    case KDR_EXEC_FRUSTUM: return &FRUSTUM;
-    case KDR_EXEC_CONE_SHADOW: return &SHADOW;
+    case KDR_EXEC_BUNDLE:
+        return &BUNDLE;
+    case KDR_EXEC_FRUSTUM:
+        return &FRUSTUM;
+    case KDR_EXEC_CONE_SHADOW:
+        return &SHADOW;
     }
     return NULL;
 }

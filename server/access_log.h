@@ -2,7 +2,8 @@
  * access_log.h — --access-log FILE|-: one line per answered request,
  *
  *   TIME CLIENT METHOD PATH STATUS RAYS BYTES_IN BYTES_OUT MS
- *   2026-01-31T12:00:00.123Z 127.0.0.1 POST /v1/scenes/default/bundle 200 10000 240211 440017 12.345
+ *   2026-01-31T12:00:00.123Z 127.0.0.1 POST /v1/scenes/default/bundle 200 10000 240211
+ * 440017 12.345
  *
  * space-separated, so `awk '{print $5}'` is the status. PATH has spaces,
  * control bytes, '%' and non-ASCII bytes written as %XX. STATUS 499 means

@@ -11,9 +11,9 @@
  * whatever the queries are doing. (One thread per connection was tried
  * first: on the shared 2-core box its thread start per new connection put a
  * probe's p99 at 8-18 ms against 2-3 ms for the pool.) While a connection
- * is suspended MHD does not look at its socket, so a watcher thread does,
- * every WATCH_TICK_S: a client that hung up cancels its query, and a queued
- * query past its deadline is answered even when every worker is busy.
+ * is suspended MHD does not look at its socket, so the watcher (watch.c)
+ * does: a client that hung up cancels its query, and a queued query past
+ * its deadline is answered even when every worker is busy.
  *
  * A request's state lives in *req_cls from its first callback until
  * MHD_OPTION_NOTIFY_COMPLETED; the in-flight gauge counts exactly those
@@ -28,7 +28,6 @@
 #include <limits.h>
 #include <microhttpd.h>
 #include <netinet/in.h>
-#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -40,13 +39,12 @@
 
 #include "log.h"
 #include "server.h"
+#include "watch.h"
 
 /* MHD per-connection memory: bigger reads mean fewer callbacks per body. */
 static const size_t CONNECTION_MEMORY = 256 * 1024;
 /* Seconds an idle connection is kept. */
 static const unsigned CONNECTION_TIMEOUT_S = 60;
-/* How often the watcher looks at the clients of suspended queries. */
-static const long WATCH_TICK_MS = 20;
 /* A body this small is parsed on the HTTP thread (tens of microseconds),
  * and answered there too when its work should take under 0.2 ms (query.c
  * decides from the scene's measured cost per ray): no hand-off to a worker
@@ -70,14 +68,8 @@ struct kdr_http {
     struct MHD_Daemon *d;
     kdr_server *srv;
     unsigned port;
-    MHD_socket quiesced; /* the listen socket after MHD_quiesce_daemon */
-    /* the watcher: suspended queries, under wlock */
-    pthread_t watcher;
-    int watcher_started;
-    pthread_mutex_t wlock;
-    pthread_cond_t wcv; /* a query was added, or stop */
-    req_state *watched;
-    int wstop;
+    MHD_socket quiesced;  /* the listen socket after MHD_quiesce_daemon */
+    kdr_watcher *watcher; /* looks after suspended queries (watch.c) */
 };
 
 struct req_state {
@@ -93,10 +85,10 @@ struct req_state {
     struct MHD_Connection *conn;
     int fd; /* the client's socket, for the watcher */
     /* a query with the executor */
-    int started, start_failed, watched;
+    int started, start_failed;
     kdr_query_call call;
     kdr_response early; /* the answer when kdr_query_start refused */
-    req_state *wnext, *wprev;
+    kdr_watch_entry watch;
     /* for the access log */
     unsigned status;
     uint64_t rays;
@@ -225,97 +217,18 @@ static void client_address(struct MHD_Connection *c, char *out, size_t n) {
         inet_ntop(AF_INET, &((const struct sockaddr_in *)(const void *)sa)->sin_addr, out,
                   (socklen_t)n);
     else if (sa->sa_family == AF_INET6)
-        inet_ntop(AF_INET6, &((const struct sockaddr_in6 *)(const void *)sa)->sin6_addr, out,
-                  (socklen_t)n);
+        inet_ntop(AF_INET6, &((const struct sockaddr_in6 *)(const void *)sa)->sin6_addr,
+                  out, (socklen_t)n);
 }
-
-/* 1 once the client has closed its end (or the socket failed). A client
- * that only shut down its sending side looks the same: it is treated as
- * gone, as nginx does, since it can no longer send anything. */
-static int fd_gone(int fd) {
-    char b;
-    if (fd < 0) return 0;
-    ssize_t n = recv(fd, &b, 1, MSG_PEEK | MSG_DONTWAIT);
-    return n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR);
-}
-
-/* ---- the watcher ------------------------------------------------------------ */
 
 static void watch_add(kdr_http *h, req_state *rs) {
-    pthread_mutex_lock(&h->wlock);
-    if (!rs->watched) {
-        rs->wprev = NULL;
-        rs->wnext = h->watched;
-        if (h->watched) h->watched->wprev = rs;
-        h->watched = rs;
-        rs->watched = 1;
-        pthread_cond_signal(&h->wcv);
-    }
-    pthread_mutex_unlock(&h->wlock);
+    rs->watch.fd = rs->fd;
+    rs->watch.call = &rs->call;
+    kdr_watcher_add(h->watcher, &rs->watch);
 }
 
 static void watch_remove(kdr_http *h, req_state *rs) {
-    pthread_mutex_lock(&h->wlock);
-    if (rs->watched) {
-        if (rs->wprev)
-            rs->wprev->wnext = rs->wnext;
-        else
-            h->watched = rs->wnext;
-        if (rs->wnext) rs->wnext->wprev = rs->wprev;
-        rs->watched = 0;
-    }
-    pthread_mutex_unlock(&h->wlock);
-}
-
-/* Looks at every suspended query each tick. kdr_query_watch may finish a
- * query here (cancelled, or past its deadline while queued), whose on_done
- * resumes its connection; that connection's thread then waits for wlock
- * before it takes the query off the list, so nothing here is freed under
- * our feet. */
-static void *watch_main(void *arg) {
-    kdr_http *h = arg;
-    pthread_mutex_lock(&h->wlock);
-    while (!h->wstop) {
-        if (!h->watched) {
-            pthread_cond_wait(&h->wcv, &h->wlock);
-            continue;
-        }
-        for (req_state *rs = h->watched; rs; rs = rs->wnext)
-            kdr_query_watch(&rs->call, fd_gone(rs->fd));
-        struct timespec ts;
-        clock_gettime(CLOCK_MONOTONIC, &ts);
-        ts.tv_nsec += WATCH_TICK_MS * 1000000L;
-        if (ts.tv_nsec >= 1000000000L) {
-            ts.tv_sec++;
-            ts.tv_nsec -= 1000000000L;
-        }
-        pthread_cond_timedwait(&h->wcv, &h->wlock, &ts);
-    }
-    pthread_mutex_unlock(&h->wlock);
-    return NULL;
-}
-
-static int watch_start(kdr_http *h) {
-    pthread_condattr_t ca;
-    pthread_condattr_init(&ca);
-    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
-    pthread_cond_init(&h->wcv, &ca);
-    pthread_condattr_destroy(&ca);
-    pthread_mutex_init(&h->wlock, NULL);
-    h->watcher_started = pthread_create(&h->watcher, NULL, watch_main, h) == 0;
-    return h->watcher_started ? 0 : -1;
-}
-
-static void watch_stop(kdr_http *h) {
-    if (h->watcher_started) {
-        pthread_mutex_lock(&h->wlock);
-        h->wstop = 1;
-        pthread_cond_signal(&h->wcv);
-        pthread_mutex_unlock(&h->wlock);
-        pthread_join(h->watcher, NULL);
-    }
-    pthread_cond_destroy(&h->wcv);
-    pthread_mutex_destroy(&h->wlock);
+    kdr_watcher_remove(h->watcher, &rs->watch);
 }
 
 /* From the worker that finished the query: let MHD call us back. */
@@ -364,7 +277,8 @@ static enum MHD_Result start_query(kdr_http *h, struct MHD_Connection *c, req_st
 }
 
 /* Called again after the resume: the query's answer. */
-static enum MHD_Result finish_query(kdr_http *h, struct MHD_Connection *c, req_state *rs) {
+static enum MHD_Result finish_query(kdr_http *h, struct MHD_Connection *c,
+                                    req_state *rs) {
     kdr_response resp = {0};
     watch_remove(h, rs);
     if (rs->start_failed) {
@@ -379,7 +293,8 @@ static enum MHD_Result finish_query(kdr_http *h, struct MHD_Connection *c, req_s
     return queue(h, c, rs, &resp);
 }
 
-static req_state *req_begin(kdr_http *h, struct MHD_Connection *c, const kdr_request *req) {
+static req_state *req_begin(kdr_http *h, struct MHD_Connection *c,
+                            const kdr_request *req) {
     req_state *rs = calloc(1, sizeof *rs);
     if (!rs) return NULL;
     rs->start = kdr_now();
@@ -419,10 +334,10 @@ static int admit(kdr_http *h, req_state *rs, long long clen, const char *path) {
     if (a != KDR_ADMIT_OK) {
         kdr_route_refusal(h->srv, a, need, &rs->refusal);
         kdr_log_debug("%s: %u %s", path, rs->refusal.status,
-                      a == KDR_ADMIT_QUEUE_FULL   ? "queue full"
-                      : a == KDR_ADMIT_TOO_LARGE  ? "over the whole in-flight budget"
-                      : a == KDR_ADMIT_STOPPED    ? "shutting down"
-                                                  : "memory full");
+                      a == KDR_ADMIT_QUEUE_FULL  ? "queue full"
+                      : a == KDR_ADMIT_TOO_LARGE ? "over the whole in-flight budget"
+                      : a == KDR_ADMIT_STOPPED   ? "shutting down"
+                                                 : "memory full");
         return 1;
     }
     if (clen > 0) {
@@ -506,14 +421,10 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **req_cls,
     req_state *rs = *req_cls;
     if (!rs) return;
     if (h->srv->access_log.fd >= 0) {
-        kdr_access_entry e = {rs->client,
-                              rs->method,
-                              rs->path,
-                              rs->queued ? rs->status : 499,
-                              rs->rays,
-                              rs->len + rs->dropped,
-                              rs->bytes_out,
-                              (kdr_now() - rs->start) * 1e3};
+        kdr_access_entry e = {rs->client,    rs->method,
+                              rs->path,      rs->queued ? rs->status : 499,
+                              rs->rays,      rs->len + rs->dropped,
+                              rs->bytes_out, (kdr_now() - rs->start) * 1e3};
         kdr_access_log_write(&h->srv->access_log, &e);
     }
     if (rs->started == 1 && !rs->start_failed) {
@@ -575,7 +486,8 @@ kdr_http *kdr_http_start(kdr_server *srv, const char *addr) {
     struct sockaddr_storage ss;
     int v6 = 0;
     if (parse_addr(addr, &ss, &v6) != 0) {
-        kdr_log_error("--listen %s: expected ADDR:PORT (IPv4, localhost or [IPv6])", addr);
+        kdr_log_error("--listen %s: expected ADDR:PORT (IPv4, localhost or [IPv6])",
+                      addr);
         return NULL;
     }
     kdr_http *h = calloc(1, sizeof *h);
@@ -586,10 +498,11 @@ kdr_http *kdr_http_start(kdr_server *srv, const char *addr) {
      * in the middle of a body is noticed only at the connection timeout
      * (measured: 7 of 10 hang-ups), so it counts as in flight for a minute. */
     unsigned flags = MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_POLL | MHD_USE_ITC |
-                     MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG | (v6 ? MHD_USE_IPv6 : 0);
-    if (watch_start(h) != 0) {
+                     MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG |
+                     (v6 ? MHD_USE_IPv6 : 0);
+    h->watcher = kdr_watcher_start();
+    if (!h->watcher) {
         kdr_log_error("cannot start the connection watcher: %s", strerror(errno));
-        watch_stop(h);
         free(h);
         return NULL;
     }
@@ -607,7 +520,7 @@ kdr_http *kdr_http_start(kdr_server *srv, const char *addr) {
     /* clang-format on */
     if (!h->d) {
         kdr_log_error("cannot listen on %s: %s", addr, strerror(errno));
-        watch_stop(h);
+        kdr_watcher_stop(h->watcher);
         free(h);
         return NULL;
     }
@@ -648,7 +561,8 @@ static void wait_executor(kdr_exec *ex) {
         if (st.queued + st.running == 0) return;
         if (ms && ms % 10000 == 0)
             kdr_log_warn("shutdown: waiting for %zu quer%s to reach a chunk boundary",
-                         st.queued + st.running, st.queued + st.running == 1 ? "y" : "ies");
+                         st.queued + st.running,
+                         st.queued + st.running == 1 ? "y" : "ies");
         sleep_ms(10);
     }
 }
@@ -658,19 +572,21 @@ void kdr_http_stop(kdr_http *h, double grace_s) {
     kdr_http_quiesce(h);
     long left = wait_idle(grace_s);
     if (left > 0) {
-        kdr_log_warn("shutdown: %ld request%s still in flight after %.0f s: stopping their "
-                     "queries",
-                     left, left == 1 ? "" : "s", grace_s);
+        kdr_log_warn(
+            "shutdown: %ld request%s still in flight after %.0f s: stopping their "
+            "queries",
+            left, left == 1 ? "" : "s", grace_s);
         kdr_exec_shutdown(h->srv->exec);
         wait_executor(h->srv->exec);
         left = wait_idle(STOP_WAIT_S);
         if (left > 0)
-            kdr_log_warn("shutdown: closing %ld connection%s", left, left == 1 ? "" : "s");
+            kdr_log_warn("shutdown: closing %ld connection%s", left,
+                         left == 1 ? "" : "s");
     }
     /* No query is suspended now (they all finished above), so MHD never has
      * to resume a connection behind the executor's back. */
     MHD_stop_daemon(h->d);
     if (h->quiesced != MHD_INVALID_SOCKET) close(h->quiesced);
-    watch_stop(h);
+    kdr_watcher_stop(h->watcher);
     free(h);
 }

@@ -93,7 +93,8 @@ static void *signal_main(void *arg) {
             w->reload = 1;
         } else {
             if (sig != SIGUSR1)
-                kdr_log("received %s: shutting down", sig == SIGINT ? "SIGINT" : "SIGTERM");
+                kdr_log("received %s: shutting down",
+                        sig == SIGINT ? "SIGINT" : "SIGTERM");
             w->stop = 1;
             atomic_store(&w->srv->stopping, 1);
         }
@@ -165,8 +166,9 @@ static void reload(kdr_server *srv) {
     else
         kdr_log("reload: done in %.1f ms; %zu scene%s current", (kdr_now() - t0) * 1e3, n,
                 n == 1 ? "" : "s");
-    kdr_notify(failed ? "READY=1\nSTATUS=serving; the last reload kept old scenes (see log)"
-                      : "READY=1\nSTATUS=serving");
+    kdr_notify(failed
+                   ? "READY=1\nSTATUS=serving; the last reload kept old scenes (see log)"
+                   : "READY=1\nSTATUS=serving");
 }
 
 /* Waits for signals after start-up; returns when a stop was asked for. */
@@ -228,21 +230,23 @@ static int serve(kdr_server *srv, const kdr_options *o) {
                            lower_worker_priority, srv};
     srv->exec = kdr_exec_create(&cfg);
     if (!srv->exec) {
-        kdr_log_error("cannot start %u worker threads: %s", srv->threads, strerror(errno));
+        kdr_log_error("cannot start %u worker threads: %s", srv->threads,
+                      strerror(errno));
         end_signals(&sw);
         return 1;
     }
     raise_file_limit(srv->max_connections);
     char deadline[32] = "none";
-    if (srv->deadline_ms > 0) snprintf(deadline, sizeof deadline, "%.0f ms", srv->deadline_ms);
+    if (srv->deadline_ms > 0)
+        snprintf(deadline, sizeof deadline, "%.0f ms", srv->deadline_ms);
     kdr_log("kdrayd %s starting: %zu scene%s, %u worker threads (nice +%d), %u HTTP "
             "threads, queue %zu, in flight %zu MiB, max body %zu MiB, max rays %zu, "
             "deadline %s, %u connections, %s bundles",
             KDRAY_VERSION, kdr_registry_count(srv->registry),
-            kdr_registry_count(srv->registry) == 1 ? "" : "s", srv->threads, srv->worker_nice,
-            srv->http_threads, o->max_queue,
-            o->max_inflight_mb, o->max_body_mb, srv->max_rays, deadline,
-            srv->max_connections, kdr_cpu_has_avx2() ? "8-wide (AVX2)" : "4-wide");
+            kdr_registry_count(srv->registry) == 1 ? "" : "s", srv->threads,
+            srv->worker_nice, srv->http_threads, o->max_queue, o->max_inflight_mb,
+            o->max_body_mb, srv->max_rays, deadline, srv->max_connections,
+            kdr_cpu_has_avx2() ? "8-wide (AVX2)" : "4-wide");
     kdr_http *h = kdr_http_start(srv, o->listen);
     int status = 1;
     if (h) {
@@ -271,8 +275,10 @@ int main(int argc, char **argv) {
     srv.access_log.fd = -1;
     srv.registry = kdr_registry_create();
     if (rc < 0 && !srv.registry) rc = 1;
-    if (rc < 0) rc = add_scenes(srv.registry, &o, default_path, sizeof default_path) ? 2 : -1;
-    if (rc < 0 && o.access_log && kdr_access_log_open(&srv.access_log, o.access_log) != 0) {
+    if (rc < 0)
+        rc = add_scenes(srv.registry, &o, default_path, sizeof default_path) ? 2 : -1;
+    if (rc < 0 && o.access_log &&
+        kdr_access_log_open(&srv.access_log, o.access_log) != 0) {
         fprintf(stderr, "kdrayd: --access-log %s: %s (see kdrayd --help)\n", o.access_log,
                 strerror(errno));
         rc = 2;

@@ -46,54 +46,56 @@ static const size_t DEFAULT_WORKER_NICE = 10;
 static const size_t MAX_GRACE_S = 3600;
 
 static void usage(FILE *f) {
-    fprintf(f,
-            "usage: kdrayd [options]\n"
-            "Serves batched ray queries (bundle, cone-shadow, frustum) over HTTP/JSON\n"
-            "on SAH kd-trees built from glTF scenes at start-up.\n\n"
-            "Scenes and network:\n"
-            "  --scene NAME=PATH     serve PATH (.glb or .gltf) as NAME; repeatable\n"
-            "                        (default: the bundled scene as \"default\")\n"
-            "  --listen ADDR:PORT    address to listen on (default %s; port 0 picks\n"
-            "                        a free port, logged at start-up)\n"
-            "  --max-connections N   HTTP connections at once (default %u)\n"
-            "  --http-threads N      threads that read requests and write answers; they\n"
-            "                        never trace (default: number of cores, at least 2)\n"
-            "Work and admission:\n"
-            "  --threads N           worker threads that parse, trace and encode queries\n"
-            "                        (default: number of cores)\n"
-            "  --worker-nice N       the workers' nice value above the HTTP threads, so\n"
-            "                        probes and small requests are answered at once while\n"
-            "                        they trace (0..19, default %zu)\n"
-            "  --max-queue N         queries admitted beyond one per worker; more get 503\n"
-            "                        with Retry-After (default %zu)\n"
-            "  --max-inflight-mb N   memory budget of admitted queries: bodies, parsed\n"
-            "                        arrays, results, answers, charged before they are\n"
-            "                        allocated; over it: 503 with Retry-After (default %zu,\n"
-            "                        or %zu x --max-body-mb x 3 if more; at least\n"
-            "                        3 x --max-body-mb)\n"
-            "  --max-body-mb N       largest request body in MiB (default %zu)\n"
-            "  --max-rays N          most rays per request (default %zu)\n"
-            "  --deadline-ms N       stop a query that runs longer than N ms after its\n"
-            "                        first byte, between chunks, with a 503 (default: none;\n"
-            "                        a request's \"deadline_ms\" can only shorten it)\n"
-            "  --shutdown-grace-s N  on SIGTERM, let requests in flight run this long,\n"
-            "                        then stop their queries with a 503 (default %zu)\n"
-            "Logs:\n"
-            "  --access-log FILE|-   one line per request: time, client, method, path,\n"
-            "                        status, rays, bytes in, bytes out, ms (\"-\": stdout;\n"
-            "                        reopened on SIGHUP)\n"
-            "  --log-level LEVEL     error, warn, info (default) or debug (per-request\n"
-            "                        refusals, deadlines and hang-ups)\n"
-            "  --help, --version\n\n"
-            "Signals: SIGHUP re-reads changed scene files (the old tree serves until\n"
-            "the new one is built; a file that fails keeps the old one) and reopens the\n"
-            "access log; SIGINT/SIGTERM stop accepting, finish requests in flight\n"
-            "(--shutdown-grace-s) and exit 0.\n"
-            "Endpoints: /v1/health (alive, scenes built), /v1/ready (503 while starting,\n"
-            "stopping or saturated), /metrics, /v1/scenes[/NAME[/bundle|cone-shadow|frustum]].\n",
-            DEFAULT_LISTEN, DEFAULT_MAX_CONNECTIONS, DEFAULT_WORKER_NICE, DEFAULT_MAX_QUEUE,
-            DEFAULT_MAX_INFLIGHT_MB, DEFAULT_INFLIGHT_BODIES, DEFAULT_MAX_BODY_MB,
-            DEFAULT_MAX_RAYS, DEFAULT_GRACE_S);
+    fprintf(
+        f,
+        "usage: kdrayd [options]\n"
+        "Serves batched ray queries (bundle, cone-shadow, frustum) over HTTP/JSON\n"
+        "on SAH kd-trees built from glTF scenes at start-up.\n\n"
+        "Scenes and network:\n"
+        "  --scene NAME=PATH     serve PATH (.glb or .gltf) as NAME; repeatable\n"
+        "                        (default: the bundled scene as \"default\")\n"
+        "  --listen ADDR:PORT    address to listen on (default %s; port 0 picks\n"
+        "                        a free port, logged at start-up)\n"
+        "  --max-connections N   HTTP connections at once (default %u)\n"
+        "  --http-threads N      threads that read requests and write answers; they\n"
+        "                        never trace (default: number of cores, at least 2)\n"
+        "Work and admission:\n"
+        "  --threads N           worker threads that parse, trace and encode queries\n"
+        "                        (default: number of cores)\n"
+        "  --worker-nice N       the workers' nice value above the HTTP threads, so\n"
+        "                        probes and small requests are answered at once while\n"
+        "                        they trace (0..19, default %zu)\n"
+        "  --max-queue N         queries admitted beyond one per worker; more get 503\n"
+        "                        with Retry-After (default %zu)\n"
+        "  --max-inflight-mb N   memory budget of admitted queries: bodies, parsed\n"
+        "                        arrays, results, answers, charged before they are\n"
+        "                        allocated; over it: 503 with Retry-After (default %zu,\n"
+        "                        or %zu x --max-body-mb x 3 if more; at least\n"
+        "                        3 x --max-body-mb)\n"
+        "  --max-body-mb N       largest request body in MiB (default %zu)\n"
+        "  --max-rays N          most rays per request (default %zu)\n"
+        "  --deadline-ms N       stop a query that runs longer than N ms after its\n"
+        "                        first byte, between chunks, with a 503 (default: none;\n"
+        "                        a request's \"deadline_ms\" can only shorten it)\n"
+        "  --shutdown-grace-s N  on SIGTERM, let requests in flight run this long,\n"
+        "                        then stop their queries with a 503 (default %zu)\n"
+        "Logs:\n"
+        "  --access-log FILE|-   one line per request: time, client, method, path,\n"
+        "                        status, rays, bytes in, bytes out, ms (\"-\": stdout;\n"
+        "                        reopened on SIGHUP)\n"
+        "  --log-level LEVEL     error, warn, info (default) or debug (per-request\n"
+        "                        refusals, deadlines and hang-ups)\n"
+        "  --help, --version\n\n"
+        "Signals: SIGHUP re-reads changed scene files (the old tree serves until\n"
+        "the new one is built; a file that fails keeps the old one) and reopens the\n"
+        "access log; SIGINT/SIGTERM stop accepting, finish requests in flight\n"
+        "(--shutdown-grace-s) and exit 0.\n"
+        "Endpoints: /v1/health (alive, scenes built), /v1/ready (503 while starting,\n"
+        "stopping or saturated), /metrics, "
+        "/v1/scenes[/NAME[/bundle|cone-shadow|frustum]].\n",
+        DEFAULT_LISTEN, DEFAULT_MAX_CONNECTIONS, DEFAULT_WORKER_NICE, DEFAULT_MAX_QUEUE,
+        DEFAULT_MAX_INFLIGHT_MB, DEFAULT_INFLIGHT_BODIES, DEFAULT_MAX_BODY_MB,
+        DEFAULT_MAX_RAYS, DEFAULT_GRACE_S);
 }
 
 static int bad_flag(const char *fmt, const char *arg) {
@@ -124,11 +126,21 @@ static const char *flag_value(int argc, char **argv, int *i, const char *eq) {
     return *i + 1 < argc ? argv[++*i] : NULL;
 }
 
-static const char *const FLAGS[] = {
-    "--scene",     "--listen",          "--threads",    "--http-threads",
-    "--max-body-mb", "--max-rays",      "--max-inflight-mb", "--max-queue",
-    "--deadline-ms", "--max-connections", "--access-log", "--log-level",
-    "--shutdown-grace-s", "--worker-nice", NULL};
+static const char *const FLAGS[] = {"--scene",
+                                    "--listen",
+                                    "--threads",
+                                    "--http-threads",
+                                    "--max-body-mb",
+                                    "--max-rays",
+                                    "--max-inflight-mb",
+                                    "--max-queue",
+                                    "--deadline-ms",
+                                    "--max-connections",
+                                    "--access-log",
+                                    "--log-level",
+                                    "--shutdown-grace-s",
+                                    "--worker-nice",
+                                    NULL};
 
 static int known(const char *a, size_t len) {
     for (int k = 0; FLAGS[k]; k++)
@@ -141,14 +153,17 @@ static int take(kdr_options *o, const char *flag, const char *v) {
     size_t n;
     if (!strcmp(flag, "--scene")) {
         const char *sep = strchr(v, '=');
-        if (!sep || sep == v || !sep[1]) return bad_flag("--scene %s: expected NAME=PATH", v);
+        if (!sep || sep == v || !sep[1])
+            return bad_flag("--scene %s: expected NAME=PATH", v);
         o->scene_args[o->nscenes++] = (char *)v; /* v is argv storage */
     } else if (!strcmp(flag, "--listen")) {
         if (!kdr_http_addr_ok(v))
-            return bad_flag("--listen %s: expected ADDR:PORT (IPv4, localhost or [IPv6])", v);
+            return bad_flag("--listen %s: expected ADDR:PORT (IPv4, localhost or [IPv6])",
+                            v);
         o->listen = v;
     } else if (!strcmp(flag, "--threads")) {
-        if (parse_size(v, 1, MAX_THREADS, &n)) return bad_flag("--threads %s: expected 1..256", v);
+        if (parse_size(v, 1, MAX_THREADS, &n))
+            return bad_flag("--threads %s: expected 1..256", v);
         o->threads = (unsigned)n;
     } else if (!strcmp(flag, "--http-threads")) {
         if (parse_size(v, 1, MAX_THREADS, &n))
@@ -175,7 +190,8 @@ static int take(kdr_options *o, const char *flag, const char *v) {
             return bad_flag("--deadline-ms %s: expected 0 (none)..86400000", v);
         o->deadline_ms = (double)n;
     } else if (!strcmp(flag, "--worker-nice")) {
-        if (parse_size(v, 0, 19, &n)) return bad_flag("--worker-nice %s: expected 0..19", v);
+        if (parse_size(v, 0, 19, &n))
+            return bad_flag("--worker-nice %s: expected 0..19", v);
         o->worker_nice = (int)n;
     } else if (!strcmp(flag, "--shutdown-grace-s")) {
         if (parse_size(v, 0, MAX_GRACE_S, &n))
@@ -186,7 +202,8 @@ static int take(kdr_options *o, const char *flag, const char *v) {
         o->access_log = v;
     } else {
         int level = kdr_log_parse_level(v);
-        if (level < 0) return bad_flag("--log-level %s: expected error, warn, info or debug", v);
+        if (level < 0)
+            return bad_flag("--log-level %s: expected error, warn, info or debug", v);
         o->log_level = level;
     }
     return -1;

@@ -53,9 +53,10 @@ static void learn_cost(kdr_scene_version *v, kdr_endpoint ep, const kdr_exec_res
     unsigned sample = ns < 1 ? 1 : ns > 4e9 ? 4000000000u : (unsigned)ns;
     atomic_uint *slot = &v->ns_per_ray[kind_of(ep)];
     unsigned old = atomic_load_explicit(slot, memory_order_relaxed);
-    unsigned next = old == 0 ? sample
-                             : (unsigned)((long long)old +
-                                          (((long long)sample - (long long)old) >> COST_SHIFT));
+    unsigned next =
+        old == 0 ? sample
+                 : (unsigned)((long long)old +
+                              (((long long)sample - (long long)old) >> COST_SHIFT));
     atomic_store_explicit(slot, next ? next : 1, memory_order_relaxed);
 }
 

@@ -110,7 +110,8 @@ const char *kdr_registry_name(const kdr_registry *r, size_t i) {
 
 long kdr_registry_index(const kdr_registry *r, const char *name, size_t len) {
     for (size_t i = 0; i < r->n; i++)
-        if (strlen(r->s[i].name) == len && !memcmp(r->s[i].name, name, len)) return (long)i;
+        if (strlen(r->s[i].name) == len && !memcmp(r->s[i].name, name, len))
+            return (long)i;
     return -1;
 }
 
@@ -137,8 +138,8 @@ static void log_stats(const entry *e, const kdr_scene_version *v) {
     kdr_log("scene %s: %zu triangles, %zu meshes, loaded in %.1f ms; kd-tree built "
             "in %.1f ms: %llu nodes, %llu leaves (%llu empty), max depth %llu, "
             "%.2f refs/leaf, SAH cost %.2f, %.1f MiB; bounds [%g %g %g]..[%g %g %g]",
-            e->name, kdr_scene_triangle_count(v->scene), v->nranges, v->load_ms, v->build_ms,
-            (unsigned long long)st.nodes, (unsigned long long)st.leaves,
+            e->name, kdr_scene_triangle_count(v->scene), v->nranges, v->load_ms,
+            v->build_ms, (unsigned long long)st.nodes, (unsigned long long)st.leaves,
             (unsigned long long)st.empty_leaves, (unsigned long long)st.max_depth,
             st.refs_per_leaf, st.sah_cost, (double)st.bytes / (1024.0 * 1024.0), b.min[0],
             b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]);
@@ -147,7 +148,8 @@ static void log_stats(const entry *e, const kdr_scene_version *v) {
 static int identify(const char *path, file_id *id) {
     struct stat st;
     if (stat(path, &st) != 0) return -1;
-    *id = (file_id){st.st_dev, st.st_ino, st.st_size, st.st_mtim.tv_sec, st.st_mtim.tv_nsec};
+    *id = (file_id){st.st_dev, st.st_ino, st.st_size, st.st_mtim.tv_sec,
+                    st.st_mtim.tv_nsec};
     return 0;
 }
 
@@ -233,8 +235,8 @@ static int reload_one(kdr_registry *r, entry *e) {
     file_id id;
     unsigned gen = e->current ? e->current->generation : 0; /* only we write it */
     if (identify(e->path, &id) != 0) {
-        kdr_log_error("scene %s: reload failed, keeping generation %u: %s: %s", e->name, gen,
-                      e->path, strerror(errno));
+        kdr_log_error("scene %s: reload failed, keeping generation %u: %s: %s", e->name,
+                      gen, e->path, strerror(errno));
         pthread_mutex_lock(&r->lock);
         e->reloads_failed++;
         pthread_mutex_unlock(&r->lock);
@@ -250,7 +252,8 @@ static int reload_one(kdr_registry *r, entry *e) {
     kdr_log("scene %s: reloading %s", e->name, e->path);
     kdr_scene_version *v = load_version(e, gen + 1, why, sizeof why);
     if (!v) {
-        kdr_log_error("scene %s: reload failed, keeping generation %u: %s", e->name, gen, why);
+        kdr_log_error("scene %s: reload failed, keeping generation %u: %s", e->name, gen,
+                      why);
         pthread_mutex_lock(&r->lock);
         e->reloads_failed++;
         pthread_mutex_unlock(&r->lock);
@@ -283,7 +286,8 @@ size_t kdr_registry_reload(kdr_registry *r) {
     return failed;
 }
 
-/* ---- metrics ------------------------------------------------------------------------ */
+/* ---- metrics ------------------------------------------------------------------------
+ */
 
 typedef struct scene_row {
     double build_s, load_s;
@@ -296,13 +300,10 @@ static int row_of(kdr_registry *r, size_t i, scene_row *row) {
     kdr_scene_version *v = kdr_registry_acquire(r, i);
     if (!v) return 0;
     pthread_mutex_lock(&r->lock);
-    *row = (scene_row){v->build_ms * 1e-3,
-                       v->load_ms * 1e-3,
-                       kdr_scene_triangle_count(v->scene),
-                       v->generation,
-                       r->s[i].reloads_ok,
-                       r->s[i].reloads_unchanged,
-                       r->s[i].reloads_failed};
+    *row = (scene_row){
+        v->build_ms * 1e-3,    v->load_ms * 1e-3,  kdr_scene_triangle_count(v->scene),
+        v->generation,         r->s[i].reloads_ok, r->s[i].reloads_unchanged,
+        r->s[i].reloads_failed};
     pthread_mutex_unlock(&r->lock);
     kdr_registry_release(v);
     return 1;
@@ -318,30 +319,35 @@ void kdr_registry_render_metrics(kdr_registry *r, kdr_tb *tb) {
     }
     for (size_t i = 0; i < r->n; i++)
         have[i] = row_of(r, i, &rows[i]);
-#define GAUGE(NAME, HELP, FMT, EXPR)                                                   \
-    do {                                                                               \
-        kdr_tb_printf(tb, "# HELP " NAME " " HELP "\n# TYPE " NAME " gauge\n");         \
-        for (size_t i = 0; i < r->n; i++)                                              \
-            if (have[i])                                                               \
-                kdr_tb_printf(tb, NAME "{scene=\"%s\"} " FMT "\n", r->s[i].name, EXPR); \
+#define GAUGE(NAME, HELP, FMT, EXPR)                                                     \
+    do {                                                                                 \
+        kdr_tb_printf(tb, "# HELP " NAME " " HELP "\n# TYPE " NAME " gauge\n");          \
+        for (size_t i = 0; i < r->n; i++)                                                \
+            if (have[i])                                                                 \
+                kdr_tb_printf(tb, NAME "{scene=\"%s\"} " FMT "\n", r->s[i].name, EXPR);  \
     } while (0)
-    GAUGE("kdray_scene_build_seconds", "Wall time of the kd-tree build, per scene.", "%.6f",
-          rows[i].build_s);
+    GAUGE("kdray_scene_build_seconds", "Wall time of the kd-tree build, per scene.",
+          "%.6f", rows[i].build_s);
     GAUGE("kdray_scene_load_seconds", "Wall time of the glTF load, per scene.", "%.6f",
           rows[i].load_s);
     GAUGE("kdray_scene_triangles", "Triangles per scene.", "%zu", rows[i].triangles);
-    GAUGE("kdray_scene_generation", "Version of the scene being served (1 at start-up, +1 "
-          "per successful reload).", "%u", rows[i].generation);
+    GAUGE("kdray_scene_generation",
+          "Version of the scene being served (1 at start-up, +1 "
+          "per successful reload).",
+          "%u", rows[i].generation);
 #undef GAUGE
     kdr_tb_printf(tb, "# HELP kdray_scene_reloads_total SIGHUP reloads per scene, by "
                       "result.\n# TYPE kdray_scene_reloads_total counter\n");
     for (size_t i = 0; i < r->n; i++) {
         if (!have[i]) continue;
-        kdr_tb_printf(tb, "kdray_scene_reloads_total{scene=\"%s\",result=\"reloaded\"} %lu\n",
+        kdr_tb_printf(tb,
+                      "kdray_scene_reloads_total{scene=\"%s\",result=\"reloaded\"} %lu\n",
                       r->s[i].name, rows[i].ok);
-        kdr_tb_printf(tb, "kdray_scene_reloads_total{scene=\"%s\",result=\"unchanged\"} %lu\n",
-                      r->s[i].name, rows[i].unchanged);
-        kdr_tb_printf(tb, "kdray_scene_reloads_total{scene=\"%s\",result=\"failed\"} %lu\n",
+        kdr_tb_printf(
+            tb, "kdray_scene_reloads_total{scene=\"%s\",result=\"unchanged\"} %lu\n",
+            r->s[i].name, rows[i].unchanged);
+        kdr_tb_printf(tb,
+                      "kdray_scene_reloads_total{scene=\"%s\",result=\"failed\"} %lu\n",
                       r->s[i].name, rows[i].failed);
     }
     kdr_tb_printf(tb,

@@ -198,9 +198,10 @@ void kdr_route_refusal(kdr_server *srv, kdr_admit why, size_t bytes, kdr_respons
                  st.slots_used, st.slots);
         break;
     case KDR_ADMIT_TOO_LARGE:
-        snprintf(detail, sizeof detail,
-                 "body: needs about %s in flight, over the limit of %s (--max-inflight-mb)",
-                 size_text(bytes, a, sizeof a), size_text(st.bytes_max, b, sizeof b));
+        snprintf(
+            detail, sizeof detail,
+            "body: needs about %s in flight, over the limit of %s (--max-inflight-mb)",
+            size_text(bytes, a, sizeof a), size_text(st.bytes_max, b, sizeof b));
         kdr_route_problem(out, 413, detail);
         return;
     case KDR_ADMIT_STOPPED:
@@ -209,8 +210,8 @@ void kdr_route_refusal(kdr_server *srv, kdr_admit why, size_t bytes, kdr_respons
     default:
         snprintf(detail, sizeof detail,
                  "memory: %s of %s in flight, no room for %s more (--max-inflight-mb)",
-                 size_text(st.bytes_used, a, sizeof a), size_text(st.bytes_max, b, sizeof b),
-                 size_text(bytes, c, sizeof c));
+                 size_text(st.bytes_used, a, sizeof a),
+                 size_text(st.bytes_max, b, sizeof b), size_text(bytes, c, sizeof c));
         break;
     }
     kdr_route_problem(out, 503, detail);
@@ -231,8 +232,8 @@ void kdr_route_answer_buf(kdr_response *out, int rc, kdr_buf *b, const char *ct)
 }
 
 /* The contract's SCENE object; meshes is scratch space owned by the caller. */
-static int scene_info(const char *name, const kdr_scene_version *s, kdr_proto_scene_info *info,
-                      kdr_proto_mesh_range **meshes) {
+static int scene_info(const char *name, const kdr_scene_version *s,
+                      kdr_proto_scene_info *info, kdr_proto_mesh_range **meshes) {
     *meshes = calloc(s->nranges ? s->nranges : 1, sizeof **meshes);
     if (!*meshes) return KDR_ENOMEM;
     for (size_t i = 0; i < s->nranges; i++)
@@ -251,8 +252,8 @@ static int scene_info(const char *name, const kdr_scene_version *s, kdr_proto_sc
 
 /* Each scene's current version is held only while its entry is encoded. */
 static void answer_scenes(kdr_server *srv, const route *r, kdr_response *out) {
-    size_t first = r->scene ? (size_t)kdr_registry_index(srv->registry, r->scene, r->scene_len)
-                            : 0;
+    size_t first =
+        r->scene ? (size_t)kdr_registry_index(srv->registry, r->scene, r->scene_len) : 0;
     size_t n = r->scene ? 1 : kdr_registry_count(srv->registry);
     kdr_proto_scene_info *info = calloc(n ? n : 1, sizeof *info);
     kdr_proto_mesh_range **meshes = calloc(n ? n : 1, sizeof *meshes);
@@ -296,12 +297,13 @@ static void answer_ready(kdr_server *srv, kdr_response *out) {
         out->retry_after = kdr_exec_retry_after(srv->exec);
         return;
     }
-    kdr_tb_printf(&tb,
-                  "{\"status\":\"ready\",\"scenes\":%zu,\"workers\":%u,\"busy\":%u,"
-                  "\"queued\":%zu,\"slots\":%zu,\"slots_used\":%zu,\"inflight_bytes\":%zu,"
-                  "\"inflight_limit\":%zu}",
-                  kdr_registry_count(srv->registry), st.workers, st.busy, st.queued, st.slots,
-                  st.slots_used, st.bytes_used, st.bytes_max);
+    kdr_tb_printf(
+        &tb,
+        "{\"status\":\"ready\",\"scenes\":%zu,\"workers\":%u,\"busy\":%u,"
+        "\"queued\":%zu,\"slots\":%zu,\"slots_used\":%zu,\"inflight_bytes\":%zu,"
+        "\"inflight_limit\":%zu}",
+        kdr_registry_count(srv->registry), st.workers, st.busy, st.queued, st.slots,
+        st.slots_used, st.bytes_used, st.bytes_max);
     out->body = kdr_tb_take(&tb, &out->len);
     if (!out->body) {
         kdr_route_problem(out, 503, "out of memory while answering");
@@ -335,9 +337,9 @@ void kdr_route_handle(kdr_server *srv, const kdr_request *req, kdr_response *out
     kdr_buf_init(&b);
     switch (r.ep) {
     case KDR_EP_HEALTH:
-        kdr_route_answer_buf(out,
-                   kdr_proto_encode_health("ok", kdr_registry_count(srv->registry), &b),
-                   &b, CT_JSON);
+        kdr_route_answer_buf(
+            out, kdr_proto_encode_health("ok", kdr_registry_count(srv->registry), &b), &b,
+            CT_JSON);
         return;
     case KDR_EP_READY:
         answer_ready(srv, out);

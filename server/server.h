@@ -53,8 +53,8 @@ typedef struct kdr_response {
     char *body;
     size_t len;
     kdr_endpoint ep;
-    uint64_t rays;  /* traced for this answer, for the access log */
-    int no_answer;  /* the client left: close without answering */
+    uint64_t rays; /* traced for this answer, for the access log */
+    int no_answer; /* the client left: close without answering */
 } kdr_response;
 
 /* Routing before the body is read: decides 404/405/415/503 and 413 from

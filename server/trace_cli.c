@@ -52,10 +52,14 @@ static char *read_file(const char *path, size_t *len) {
 }
 
 static int kind_of(const char *name, kdr_exec_kind *out) {
-    if (!strcmp(name, "bundle")) *out = KDR_EXEC_BUNDLE;
-    else if (!strcmp(name, "frustum")) *out = KDR_EXEC_FRUSTUM;
-    else if (!strcmp(name, "cone-shadow")) *out = KDR_EXEC_CONE_SHADOW;
-    else return -1;
+    if (!strcmp(name, "bundle"))
+        *out = KDR_EXEC_BUNDLE;
+    else if (!strcmp(name, "frustum"))
+        *out = KDR_EXEC_FRUSTUM;
+    else if (!strcmp(name, "cone-shadow"))
+        *out = KDR_EXEC_CONE_SHADOW;
+    else
+        return -1;
     return 0;
 }
 
@@ -110,9 +114,11 @@ static void run(kdr_exec *ex, kdr_exec_query *q, unsigned repeat) {
 }
 
 static int usage(void) {
-    fprintf(stderr, "usage: kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum "
-                    "[--mode reference|fast] [--threads T] [--repeat R] REQUEST.json\n"
-                    "       kdray-trace [--scene PATH] [--threads T] KIND:MODE:REQUEST.json...\n");
+    fprintf(
+        stderr,
+        "usage: kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum "
+        "[--mode reference|fast] [--threads T] [--repeat R] REQUEST.json\n"
+        "       kdray-trace [--scene PATH] [--threads T] KIND:MODE:REQUEST.json...\n");
     return 2;
 }
 
@@ -207,7 +213,8 @@ static int answer_one(kdr_exec *ex, const kdr_scene *scene, cli c, char *spec) {
     run(ex, &q, c.repeat);
     int rc = q.result.status == 200 ? write_out(k ? path : NULL, &q.result.body) : 1;
     if (q.result.status != 200)
-        fprintf(stderr, "kdray-trace: %s: %d %s\n", path, q.result.status, q.result.detail);
+        fprintf(stderr, "kdray-trace: %s: %d %s\n", path, q.result.status,
+                q.result.detail);
     if (q.job) kdr_exec_query_done(&q);
     free(body);
     return rc ? 1 : 0;
@@ -217,7 +224,8 @@ int main(int argc, char **argv) {
     cli c;
     char default_path[4096];
     if (parse_cli(&c, argc, argv)) return usage();
-    if (!c.scene_path) c.scene_path = kdr_default_scene_path(default_path, sizeof default_path);
+    if (!c.scene_path)
+        c.scene_path = kdr_default_scene_path(default_path, sizeof default_path);
     kdr_scene *scene = load_scene(c.scene_path);
     kdr_exec_config cfg = {c.threads, (size_t)c.nrequests, 0, NULL, NULL};
     kdr_exec *ex = scene ? kdr_exec_create(&cfg) : NULL;

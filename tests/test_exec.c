@@ -21,13 +21,13 @@
 
 static int failures;
 
-#define CHECK(cond, ...)                                                             \
-    do {                                                                             \
-        if (!(cond) && ++failures <= 50) {                                           \
-            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                            \
-            fputc('\n', stderr);                                                     \
-        }                                                                            \
+#define CHECK(cond, ...)                                                                 \
+    do {                                                                                 \
+        if (!(cond) && ++failures <= 50) {                                               \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond);     \
+            fprintf(stderr, __VA_ARGS__);                                                \
+            fputc('\n', stderr);                                                         \
+        }                                                                                \
     } while (0)
 
 static uint64_t rng_state = 0x9e3779b97f4a7c15ull;
@@ -51,7 +51,8 @@ static kdr_scene *make_scene(void) {
             float h[4];
             for (int c = 0; c < 4; c++)
                 h[c] = 0.3f * (float)frand();
-            const float q[4][3] = {{x0, h[0], z0}, {x1, h[1], z0}, {x1, h[2], z1}, {x0, h[3], z1}};
+            const float q[4][3] = {
+                {x0, h[0], z0}, {x1, h[1], z0}, {x1, h[2], z1}, {x0, h[3], z1}};
             const int tri[2][3] = {{0, 1, 2}, {0, 2, 3}};
             for (int a = 0; a < 2; a++)
                 for (int v = 0; v < 3; v++)
@@ -102,15 +103,17 @@ static body frustum_body(int w, int h, const char *query, const char *extra) {
     body b = {0};
     put(&b,
         "{\"camera\":{\"eye\":[0.3,1.2,2.5],\"target\":[0,0,0],\"fov_y_deg\":50,"
-        "\"width\":%d,\"height\":%d},\"tile\":8,\"query\":\"%s\",\"encoding\":\"base64\"%s}",
+        "\"width\":%d,\"height\":%d},\"tile\":8,\"query\":\"%s\",\"encoding\":\"base64\"%"
+        "s}",
         w, h, query, extra);
     return b;
 }
 
 static body shadow_body(size_t n, int samples, const char *extra) {
     body b = {0};
-    put(&b, "{\"samples\":%d,\"stats\":true,\"lights\":[{\"center\":[0.5,2,0],"
-            "\"radius\":0.4},{\"center\":[-2,1,0],\"radius\":0.2}],\"points\":[",
+    put(&b,
+        "{\"samples\":%d,\"stats\":true,\"lights\":[{\"center\":[0.5,2,0],"
+        "\"radius\":0.4},{\"center\":[-2,1,0],\"radius\":0.2}],\"points\":[",
         samples);
     for (size_t i = 0; i < n; i++)
         put(&b, "%s%.5f,%.5f,%.5f", i ? "," : "", 2 * frand() - 1, 0.3 * frand(),
@@ -131,9 +134,10 @@ static kdr_buf direct_answer(const kdr_scene *s, kdr_exec_kind kind, kdr_exec_mo
         kdr_bundle_request r;
         CHECK(kdr_proto_parse_bundle(b->s, b->len, 0, &r, &err) == 0, "%s", err.detail);
         size_t n = r.batch.n;
-        kdr_hits h = {malloc(4 * n), malloc(4 * n), malloc(4 * n), malloc(4 * n), malloc(n)};
-        kdr_trace_batch(s, &r.batch, 0, n, r.query, fast ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE,
-                        &h, NULL);
+        kdr_hits h = {malloc(4 * n), malloc(4 * n), malloc(4 * n), malloc(4 * n),
+                      malloc(n)};
+        kdr_trace_batch(s, &r.batch, 0, n, r.query,
+                        fast ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE, &h, NULL);
         kdr_proto_encode_hits(&h, n, r.query, r.encoding, &out);
         free(h.t), free(h.prim), free(h.u), free(h.v), free(h.hit);
         kdr_bundle_request_free(&r);
@@ -141,9 +145,11 @@ static kdr_buf direct_answer(const kdr_scene *s, kdr_exec_kind kind, kdr_exec_mo
         kdr_frustum_request r;
         CHECK(kdr_proto_parse_frustum(b->s, b->len, 0, &r, &err) == 0, "%s", err.detail);
         size_t n = r.rays;
-        kdr_hits h = {malloc(4 * n), malloc(4 * n), malloc(4 * n), malloc(4 * n), malloc(n)};
-        kdr_frustum_trace(s, &r.camera, r.tile, 0, kdr_frustum_tile_count(&r.camera, r.tile),
-                          r.query, fast ? KDR_FRUSTUM_MULTI4 : KDR_FRUSTUM_RAYS, &h, NULL);
+        kdr_hits h = {malloc(4 * n), malloc(4 * n), malloc(4 * n), malloc(4 * n),
+                      malloc(n)};
+        kdr_frustum_trace(s, &r.camera, r.tile, 0,
+                          kdr_frustum_tile_count(&r.camera, r.tile), r.query,
+                          fast ? KDR_FRUSTUM_MULTI4 : KDR_FRUSTUM_RAYS, &h, NULL);
         kdr_proto_encode_hits(&h, n, r.query, r.encoding, &out);
         free(h.t), free(h.prim), free(h.u), free(h.v), free(h.hit);
     } else {
@@ -151,10 +157,10 @@ static kdr_buf direct_answer(const kdr_scene *s, kdr_exec_kind kind, kdr_exec_mo
         CHECK(kdr_proto_parse_shadow(b->s, b->len, 0, &r, &err) == 0, "%s", err.detail);
         float *vis = malloc(r.query.n * r.query.nlights * sizeof(float));
         kdr_shadow_stats st = {0, 0, 0};
-        kdr_shadow_trace(s, &r.query, 0, r.query.n, fast ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS,
-                         vis, &st);
-        kdr_proto_encode_shadow(vis, r.query.n, r.query.nlights, r.want_stats ? &st : NULL,
-                                r.encoding, &out);
+        kdr_shadow_trace(s, &r.query, 0, r.query.n,
+                         fast ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS, vis, &st);
+        kdr_proto_encode_shadow(vis, r.query.n, r.query.nlights,
+                                r.want_stats ? &st : NULL, r.encoding, &out);
         free(vis);
         kdr_shadow_request_free(&r);
     }
@@ -168,7 +174,11 @@ static void run_query(kdr_exec *ex, kdr_exec_query *q) {
 
 static kdr_exec_query query_of(const kdr_scene *s, kdr_exec_kind kind, kdr_exec_mode mode,
                                const body *b) {
-    kdr_exec_query q = {.kind = kind, .mode = mode, .scene = s, .body = b->s, .len = b->len,
+    kdr_exec_query q = {.kind = kind,
+                        .mode = mode,
+                        .scene = s,
+                        .body = b->s,
+                        .len = b->len,
                         .start = kdr_exec_now()};
     return q;
 }
@@ -185,20 +195,21 @@ typedef struct cases {
 
 static void make_cases(cases *c, const kdr_scene *s) {
     c->scene = s;
-    const kdr_exec_kind k[NCASES] = {KDR_EXEC_BUNDLE,  KDR_EXEC_BUNDLE,      KDR_EXEC_BUNDLE,
-                                     KDR_EXEC_FRUSTUM, KDR_EXEC_FRUSTUM,     KDR_EXEC_CONE_SHADOW,
-                                     KDR_EXEC_CONE_SHADOW};
+    const kdr_exec_kind k[NCASES] = {
+        KDR_EXEC_BUNDLE,  KDR_EXEC_BUNDLE,      KDR_EXEC_BUNDLE,     KDR_EXEC_FRUSTUM,
+        KDR_EXEC_FRUSTUM, KDR_EXEC_CONE_SHADOW, KDR_EXEC_CONE_SHADOW};
     memcpy(c->kinds, k, sizeof k);
-    c->bodies[0] = bundle_body(10000, "closest", "");  /* 3 chunks */
+    c->bodies[0] = bundle_body(10000, "closest", ""); /* 3 chunks */
     c->bodies[1] = bundle_body(9000, "any", ",\"encoding\":\"base64\"");
     c->bodies[2] = bundle_body(1, "closest", "");
     c->bodies[3] = frustum_body(97, 61, "closest", ""); /* 13 x 8 tiles: 7 chunks */
     c->bodies[4] = frustum_body(40, 30, "any", "");
-    c->bodies[5] = shadow_body(150, 16, "");            /* 3 chunks */
+    c->bodies[5] = shadow_body(150, 16, ""); /* 3 chunks */
     c->bodies[6] = shadow_body(1, 64, ",\"encoding\":\"base64\"");
     for (int m = 0; m < 2; m++)
         for (int i = 0; i < NCASES; i++)
-            c->want[m][i] = direct_answer(s, c->kinds[i], (kdr_exec_mode)m, &c->bodies[i]);
+            c->want[m][i] =
+                direct_answer(s, c->kinds[i], (kdr_exec_mode)m, &c->bodies[i]);
 }
 
 static void free_cases(cases *c) {
@@ -217,7 +228,8 @@ static int same_answer(const kdr_exec_query *q, const kdr_buf *want) {
 static void count_done(void *ctx) { atomic_fetch_add((atomic_int *)ctx, 1); }
 
 static void check_case(kdr_exec *ex, cases *c, int i, int mode, const char *what) {
-    kdr_exec_query q = query_of(c->scene, c->kinds[i], (kdr_exec_mode)mode, &c->bodies[i]);
+    kdr_exec_query q =
+        query_of(c->scene, c->kinds[i], (kdr_exec_mode)mode, &c->bodies[i]);
     atomic_int done;
     atomic_init(&done, 0);
     q.on_done = count_done;
@@ -226,10 +238,10 @@ static void check_case(kdr_exec *ex, cases *c, int i, int mode, const char *what
     for (int k = 0; k < 100000 && atomic_load(&done) == 0; k++)
         nanosleep(&(struct timespec){0, 10000}, NULL);
     CHECK(atomic_load(&done) == 1, "on_done called %d times", atomic_load(&done));
-    CHECK(same_answer(&q, &c->want[mode][i]), "%s: case %d mode %d: status %d %s", what, i,
-          mode, q.result.status, q.result.detail);
-    CHECK(q.result.chunks == q.result.chunks_done && q.result.chunks >= 1, "chunks %zu/%zu",
-          q.result.chunks_done, q.result.chunks);
+    CHECK(same_answer(&q, &c->want[mode][i]), "%s: case %d mode %d: status %d %s", what,
+          i, mode, q.result.status, q.result.detail);
+    CHECK(q.result.chunks == q.result.chunks_done && q.result.chunks >= 1,
+          "chunks %zu/%zu", q.result.chunks_done, q.result.chunks);
     kdr_exec_query_done(&q);
 }
 
@@ -242,7 +254,8 @@ typedef struct submitter {
 static void *submit_main(void *arg) {
     submitter *s = arg;
     for (int r = 0; r < 12; r++)
-        check_case(s->ex, s->c, (s->seed * 5 + r * 3) % NCASES, (s->seed + r) % 2, "concurrent");
+        check_case(s->ex, s->c, (s->seed * 5 + r * 3) % NCASES, (s->seed + r) % 2,
+                   "concurrent");
     return NULL;
 }
 
@@ -264,7 +277,8 @@ static void test_answers(cases *c) {
         kdr_exec_stats st;
         kdr_exec_get_stats(ex, &st);
         CHECK(st.queued == 0 && st.running == 0 && st.busy == 0 && st.slots_used == 0,
-              "idle books: %zu %zu %u %zu", st.queued, st.running, st.busy, st.slots_used);
+              "idle books: %zu %zu %u %zu", st.queued, st.running, st.busy,
+              st.slots_used);
         CHECK(st.completed == 2 * NCASES + 48, "completed %llu",
               (unsigned long long)st.completed);
         kdr_exec_destroy(ex);
@@ -305,7 +319,8 @@ static void test_inline(cases *c) {
     free(bad.s);
     kdr_exec_stats st;
     kdr_exec_get_stats(ex, &st);
-    CHECK(st.running == 0 && st.queued == 0 && st.completed == NCASES + 1, "inline books");
+    CHECK(st.running == 0 && st.queued == 0 && st.completed == NCASES + 1,
+          "inline books");
     kdr_exec_destroy(ex);
 }
 
@@ -316,27 +331,31 @@ static void test_admission(void) {
     kdr_exec *ex = kdr_exec_create(&cfg);
     kdr_exec_claim a = {0}, b = {0}, c = {0};
     CHECK(kdr_exec_admit(ex, &a, 600) == KDR_ADMIT_OK && a.slot && a.bytes == 600, "a");
-    CHECK(kdr_exec_admit(ex, &b, 500) == KDR_ADMIT_MEMORY_FULL && !b.slot && !b.bytes, "b");
+    CHECK(kdr_exec_admit(ex, &b, 500) == KDR_ADMIT_MEMORY_FULL && !b.slot && !b.bytes,
+          "b");
     CHECK(kdr_exec_admit(ex, &b, 1001) == KDR_ADMIT_TOO_LARGE, "too large");
     CHECK(kdr_exec_admit(ex, &b, 400) == KDR_ADMIT_OK, "b fits");
     CHECK(kdr_exec_admit(ex, &c, 0) == KDR_ADMIT_QUEUE_FULL, "2 slots (1 worker + 1)");
-    CHECK(kdr_exec_charge(ex, &a, 1) == KDR_ADMIT_MEMORY_FULL && a.bytes == 600, "charge");
+    CHECK(kdr_exec_charge(ex, &a, 1) == KDR_ADMIT_MEMORY_FULL && a.bytes == 600,
+          "charge");
     kdr_exec_stats st;
     kdr_exec_get_stats(ex, &st);
     CHECK(kdr_exec_saturated(&st), "full slots are saturation");
-    CHECK(st.rejected_queue == 1 && st.rejected_memory == 2 && st.rejected_too_large == 1 &&
-              st.admitted == 2 && st.bytes_used == 1000,
+    CHECK(st.rejected_queue == 1 && st.rejected_memory == 2 &&
+              st.rejected_too_large == 1 && st.admitted == 2 && st.bytes_used == 1000,
           "books %llu %llu %llu %zu", (unsigned long long)st.rejected_queue,
-          (unsigned long long)st.rejected_memory, (unsigned long long)st.rejected_too_large,
-          st.bytes_used);
+          (unsigned long long)st.rejected_memory,
+          (unsigned long long)st.rejected_too_large, st.bytes_used);
     kdr_exec_settle(ex, &a, 100);
-    CHECK(kdr_exec_charge(ex, &a, 400) == KDR_ADMIT_OK && a.bytes == 500, "charge after settle");
+    CHECK(kdr_exec_charge(ex, &a, 400) == KDR_ADMIT_OK && a.bytes == 500,
+          "charge after settle");
     kdr_exec_release(ex, &b);
     CHECK(kdr_exec_admit(ex, &c, 10) == KDR_ADMIT_OK, "slot freed by release");
     kdr_exec_release(ex, &a);
     kdr_exec_release(ex, &c);
     kdr_exec_get_stats(ex, &st);
-    CHECK(st.bytes_used == 0 && st.slots_used == 0 && !kdr_exec_saturated(&st), "all back");
+    CHECK(st.bytes_used == 0 && st.slots_used == 0 && !kdr_exec_saturated(&st),
+          "all back");
     CHECK(kdr_exec_retry_after(ex) >= 1, "retry after at least 1 s");
     kdr_exec_destroy(ex);
 }
@@ -347,7 +366,8 @@ static void test_answer_charge(const kdr_scene *s) {
     kdr_exec *ex = kdr_exec_create(&cfg);
     body big = frustum_body(1000, 1000, "closest", ""); /* ~16 MB of hits alone */
     kdr_exec_claim cl = {0};
-    CHECK(kdr_exec_admit(ex, &cl, kdr_exec_body_charge(big.len)) == KDR_ADMIT_OK, "admit");
+    CHECK(kdr_exec_admit(ex, &cl, kdr_exec_body_charge(big.len)) == KDR_ADMIT_OK,
+          "admit");
     kdr_exec_query q = query_of(s, KDR_EXEC_FRUSTUM, KDR_EXEC_FAST, &big);
     q.claim = &cl;
     run_query(ex, &q);
@@ -378,7 +398,8 @@ static void test_answer_charge(const kdr_scene *s) {
     q = query_of(s, KDR_EXEC_FRUSTUM, KDR_EXEC_FAST, &bad);
     q.claim = &cl;
     run_query(ex, &q);
-    CHECK(q.result.status == 400 && !strcmp(q.result.detail, "camera: expected an object") &&
+    CHECK(q.result.status == 400 &&
+              !strcmp(q.result.detail, "camera: expected an object") &&
               cl.bytes == bad.len && q.result.body.len == 0,
           "%d %s", q.result.status, q.result.detail);
     kdr_exec_query_done(&q);
@@ -443,7 +464,8 @@ static void test_stops(const kdr_scene *s) {
     double t0 = kdr_exec_now();
     kdr_exec_cancel(&a);
     kdr_exec_wait(&a, -1);
-    CHECK(a.result.stopped == KDR_STOP_CANCELLED && a.result.chunks_done < a.result.chunks,
+    CHECK(a.result.stopped == KDR_STOP_CANCELLED &&
+              a.result.chunks_done < a.result.chunks,
           "running cancel: %zu of %zu", a.result.chunks_done, a.result.chunks);
     CHECK(kdr_exec_now() - t0 < 2.0, "a cancel stops within a chunk");
     kdr_exec_query_done(&a);
