@@ -560,9 +560,13 @@ def test_health_latency(t):
 def main():
     t = lib.Runner()
     probe = lib.Daemon(KDRAYD, ["--threads", "1"])
+    try:
+        # the log is read by another thread: wait for the line, then read it
+        probe.wait_log("scene default: loading ")
+    finally:
+        probe.stop()
     default_path = [l for l in probe.log if "scene default: loading " in l][0] \
         .split("loading ", 1)[1]
-    probe.stop()
     tests = {
         "queue": lambda: t.run(test_queue_full_and_ready),
         "memory": lambda: t.run(test_memory_budget),
