@@ -304,6 +304,20 @@ int kdr_pf_encoding(const cJSON *root, kdr_encoding *out, kdr_proto_error *err) 
     return 0;
 }
 
+int kdr_pf_deadline(const cJSON *root, double *out, kdr_proto_error *err) {
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(root, "deadline_ms");
+    *out = 0.0;
+    if (!it)
+        return 0;
+    if (!cJSON_IsNumber(it) || !(it->valuedouble > 0.0) ||
+        !(it->valuedouble <= KDR_PROTO_MAX_DEADLINE_MS))
+        return kdr_proto_error_set(err, 400,
+                                   "deadline_ms: must be a number of milliseconds in "
+                                   "(0, 86400000]");
+    *out = it->valuedouble;
+    return 0;
+}
+
 int kdr_pf_too_many(kdr_proto_error *err, uint64_t rays, size_t max_rays,
                     const char *what) {
     return kdr_proto_error_set(err, 413, "batch of %llu %s exceeds the limit of %zu",

@@ -145,6 +145,8 @@ typedef struct kdr_field_info {
 } kdr_field_info;
 #define KDR_FIELD_COUNT 5
 extern const kdr_field_info kdr_field_table[KDR_FIELD_COUNT];
+/* "deadline_ms": absent gives 0, else a number in (0, KDR_PROTO_MAX_DEADLINE_MS]. */
+int kdr_pf_deadline(const cJSON *root, double *out, kdr_proto_error *err);
 
 int kdr_pf_too_many(kdr_proto_error *err, uint64_t rays, size_t max_rays,
                     const char *what);

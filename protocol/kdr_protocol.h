@@ -61,6 +61,8 @@ extern "C" {
 #define KDR_PROTO_MIN_TILE 4
 #define KDR_PROTO_MAX_TILE 64
 #define KDR_PROTO_MAX_IMAGE_SIDE 16384
+/* "deadline_ms" (every query kind): 0 < ms <= this (one day). */
+#define KDR_PROTO_MAX_DEADLINE_MS 86400000.0
 
 /* ---- output buffer ------------------------------------------------------ */
 
@@ -148,6 +150,7 @@ typedef struct kdr_bundle_request {
     kdr_query query;
     kdr_encoding encoding;
     unsigned fields;     /* KDR_FIELD_* bits, never 0 */
+    double deadline_ms;  /* "deadline_ms": 0 when absent */
     float *owned[4];     /* org, dir, tmin, tmax storage (internal) */
 } kdr_bundle_request;
 
@@ -167,6 +170,7 @@ typedef struct kdr_shadow_request {
     kdr_shadow_query query; /* ready for kdr_shadow_trace */
     int want_stats;         /* "stats": true */
     kdr_encoding encoding;
+    double deadline_ms;     /* "deadline_ms": 0 when absent */
     float *owned_points, *owned_normals; /* internal */
     kdr_sphere_light *owned_lights;      /* internal */
 } kdr_shadow_request;
@@ -185,6 +189,7 @@ typedef struct kdr_frustum_request {
     kdr_query query;
     kdr_encoding encoding;
     unsigned fields;   /* KDR_FIELD_* bits, never 0 */
+    double deadline_ms; /* "deadline_ms": 0 when absent */
     size_t rays;       /* width * height */
 } kdr_frustum_request;
 

@@ -150,6 +150,8 @@ int kdr_proto_parse_bundle_as(kdr_media media, const char *body, size_t len,
     if (!st)
         st = kdr_pf_encoding(doc.root, &out->encoding, err);
     if (!st)
+        st = kdr_pf_deadline(doc.root, &out->deadline_ms, err);
+    if (!st)
         st = bundle_arrays(&doc, &sh, out, err);
     kdr_pf_doc_free(&doc);
     if (st)
@@ -208,7 +210,7 @@ static int read_lights(const cJSON *root, kdr_shadow_request *out,
     return 0;
 }
 
-/* samples, seed, epsilon, stats, encoding: the scalar options. */
+/* samples, seed, epsilon, stats, deadline_ms, encoding: the scalar options. */
 static int shadow_options(const cJSON *root, kdr_shadow_request *out,
                           kdr_proto_error *err) {
     kdr_shadow_query *q = &out->query;
@@ -235,6 +237,8 @@ static int shadow_options(const cJSON *root, kdr_shadow_request *out,
             return kdr_proto_error_set(err, 400, "stats: must be true or false");
         out->want_stats = cJSON_IsTrue(it);
     }
+    if (kdr_pf_deadline(root, &out->deadline_ms, err))
+        return err->status;
     return kdr_pf_encoding(root, &out->encoding, err);
 }
 
@@ -410,6 +414,8 @@ int kdr_proto_parse_frustum_as(kdr_media media, const char *body, size_t len,
         st = kdr_pf_fields(root, out->query, &out->fields, err);
     if (!st)
         st = kdr_pf_encoding(root, &out->encoding, err);
+    if (!st)
+        st = kdr_pf_deadline(root, &out->deadline_ms, err);
     kdr_pf_doc_free(&doc);
     if (st) {
         memset(out, 0, sizeof *out);
