@@ -26,6 +26,8 @@
 
 /* Weight of the newest query in the running mean behind Retry-After. */
 static const double MEAN_WEIGHT = 0.2;
+/* Smallest extra charge for a parse that outgrew its allowance. */
+#define PARSE_STEP_MIN ((size_t)256 << 10)
 
 double kdr_exec_now(void) {
     struct timespec ts;
@@ -131,6 +133,58 @@ static void stopped_result(kdr_exec_job *j, kdr_exec_stop why) {
 /* ---- one job -------------------------------------------------------------------------
  */
 
+/* More room for a parse that has used what its claim held for it
+ * (protocol/'s meter asks before it allocates): charged to the claim in
+ * steps of a quarter of the allowance or more, so that a big parse takes
+ * the lock a few dozen times, not once per node. A refusal is the query's
+ * answer: 413 when the parse alone would exceed the whole budget, else 503
+ * with a retry hint (the protocol's "out of memory" that follows loses:
+ * the first failure recorded wins). */
+static int parse_grow(void *ctx, kdr_proto_meter *m, size_t need) {
+    kdr_exec_job *j = ctx;
+    kdr_exec *ex = j->ex;
+    size_t step = need > PARSE_STEP_MIN ? need : PARSE_STEP_MIN;
+    if (step < m->limit / 4) step = m->limit / 4;
+    kdr_admit a = kdr_exec_charge(ex, j->q->claim, step);
+    if (a != KDR_ADMIT_OK && step > need && kdr_exec_charge(ex, j->q->claim, need) == KDR_ADMIT_OK) {
+        a = KDR_ADMIT_OK;
+        step = need;
+    }
+    if (a == KDR_ADMIT_OK) {
+        m->limit += step;
+        return 0;
+    }
+    if (a == KDR_ADMIT_TOO_LARGE)
+        kdr_exec_fail(j, 413,
+                      "body: parsing it takes more than the in-flight memory limit of "
+                      "%.1f MiB (%.1f MiB so far for a %.1f MiB body; JSON the fast path "
+                      "reads, flat number arrays or base64, or CBOR takes far less)",
+                      (double)ex->cfg.max_bytes / 1048576.0, (double)m->used / 1048576.0,
+                      (double)j->q->len / 1048576.0);
+    else if (a == KDR_ADMIT_STOPPED)
+        kdr_exec_fail(j, 503, "shutting down");
+    else
+        kdr_exec_fail(j, 503, "memory: no room to parse the body now (%.1f MiB so far)",
+                      (double)m->used / 1048576.0);
+    return -1;
+}
+
+/* The kind's parse, metered when the query has a claim: protocol/ counts
+ * every block it (and cJSON) allocates before allocating it, first against
+ * what the claim holds beyond the body (kdr_exec_body_charge's parse
+ * share), then against more charged by parse_grow. */
+static int metered_parse(kdr_exec_job *j) {
+    kdr_exec_claim *c = j->q->claim;
+    if (!c) return j->ops->parse(j);
+    kdr_proto_meter m = {.limit = c->bytes > j->q->len ? c->bytes - j->q->len : 0,
+                         .grow = parse_grow,
+                         .ctx = j};
+    kdr_proto_meter *outer = kdr_proto_meter_set(&m);
+    int rc = j->ops->parse(j);
+    kdr_proto_meter_set(outer);
+    return rc;
+}
+
 /* Parses the body, charges and allocates; sets nchunks (0 when the job
  * already has its answer: an error, or a stop before it began). */
 static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
@@ -138,7 +192,7 @@ static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
     long long cpu0 = thread_cpu_ns();
     j->t_pick = kdr_exec_now();
     apply_deadline(j, 0);
-    int ok = check_stop(j) == KDR_STOP_NONE && j->ops->parse(j) == 0;
+    int ok = check_stop(j) == KDR_STOP_NONE && metered_parse(j) == 0;
     if (ok) {
         apply_deadline(j, j->deadline_ms);
         ok = check_stop(j) == KDR_STOP_NONE;

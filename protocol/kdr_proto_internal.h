@@ -29,6 +29,20 @@ static inline void kdr_buf_put(kdr_buf *b, const void *bytes, size_t n) {
  * >= 0x80 copied, so UTF-8 stays UTF-8). */
 int kdr_buf_json_string(kdr_buf *b, const char *s);
 
+/* ---- metered allocation (kdr_meter.c) ----------------------------------------- */
+
+/* malloc / realloc / free for everything a parse allocates (cJSON's hooks
+ * are these too): counted on the thread's meter (kdr_proto_meter_set)
+ * before the block exists, counted back when freed; NULL when the meter
+ * refuses or malloc fails (both counted as failures). */
+void *kdr_pf_malloc(size_t n);
+void *kdr_pf_realloc(void *p, size_t n);
+void kdr_pf_free(void *p);
+/* Allocations that failed on this thread so far: a parser that gets NULL
+ * from cJSON compares it with the value before the call (NULL with no new
+ * failure is malformed input). */
+unsigned long kdr_pf_alloc_failures(void);
+
 /* ---- CBOR writing (kdr_cbor_write.c) ---------------------------------------- */
 
 /* RFC 8746 typed-array tags used here (little-endian element order). */

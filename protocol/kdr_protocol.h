@@ -23,7 +23,11 @@
  *    data is malloc'd: it may be handed to libmicrohttpd with free() as the
  *    free callback (then forget it: set the kdr_buf to {0}).
  *  - Thread safety: every function is reentrant (no global state; the cJSON
- *    error pointer is not used).
+ *    error pointer is not used). The one per-thread state is the parse
+ *    meter (kdr_proto_meter_set); cJSON's allocation hooks are installed
+ *    once, before main, so that cJSON's blocks are counted too.
+ *  - Out of memory while parsing (cJSON's nodes included) is a 500 whose
+ *    detail says "out of memory", never a 400.
  *
  * Limits (documented in the contract's terms):
  *  - bundle: N rays count as N; frustum: width*height; cone-shadow:
@@ -63,6 +67,29 @@ extern "C" {
 #define KDR_PROTO_MAX_IMAGE_SIDE 16384
 /* "deadline_ms" (every query kind): 0 < ms <= this (one day). */
 #define KDR_PROTO_MAX_DEADLINE_MS 86400000.0
+
+/* ---- parse memory ---------------------------------------------------------- */
+
+/* What a parse may allocate. Every block the parsers allocate on a thread,
+ * cJSON's nodes and strings included (through its allocation hooks), is
+ * counted at its heap footprint on that thread's meter, and checked BEFORE
+ * it is allocated: a block that would take `used` past `limit` first calls
+ * grow(ctx, m, more), which may raise m->limit by at least `more` and
+ * return 0; otherwise the block fails like malloc, `refused` is set and
+ * stays set, and the parse ends with a 500 "out of memory". Frees are
+ * counted back, so `used` follows the live bytes and `limit` bounds their
+ * peak. What parses take is measured by tests/test_protocol_meter.c. */
+typedef struct kdr_proto_meter {
+    size_t limit;
+    size_t used;
+    int (*grow)(void *ctx, struct kdr_proto_meter *m, size_t need); /* may be NULL */
+    void *ctx;
+    int refused;
+} kdr_proto_meter;
+
+/* Makes m the calling thread's meter (NULL: none, nothing is limited) and
+ * returns the previous one. */
+kdr_proto_meter *kdr_proto_meter_set(kdr_proto_meter *m);
 
 /* ---- output buffer ------------------------------------------------------ */
 

@@ -20,7 +20,7 @@ static const cJSON *field(const cJSON *root, const char *name) {
     return cJSON_GetObjectItemCaseSensitive(root, name);
 }
 
-static float *alloc_floats(size_t n) { return malloc((n ? n : 1) * sizeof(float)); }
+static float *alloc_floats(size_t n) { return kdr_pf_malloc((n ? n : 1) * sizeof(float)); }
 
 static size_t limit_of(size_t max_rays) {
     return max_rays ? max_rays : KDR_PROTO_DEFAULT_MAX_RAYS;
@@ -163,7 +163,7 @@ void kdr_bundle_request_free(kdr_bundle_request *req) {
     if (!req)
         return;
     for (int i = 0; i < 4; i++)
-        free(req->owned[i]);
+        kdr_pf_free(req->owned[i]);
     memset(req, 0, sizeof *req);
 }
 
@@ -198,7 +198,9 @@ static int read_lights(const cJSON *root, kdr_shadow_request *out,
     if (nl < 1 || nl > KDR_PROTO_MAX_LIGHTS)
         return kdr_proto_error_set(err, 400, "lights: expected an array of 1..%d lights",
                                    KDR_PROTO_MAX_LIGHTS);
-    out->owned_lights = calloc((size_t)nl, sizeof *out->owned_lights);
+    out->owned_lights = kdr_pf_malloc((size_t)nl * sizeof *out->owned_lights);
+    if (out->owned_lights)
+        memset(out->owned_lights, 0, (size_t)nl * sizeof *out->owned_lights);
     if (!out->owned_lights)
         return kdr_proto_error_set(err, 500, "lights: out of memory");
     size_t l = 0;
@@ -320,9 +322,9 @@ int kdr_proto_parse_shadow_as(kdr_media media, const char *body, size_t len,
 void kdr_shadow_request_free(kdr_shadow_request *req) {
     if (!req)
         return;
-    free(req->owned_points);
-    free(req->owned_normals);
-    free(req->owned_lights);
+    kdr_pf_free(req->owned_points);
+    kdr_pf_free(req->owned_normals);
+    kdr_pf_free(req->owned_lights);
     memset(req, 0, sizeof *req);
 }
 

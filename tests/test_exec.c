@@ -545,6 +545,54 @@ static void test_answer_charge(const kdr_scene *s) {
     kdr_exec_destroy(ex);
 }
 
+/* A body that goes to cJSON (an unknown member of single digits: ~40
+ * bytes of nodes per body byte) is charged as its parse allocates: 413 past
+ * the whole budget, 503 when others hold the room, 200 when it fits; its
+ * claim ends settled to the body and the answer either way. */
+static void test_parse_charge(const kdr_scene *s) {
+    body odd = {0};
+    put(&odd, "{\"origins\":[0,2,0],\"directions\":[0,-1,0],\"x\":[0");
+    while (odd.len < 100000)
+        put(&odd, ",0");
+    put(&odd, "]}");
+    const size_t need = 40 * odd.len; /* about: cJSON's nodes */
+    struct {
+        size_t budget, hog;
+        int status;
+        const char *says;
+    } runs[] = {
+        {need / 2, 0, 413, "parsing it takes more than the in-flight memory limit"},
+        {2 * need, need + need / 2, 503, "memory: no room to parse the body now"},
+        {2 * need, 0, 200, NULL},
+    };
+    for (int i = 0; i < 3; i++) {
+        kdr_exec_config cfg = {1, 4, runs[i].budget, NULL, NULL};
+        kdr_exec *ex = kdr_exec_create(&cfg);
+        kdr_exec_claim hog = {0}, cl = {0};
+        if (runs[i].hog)
+            CHECK(kdr_exec_admit(ex, &hog, runs[i].hog) == KDR_ADMIT_OK, "hog");
+        CHECK(kdr_exec_admit(ex, &cl, kdr_exec_body_charge(odd.len)) == KDR_ADMIT_OK,
+              "admit");
+        kdr_exec_query q = query_of(s, KDR_EXEC_BUNDLE, KDR_EXEC_FAST, &odd);
+        q.claim = &cl;
+        run_query(ex, &q);
+        CHECK(q.result.status == runs[i].status &&
+                  (!runs[i].says || strstr(q.result.detail, runs[i].says)),
+              "run %d: %d %s", i, q.result.status, q.result.detail);
+        CHECK(runs[i].status != 503 || q.result.retry_after >= 1, "retry hint");
+        CHECK(cl.bytes == odd.len + q.result.body.len, "run %d: settled to %zu", i,
+              cl.bytes);
+        kdr_exec_stats st;
+        kdr_exec_get_stats(ex, &st);
+        CHECK(st.bytes_used == cl.bytes + hog.bytes, "run %d: books", i);
+        kdr_exec_query_done(&q);
+        kdr_exec_release(ex, &cl);
+        kdr_exec_release(ex, &hog);
+        kdr_exec_destroy(ex);
+    }
+    free(odd.s);
+}
+
 /* ---- stopping ------------------------------------------------------------------ */
 
 static void wait_running(kdr_exec *ex, unsigned busy) {
@@ -646,6 +694,7 @@ int main(void) {
     test_inline(&c);
     test_admission();
     test_answer_charge(s);
+    test_parse_charge(s);
     test_stops(s);
     free_cases(&c);
     kdr_scene_free(s);

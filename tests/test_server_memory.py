@@ -15,9 +15,17 @@ buffers, far from the 400 MiB the bodies add up to. Then every client sends
 its last byte: the admitted one is answered 200, the others 503 with
 Retry-After.
 
+parse_charged: a JSON body the fast path cannot read (a 2 MiB array of
+single digits in a member the contract does not know goes to cJSON, some 40
+bytes of nodes per body byte) is charged as its parse allocates: past the
+whole budget it is refused with 413 before the nodes exist, and the peak
+RSS stays within the budget. (Before parses were metered it was answered
+200 after ~80 MiB of cJSON nodes on a 16 MiB budget.)
+
 out_of_memory: the daemon's address space is capped (prlimit) a little above
 what it uses; a query whose result arrays cannot be allocated is answered
-503 with Retry-After (never 500), and the daemon goes on answering.
+503 with Retry-After (never 500), and so is a body whose cJSON parse runs
+out of memory (never a 400 "malformed JSON"); the daemon goes on answering.
 """
 
 import json
@@ -123,6 +131,39 @@ def test_rss_bound(t):
         t.eq(d.stop(), 0, "exit 0")
 
 
+def digits_body(mb):
+    """A valid bundle body of about mb MiB, nearly all of it an array of
+    single digits in an unknown member (parsed by cJSON, not the fast path)."""
+    head = b'{"origins": [0, 3, 5], "directions": [0, -0.3, -1], "x": ['
+    n = ((mb << 20) - len(head)) // 2
+    return head + b"0," * (n - 1) + b"0]}"
+
+
+def test_parse_charged(t):
+    d = lib.Daemon(KDRAYD, ["--threads", "1", "--max-body-mb", str(BODY_MB),
+                            "--max-inflight-mb", str(INFLIGHT_MB)])
+    try:
+        c = Client(d.url)
+        pid = d.proc.pid
+        t.eq(c.bundle("default", [0, 3, 5], [0, -0.3, -1])["count"], 1, "warm")
+        base = proc_kib(pid, "VmHWM")
+        code, headers, body = c.request("POST", "/v1/scenes/default/bundle",
+                                        digits_body(2))
+        peak = proc_kib(pid, "VmHWM")
+        p = json.loads(body)
+        print("  2 MiB of digits for cJSON on a %d MiB budget: %d %s; peak RSS %.1f -> "
+              "%.1f MiB" % (INFLIGHT_MB, code, p.get("detail"), base / 1024, peak / 1024))
+        t.eq(code, 413, "a parse larger than the whole budget is 413")
+        t.check("in-flight memory limit" in p.get("detail", ""), "says why: %r" % p)
+        t.check(peak - base <= (INFLIGHT_MB + SLACK_MB) * 1024,
+                "peak RSS grew %.1f MiB" % ((peak - base) / 1024))
+        m = c.metrics()
+        t.eq(lib.metric(m, "kdray_inflight_bytes"), 0.0, "the charge is returned")
+        t.eq(c.bundle("default", [0, 3, 5], [0, -0.3, -1])["count"], 1, "goes on")
+    finally:
+        t.eq(d.stop(), 0, "exit 0")
+
+
 def test_out_of_memory(t):
     d = lib.Daemon(KDRAYD, ["--threads", "1", "--max-rays", str(1 << 28),
                             "--max-inflight-mb", "65536"])
@@ -146,6 +187,17 @@ def test_out_of_memory(t):
         t.eq(lib.metric(c.metrics(), "kdray_out_of_memory_total"), 1.0, "counted")
         t.eq(c.bundle("default", [0, 3, 5], [0, -0.3, -1])["count"], 1,
              "the daemon goes on answering")
+        # 16 MiB of digits: ~640 MiB of cJSON nodes, more than the cap allows
+        code, headers, body = c.request("POST", "/v1/scenes/default/bundle",
+                                        digits_body(16))
+        p = json.loads(body)
+        print("  16 MiB of digits for cJSON under the cap: %d %s" % (code, p.get("detail")))
+        t.eq(code, 503, "cJSON out of memory is 503, not a 400")
+        t.check("out of memory" in p.get("detail", ""), "says so: %r" % p)
+        t.check(headers.get("Retry-After", "").isdigit(), "with Retry-After")
+        t.eq(lib.metric(c.metrics(), "kdray_out_of_memory_total"), 2.0, "counted")
+        t.eq(c.bundle("default", [0, 3, 5], [0, -0.3, -1])["count"], 1,
+             "the daemon goes on answering after it")
     finally:
         t.eq(d.stop(), 0, "exit 0")
 
@@ -153,6 +205,7 @@ def test_out_of_memory(t):
 def main():
     t = lib.Runner()
     t.run(test_rss_bound)
+    t.run(test_parse_charged)
     t.run(test_out_of_memory)
     return t.finish()
 
