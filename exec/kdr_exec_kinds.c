@@ -14,42 +14,19 @@
 
 #include "kdr_exec_internal.h"
 
-/* Typical encoded sizes, bytes per value, for the answer estimate: a JSON
- * float is ~9 significant digits plus "0." and a comma, a triangle index up
- * to 7 digits and a comma, a hit flag "1,"; base64 carries 4 bytes as 16/3
- * characters; CBOR typed arrays carry 4 bytes per float or index, 1 per hit
- * flag. The claim is settled to the real size once encoded. */
-#define EST_JSON_FLOAT 12
-#define EST_JSON_PRIM 8
-#define EST_JSON_FLAG 2
-#define EST_B64_VALUE 6
-#define EST_FIXED 256 /* "count", field names, brackets */
-
 /* The encoding an answer is written in: CBOR when the answer media type is
  * CBOR, else the JSON or base64 text the request asked for. */
 static kdr_encoding answer_encoding(const kdr_exec_job *j, kdr_encoding asked) {
     return j->q->answer_media == KDR_MEDIA_CBOR ? KDR_ENCODING_CBOR : asked;
 }
 
-/* Encoded bytes per value of one answer array. */
-static size_t value_bytes(unsigned field, kdr_encoding enc) {
-    const int flag = field == KDR_FIELD_HIT, index = field == KDR_FIELD_PRIM;
-    if (enc == KDR_ENCODING_CBOR)
-        return flag ? 1 : 4;
-    if (enc == KDR_ENCODING_BASE64)
-        return EST_B64_VALUE; /* hit flags go as int32 too */
-    return flag ? EST_JSON_FLAG : index ? EST_JSON_PRIM : EST_JSON_FLOAT;
-}
-
-/* Result arrays plus the encoded answer: only the fields asked for are
- * encoded (the core still fills every result array of the query). */
+/* Result arrays plus the encoded answer's bound (protocol/ knows it exactly
+ * for every encoding and field set, and allocates no more): only the
+ * fields asked for are encoded, though the core fills every result array
+ * of the query. */
 static size_t hits_estimate(size_t n, kdr_query q, unsigned fields, kdr_encoding enc) {
     size_t arrays = q == KDR_ANY ? n : n * (3 * sizeof(float) + sizeof(int32_t));
-    size_t text = EST_FIXED;
-    for (unsigned bit = 1; bit <= KDR_FIELD_HIT; bit <<= 1)
-        if (fields & bit)
-            text += n * value_bytes(bit, enc);
-    return arrays + text;
+    return arrays + kdr_proto_hits_answer_max(n, q, fields, enc);
 }
 
 static int hits_alloc(kdr_hits *h, size_t n, kdr_query q) {
@@ -74,10 +51,21 @@ static void hits_free(kdr_hits *h) {
 
 static size_t chunks_of(size_t total, size_t per) { return (total + per - 1) / per; }
 
-/* rc: the encoder's. The answer's Content-Type goes with it. */
+/* rc: the encoder's. The answer's Content-Type goes with it. The buffer
+ * was allocated at the answer's bound; what the answer did not use goes
+ * back to the allocator (a shrinking realloc stays in place), so the claim
+ * is settled to what is really held. */
 static int encoded(kdr_exec_job *j, int rc, kdr_encoding enc) {
+    kdr_buf *b = &j->q->result.body;
     if (rc != 0) kdr_exec_fail(j, 503, "out of memory while encoding the answer");
     j->q->result.content_type = kdr_proto_encoding_media(enc);
+    if (rc == 0 && b->len > 0 && b->len < b->cap) {
+        char *p = realloc(b->data, b->len);
+        if (p) {
+            b->data = p;
+            b->cap = b->len;
+        }
+    }
     return rc;
 }
 
@@ -205,8 +193,8 @@ static int shadow_parse(kdr_exec_job *j) {
                       (r->owned_normals ? 3 * q->n * sizeof(float) : 0) +
                       q->nlights * sizeof(kdr_sphere_light);
     j->answer_estimate = nvis * sizeof(float) + j->nchunks * sizeof(kdr_shadow_stats) +
-                         EST_FIXED +
-                         nvis * value_bytes(KDR_FIELD_T, answer_encoding(j, r->encoding));
+                         kdr_proto_shadow_answer_max(q->n, q->nlights, r->want_stats,
+                                                     answer_encoding(j, r->encoding));
     j->deadline_ms = r->deadline_ms;
     return 0;
 }

@@ -25,6 +25,10 @@ static inline void kdr_buf_put(kdr_buf *b, const void *bytes, size_t n) {
 /* lit must be a string literal (sizeof of a pointer would be wrong). */
 #define KDR_BUF_LIT(b, lit) kdr_buf_append((b), "" lit, sizeof(lit) - 1)
 
+/* Grows b's capacity to exactly len + extra if it is smaller (no doubling):
+ * for an answer whose size is bounded beforehand. 0 or KDR_ENOMEM. */
+int kdr_buf_reserve_exact(kdr_buf *b, size_t extra);
+
 /* Appends s as a quoted JSON string (control characters escaped; bytes
  * >= 0x80 copied, so UTF-8 stays UTF-8). */
 int kdr_buf_json_string(kdr_buf *b, const char *s);

@@ -248,6 +248,16 @@ int kdr_proto_encode_shadow(const float *visibility, size_t n, size_t nlights,
                             const kdr_shadow_stats *stats, kdr_encoding enc,
                             kdr_buf *out);
 
+/* The most bytes the two encoders above can need for an answer, known
+ * before anything is traced (admission charges it). Encoding into an empty
+ * kdr_buf allocates exactly this much once and never grows the buffer;
+ * the answer's length is at most this (tests/test_protocol_fields.c checks
+ * both for every encoding and field set, with the longest floats). */
+size_t kdr_proto_hits_answer_max(size_t n, kdr_query query, unsigned fields,
+                                 kdr_encoding enc);
+size_t kdr_proto_shadow_answer_max(size_t n, size_t nlights, int stats,
+                                   kdr_encoding enc);
+
 /* Scene description, independent of scenes/: the server fills it. */
 typedef struct kdr_proto_mesh_range {
     int64_t node, mesh, primitive;  /* glTF indices */
@@ -275,8 +285,11 @@ int kdr_proto_encode_health(const char *status, size_t nscenes, kdr_buf *out);
 
 /* Shortest decimal that reads back as exactly f (JSON number syntax:
  * "-0", "1", "0.1", "1e-45", "3.4028235e38"); "null" for NaN/Inf.
- * Writes at most KDR_FLOAT_CHARS bytes, no NUL; returns the length. */
+ * Writes KDR_FLOAT_CHARS bytes (one fixed-size copy), no NUL; returns the
+ * length, at most KDR_FLOAT_MAX_LEN ("-0.0000123456875": checked for all
+ * 2^32 floats by tests/float_exhaustive.c). */
 #define KDR_FLOAT_CHARS 24
+#define KDR_FLOAT_MAX_LEN 16
 size_t kdr_format_float(float f, char *dst);
 
 /* RFC 4648 base64 with padding. encode writes kdr_base64_encoded_len(n)
