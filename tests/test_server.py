@@ -539,6 +539,12 @@ def test_startup_503_and_two_scenes(t, default_path):
         c = Client(d.url)
         p = expect_problem(t, c.request("GET", "/v1/health"), 503, "health while loading")
         t.check("0 of 2" in p["detail"], "starting detail: " + p["detail"])
+        try:
+            c.ready()
+            t.check(False, "client ready() raises while loading")
+        except KdrayError as err:
+            t.check(err.status == 503 and err.problem["detail"].startswith("starting"),
+                    "client ready() while loading: %r" % err.problem)
         expect_problem(t, post(c, "/v1/scenes/b/bundle", {}), 503, "query while loading")
         expect_problem(t, c.request("GET", "/v1/scenes"), 503, "scenes while loading")
         t.eq(metric(c.metrics(), "kdray_ready"), 0.0, "metrics answer while loading")
@@ -546,6 +552,7 @@ def test_startup_503_and_two_scenes(t, default_path):
             dst.write(src.read())
         d.wait_healthy()
         t.eq(c.health(), {"status": "ok", "scenes": 2}, "health with two scenes")
+        t.eq((c.ready()["status"], c.ready()["scenes"]), ("ready", 2), "client ready()")
         t.eq([s["name"] for s in c.scenes()], ["a", "b"], "scenes in flag order")
         o, dirs = lib.rays_into_box(c.scene("a")["bounds"], 500, 3)
         t.eq(c.bundle("a", o, dirs), c.bundle("b", o, dirs), "same file, same answers")

@@ -33,7 +33,7 @@ import test_server_lib as lib  # noqa: E402
 
 KDRAYD, CLIENTS = sys.argv[1], sys.argv[2]
 lib.add_client_path(CLIENTS)
-from kdray_client import Client  # noqa: E402
+from kdray_client import Client, KdrayError  # noqa: E402
 
 SCENE = "default"
 BUNDLE = "/v1/scenes/default/bundle"
@@ -140,6 +140,8 @@ def test_queue_full_and_ready(t):
         code, _, body = c.request("GET", "/v1/ready")
         t.eq(code, 200, "ready when idle")
         t.eq(json.loads(body)["status"], "ready", "ready body")
+        r = c.ready()  # the client's probe call
+        t.eq((r["status"], r["slots"], r["slots_used"]), ("ready", 2, 0), "client ready()")
         body = padded(small_bundle(), 4096)
         held = [RawRequest(d.url, BUNDLE, body) for _ in range(2)]
         for r in held:
@@ -149,12 +151,27 @@ def test_queue_full_and_ready(t):
         p, h = problem(t, c.request("GET", "/v1/ready"), 503, "ready when saturated",
                        "saturated: 2 of 2 query slots taken")
         retry_after(t, h, "ready")
+        try:
+            c.ready()
+            t.check(False, "client ready() raises while saturated")
+        except KdrayError as err:
+            t.check(err.status == 503 and "saturated" in err.problem["detail"] and
+                    (err.retry_after or 0) >= 1, "client ready(): %r, retry after %r"
+                    % (err.problem, err.retry_after))
+        # refusals are problem+json whatever Accept asks for
+        for path, send in (("/v1/ready", None), (BUNDLE, small_bundle())):
+            hdrs = {"Accept": "application/cbor"}
+            resp = (c.request("GET", path, headers=hdrs) if send is None
+                    else post(c, path, send, hdrs))
+            t.eq(resp[0], 503, path + " with Accept: application/cbor")
+            t.eq({k.lower(): v for k, v in resp[1].items()}.get("content-type"),
+                 "application/problem+json", path + ": problem+json, not CBOR")
         p, h = problem(t, post(c, BUNDLE, small_bundle()), 503, "third query",
                        "queue full: 2 of 2")
         retry_after(t, h, "queue full")
         t.eq(c.health()["status"], "ok", "health answers while saturated")
         m = metrics(c)
-        t.eq(lib.metric(m, "kdray_rejections_total", reason="queue"), 1.0, "rejections")
+        t.eq(lib.metric(m, "kdray_rejections_total", reason="queue"), 2.0, "rejections")
         t.eq(lib.metric(m, "kdray_queue_slots"), 2.0, "slots gauge")
         for r in held:
             r.send_rest()
