@@ -17,11 +17,13 @@
  * Admission. A caller claims a queue slot and bytes (kdr_exec_admit) before
  * it allocates anything for a request, and grows the claim as it learns
  * more (body bytes of a chunked upload, kdr_exec_charge). The executor then
- * charges the query's own memory to the same claim: the parsed arrays, the
- * result arrays and the encoded answer, each estimated before it is
- * allocated. A claim that does not fit is refused (the caller answers 503
- * with Retry-After), or KDR_ADMIT_TOO_LARGE when it would not fit even in an
- * empty executor. Slots count queries from admission until their answer is
+ * charges the query's own memory to the same claim before it is allocated:
+ * the parse (protocol/'s meter counts every block, cJSON's included, and
+ * asks for more of the claim when the body's parse share is used up), then
+ * the arrays the parse kept, the result arrays and the answer's bound for
+ * its encoding and fields. A claim that does not fit is refused (the
+ * caller answers 503 with Retry-After), or KDR_ADMIT_TOO_LARGE (413) when
+ * it would not fit even in an empty executor. Slots count queries from admission until their answer is
  * encoded; bytes stay charged until the caller releases the claim (after
  * the answer has been sent).
  *
@@ -56,10 +58,11 @@ extern "C" {
 #define KDR_EXEC_CHUNK_TILES 16
 #define KDR_EXEC_CHUNK_POINTS 64
 #define KDR_EXEC_CHUNK_SHADOW_RAYS 65536
-/* Bytes charged per body byte for parsing it: protocol/ converts flat JSON
- * number arrays while it walks the body, to at most about twice the body
- * in floats (kdr_protocol.h); base64 decodes to less. The body itself is
- * charged on top. */
+/* Bytes charged per body byte for parsing it, up front: what a JSON body of
+ * usual decimals takes (1.3 per byte while its float arrays grow; CBOR
+ * typed arrays take none). A parse that needs more is charged more as it
+ * allocates (kdr_exec.c, metered_parse). The body itself is charged on
+ * top. */
 #define KDR_EXEC_PARSE_BYTES_PER_BODY_BYTE 2
 
 typedef struct kdr_exec kdr_exec;

@@ -128,8 +128,8 @@ int kdr_proto_encode_error(const kdr_proto_error *err, kdr_buf *out);
 /* ---- requests ---------------------------------------------------------------- */
 
 /* How an answer is written. A request's "encoding" member picks JSON or
- * BASE64; the server sets CBOR when content negotiation chose
- * application/cbor (kdr_proto_answer_media). */
+ * BASE64; the executor (exec/) writes CBOR instead when content
+ * negotiation chose application/cbor (kdr_proto_answer_media). */
 typedef enum kdr_encoding {
     KDR_ENCODING_JSON = 0,   /* arrays of numbers */
     KDR_ENCODING_BASE64 = 1, /* {"f32": ...} / {"i32": ...} */
