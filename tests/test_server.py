@@ -30,7 +30,7 @@ lib.add_client_path(CLIENTS)
 from kdray_client import Client, KdrayError, f32_b64  # noqa: E402
 
 SCENE = "default"
-BUNDLE_RAYS = 10000   # three 4096-ray chunks: the job pool splits it
+BUNDLE_RAYS = 10000   # three 4096-ray chunks: the executor splits it
 SHADOW_POINTS = 150   # three 64-point chunks
 CONCURRENT_THREADS, CONCURRENT_REQUESTS = 8, 50
 
