@@ -146,7 +146,8 @@ static int parse_grow(void *ctx, kdr_proto_meter *m, size_t need) {
     size_t step = need > PARSE_STEP_MIN ? need : PARSE_STEP_MIN;
     if (step < m->limit / 4) step = m->limit / 4;
     kdr_admit a = kdr_exec_charge(ex, j->q->claim, step);
-    if (a != KDR_ADMIT_OK && step > need && kdr_exec_charge(ex, j->q->claim, need) == KDR_ADMIT_OK) {
+    if (a != KDR_ADMIT_OK && step > need &&
+        kdr_exec_charge(ex, j->q->claim, need) == KDR_ADMIT_OK) {
         a = KDR_ADMIT_OK;
         step = need;
     }

@@ -23,8 +23,8 @@
  * the arrays the parse kept, the result arrays and the answer's bound for
  * its encoding and fields. A claim that does not fit is refused (the
  * caller answers 503 with Retry-After), or KDR_ADMIT_TOO_LARGE (413) when
- * it would not fit even in an empty executor. Slots count queries from admission until their answer is
- * encoded; bytes stay charged until the caller releases the claim (after
+ * it would not fit even in an empty executor. Slots count queries from admission until
+ * their answer is encoded; bytes stay charged until the caller releases the claim (after
  * the answer has been sent).
  *
  * Threads. Every function may be called from any thread. A query struct is
@@ -140,7 +140,7 @@ typedef struct kdr_exec_result {
     kdr_buf body;             /* the 200 answer */
     const char *content_type; /* of a 200 answer: application/json or
                                  application/cbor (a static string) */
-    unsigned retry_after; /* > 0 on a 503 that a later retry may cure */
+    unsigned retry_after;     /* > 0 on a 503 that a later retry may cure */
     kdr_exec_stop stopped;
     uint64_t rays;      /* bundle rays, frustum pixels, shadow rays traced */
     uint64_t work_rays; /* the worst case the request asked for: bundle
@@ -165,11 +165,11 @@ typedef struct kdr_exec_query {
     kdr_media answer_media; /* the answer's (Accept, kdr_proto_answer_media):
                                CBOR, or JSON for the JSON or base64 text the
                                request's "encoding" member asks for */
-    size_t max_rays;       /* protocol limit (0: the protocol default) */
-    double start;          /* kdr_exec_now() when the request began */
-    double deadline_ms;    /* the caller's deadline from start, 0 = none; a
-                              request's "deadline_ms" can only shorten it */
-    kdr_exec_claim *claim; /* charged as the query grows; NULL: unlimited */
+    size_t max_rays;        /* protocol limit (0: the protocol default) */
+    double start;           /* kdr_exec_now() when the request began */
+    double deadline_ms;     /* the caller's deadline from start, 0 = none; a
+                               request's "deadline_ms" can only shorten it */
+    kdr_exec_claim *claim;  /* charged as the query grows; NULL: unlimited */
     /* optional: called once, by the thread that finished q, after the
      * result is filled (kdr_exec_wait already returns 1). It must not block;
      * q may be freed by another thread as soon as it is called. */

@@ -52,21 +52,17 @@ static size_t footprint(void *p) { return p ? malloc_usable_size(p) + 8 : 0; }
  * small blocks are rounded to 16 bytes with the header (32 at least),
  * large ones are pages (mmap) with a 16-byte header. */
 static size_t bound(size_t n) {
-    if (n > SIZE_MAX / 2)
-        return SIZE_MAX;
-    if (n < 65536)
-        return n + 24 < 32 ? 32 : n + 24;
+    if (n > SIZE_MAX / 2) return SIZE_MAX;
+    if (n < 65536) return n + 24 < 32 ? 32 : n + 24;
     return ((n + 16 + 4095) & ~(size_t)4095) + 16;
 }
 
 /* Room for a block of n bytes on the thread's meter (none: always). */
 static int room(size_t n) {
     kdr_proto_meter *m = thread_meter;
-    if (!m)
-        return 1;
+    if (!m) return 1;
     const size_t need = bound(n);
-    if (need <= m->limit && m->used <= m->limit - need)
-        return 1;
+    if (need <= m->limit && m->used <= m->limit - need) return 1;
     if (!m->refused && m->grow && m->grow(m->ctx, m, m->used + need - m->limit) == 0 &&
         need <= m->limit && m->used <= m->limit - need)
         return 1;
@@ -75,20 +71,17 @@ static int room(size_t n) {
 }
 
 static void credit(void *p) {
-    if (thread_meter)
-        thread_meter->used += footprint(p);
+    if (thread_meter) thread_meter->used += footprint(p);
 }
 
 static void debit(size_t bytes) {
     kdr_proto_meter *m = thread_meter;
-    if (m)
-        m->used = m->used > bytes ? m->used - bytes : 0;
+    if (m) m->used = m->used > bytes ? m->used - bytes : 0;
 }
 
 void *kdr_pf_malloc(size_t n) {
     void *p = room(n) ? malloc(n ? n : 1) : NULL;
-    if (!p)
-        thread_failures++;
+    if (!p) thread_failures++;
     credit(p);
     return p;
 }
@@ -108,8 +101,7 @@ void *kdr_pf_realloc(void *p, size_t n) {
 }
 
 void kdr_pf_free(void *p) {
-    if (thread_meter)
-        debit(footprint(p));
+    if (thread_meter) debit(footprint(p));
     free(p);
 }
 

@@ -220,8 +220,10 @@ static int answer_one(kdr_exec *ex, const kdr_scene *scene, cli c, char *spec) {
     if (!c.kind || kind_of(c.kind, &kind) != 0) return usage(), 1;
     kdr_media media = media_of(&c, path);
     if (media == KDR_MEDIA_OTHER) {
-        fprintf(stderr, "kdray-trace: --content-type %s: expected application/json or "
-                        "application/cbor\n", c.content_type);
+        fprintf(stderr,
+                "kdray-trace: --content-type %s: expected application/json or "
+                "application/cbor\n",
+                c.content_type);
         return 1;
     }
     size_t len = 0;

@@ -27,8 +27,7 @@ static kdr_buf usual(size_t n) {
     kdr_buf_append(&b, "{\"origins\":[0,3,5],\"directions\":[", 33);
     char tmp[KDR_FLOAT_CHARS];
     for (size_t i = 0; i < 3 * n; i++) {
-        if (i)
-            kdr_buf_append(&b, ",", 1);
+        if (i) kdr_buf_append(&b, ",", 1);
         float v = i % 3 == 1 ? -1.0f : frand(-0.5f, 0.5f);
         kdr_buf_append(&b, tmp, kdr_format_float(v, tmp));
     }
@@ -59,8 +58,7 @@ static size_t metered(kdr_media media, const char *body, size_t len, int *status
     kdr_proto_error err = {0};
     *status = kdr_proto_parse_bundle_as(media, body, len, 0, &r, &err);
     kdr_proto_meter_set(outer);
-    if (detail)
-        snprintf(detail, 256, "%s", err.detail);
+    if (detail) snprintf(detail, 256, "%s", err.detail);
     kdr_bundle_request_free(&r);
     CHECK(m.used <= m.limit && !m.refused, "used %zu limit %zu", m.used, m.limit);
     return m.limit; /* every byte ever granted: the most that was live at once */
@@ -76,17 +74,19 @@ static void test_counts(void) {
         {"JSON single digits in directions",
          digits("{\"origins\":[0,3,5],\"directions\":[", 600000, "]}"), 6.0},
         {"JSON single digits in an unknown member (cJSON)",
-         digits("{\"origins\":[0,3,5],\"directions\":[0,0,-1],\"x\":[", 600000, "]}"), 44},
+         digits("{\"origins\":[0,3,5],\"directions\":[0,0,-1],\"x\":[", 600000, "]}"),
+         44},
         {"JSON single digits, escaped key (all cJSON)",
          digits("{\"origins\":[0,3,5],\"direction\\u0073\":[", 600000, "]}"), 46},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         int st;
         char detail[256];
-        size_t used = metered(KDR_MEDIA_JSON, cases[i].b.data, cases[i].b.len, &st, detail);
+        size_t used =
+            metered(KDR_MEDIA_JSON, cases[i].b.data, cases[i].b.len, &st, detail);
         double per = (double)used / (double)cases[i].b.len;
-        printf("%-52s %8zu bytes: %6.2f counted per body byte (status %d)\n", cases[i].what,
-               cases[i].b.len, per, st);
+        printf("%-52s %8zu bytes: %6.2f counted per body byte (status %d)\n",
+               cases[i].what, cases[i].b.len, per, st);
         CHECK(st == 0, "%s: %d %s", cases[i].what, st, detail);
         CHECK(per <= cases[i].at_most, "%s: %.2f > %.2f", cases[i].what, per,
               cases[i].at_most);
@@ -133,7 +133,8 @@ static void test_counts(void) {
 /* A meter that refuses: the parse fails as out of memory, before the
  * block that would not fit exists, whichever path was allocating. */
 static void test_refusal(void) {
-    kdr_buf odd = digits("{\"origins\":[0,3,5],\"directions\":[0,0,-1],\"x\":[", 200000, "]}");
+    kdr_buf odd =
+        digits("{\"origins\":[0,3,5],\"directions\":[0,0,-1],\"x\":[", 200000, "]}");
     kdr_buf esc = digits("{\"origins\":[0,3,5],\"direction\\u0073\":[", 200000, "]}");
     kdr_buf ok = usual(20000);
     const kdr_buf *bodies[] = {&odd, &esc, &ok};
