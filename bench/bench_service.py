@@ -47,7 +47,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "clients"))
 from kdray_client import Client, f32_b64  # noqa: E402
 
 BATCHES = (1, 1024, 65536)
-SERVER_CHUNK_RAYS = 4096  # server/query.c CHUNK_RAYS: rays per pool job
+SERVER_CHUNK_RAYS = 4096  # exec/kdr_exec.h KDR_EXEC_CHUNK_RAYS: rays per chunk
 LATENCY_REQUESTS = 400
 WRK_LUA = """
 wrk.method = "POST"
@@ -351,20 +351,19 @@ def throughput_table(args, url, scene, tmp):
     for n in BATCHES:
         origin, dirs = rays(scene["bounds"], n, seed=n)
         for enc in ("json", "base64", "cbor"):
-            if enc == "cbor":  # the same rays; kdray-trace reads the JSON form
+            if enc == "cbor":  # the same rays; kdray-trace reads .cbor as CBOR
                 body = cbor_request_body(origin, dirs)
                 path = os.path.join(tmp, "req-%d.cbor" % n)
-                core_path = os.path.join(tmp, "req-%d-base64.json" % n)
             else:
                 body = request_body(origin, dirs, enc)
-                path = core_path = os.path.join(tmp, "req-%d-%s.json" % (n, enc))
+                path = os.path.join(tmp, "req-%d-%s.json" % (n, enc))
             with open(path, "wb") as f:
                 f.write(body)
             if n == 1 and enc == "json":
                 one_ray_body = (body, path)
             conns = 4 if n < 65536 else 2
             rps, _ = wrk_rate(endpoint, path, lua, args.seconds, conns)
-            core = core_rate(args.trace, args.scene, core_path, args.threads, n)
+            core = core_rate(args.trace, args.scene, path, args.threads, n)
             print("%-8d %-7s %10.1f %12.1f %14.3e %14.3e %7.3f" % (
                 n, enc, len(body) / 1024, rps, rps * n, core, rps * n / core),
                 flush=True)

@@ -15,8 +15,16 @@ say() { printf '\n== %s\n' "$*"; }
 # show CURL-ARGS...: the request must succeed; prints the answer's start.
 show() { curl -fsS -o "$TMP" "$@"; head -c 600 "$TMP"; echo; }
 
-say "health"
+say "health (alive?)"
 curl -fsS "$URL/v1/health"
+
+# Readiness, what a balancer or a Kubernetes readinessProbe asks: 200 and
+# the executor's load while the daemon should get traffic; 503 problem+json
+# while starting, shutting down or saturated (then with Retry-After), which
+# curl -f turns into a failure here, as it would for a probe.
+say "ready (take traffic?)"
+curl -fsS -D "$TMP" "$URL/v1/ready"; echo
+head -n 1 "$TMP"
 
 say "metrics (first lines)"
 curl -fsS -o "$TMP" "$URL/metrics"

@@ -23,6 +23,7 @@ problem+json body (errors are problem+json in binary mode too).
 As a command (see --help):
 
     kdray_client.py --url http://127.0.0.1:8080 scenes
+    kdray_client.py ready          # exit 1 and the problem while not ready
     kdray_client.py bundle --origin 0,0,5 --random 1000 --encoding base64
     kdray_client.py shadow --point 0,0,0 --light 10,10,10,1 --samples 64
     kdray_client.py frustum --eye 0,0,5 --target 0,0,0 --width 320 --height 240 \\
@@ -50,11 +51,14 @@ TYPED_ARRAYS = {85: "f", 78: "i", 64: "B"}  # float32 LE, int32 LE, uint8
 
 
 class KdrayError(Exception):
-    """An HTTP error answer; .status is the code, .problem the parsed body."""
+    """An HTTP error answer; .status is the code, .problem the parsed body,
+    .retry_after the Retry-After seconds of a 503 that a retry may cure
+    (None otherwise: a deadline, a shutdown, a bad request)."""
 
-    def __init__(self, status, problem):
+    def __init__(self, status, problem, retry_after=None):
         self.status = status
         self.problem = problem if isinstance(problem, dict) else {"detail": problem}
+        self.retry_after = retry_after
         super().__init__("HTTP %d: %s" % (status, self.problem.get("detail", "")))
 
 
@@ -204,7 +208,8 @@ class Client:
         else:
             body = json.dumps(payload).encode("utf-8")
         status, hdrs, data = self.request(method, path, body, ctype, headers)
-        answer_type = {k.lower(): v for k, v in hdrs.items()}.get("content-type", "")
+        hdrs = {k.lower(): v for k, v in hdrs.items()}
+        answer_type = hdrs.get("content-type", "")
         try:
             if answer_type.startswith(CBOR):
                 parsed = decode_cbor(data)
@@ -213,14 +218,25 @@ class Client:
         except ValueError:
             parsed = data.decode("utf-8", "replace")
         if status >= 400:
-            raise KdrayError(status, parsed)
+            retry = hdrs.get("retry-after", "")
+            raise KdrayError(status, parsed, int(retry) if retry.isdigit() else None)
         return parsed
 
     def _send(self, send):
         return "cbor" if self.binary else send
 
     def health(self):
+        """GET /v1/health: is the daemon alive (200 once every scene is built,
+        whatever the load)."""
         return self.call("GET", "/v1/health")
+
+    def ready(self):
+        """GET /v1/ready: should it get traffic now? The readiness document
+        (status, scenes, workers, busy, queued, slots, slots_used,
+        inflight_bytes, inflight_limit) when ready; KdrayError 503 while
+        starting, shutting down or saturated (.retry_after set when
+        saturated)."""
+        return self.call("GET", "/v1/ready")
 
     def metrics(self):
         status, _, data = self.request("GET", "/metrics")
@@ -361,7 +377,7 @@ def _parser():
     p.add_argument("--binary", action="store_true",
                    help="queries in CBOR (application/cbor; needs python3-cbor2)")
     sub = p.add_subparsers(dest="cmd", required=True)
-    for name in ("health", "metrics", "scenes"):
+    for name in ("health", "ready", "metrics", "scenes"):
         sub.add_parser(name)
     b = sub.add_parser("bundle", help="trace rays from one origin")
     b.add_argument("--origin", type=_vec, default=[0.0, 0.0, 0.0])
@@ -406,12 +422,15 @@ def main(argv=None):
             sys.stdout.write(client.metrics())
             return 0
         handlers = {"health": lambda c, a: c.health(),
+                    "ready": lambda c, a: c.ready(),
                     "scenes": lambda c, a: {"scenes": c.scenes()},
                     "bundle": _cmd_bundle, "shadow": _cmd_shadow,
                     "frustum": _cmd_frustum}
         answer = handlers[args.cmd](client, args)
     except KdrayError as err:
         print(json.dumps(err.problem), file=sys.stderr)
+        if err.retry_after is not None:
+            print("kdray_client: retry after %d s" % err.retry_after, file=sys.stderr)
         return 1
     except (urllib.error.URLError, OSError) as err:
         print("kdray_client: %s: %s" % (args.url, err), file=sys.stderr)

@@ -37,6 +37,19 @@ int kdr_buf_reserve(kdr_buf *b, size_t extra) {
     return 0;
 }
 
+int kdr_buf_reserve_exact(kdr_buf *b, size_t extra) {
+    if (extra <= b->cap - b->len)
+        return 0;
+    if (extra > SIZE_MAX - b->len)
+        return KDR_ENOMEM;
+    char *data = realloc(b->data, b->len + extra);
+    if (!data)
+        return KDR_ENOMEM;
+    b->data = data;
+    b->cap = b->len + extra;
+    return 0;
+}
+
 int kdr_buf_append(kdr_buf *b, const void *bytes, size_t n) {
     if (kdr_buf_reserve(b, n))
         return KDR_ENOMEM;

@@ -180,12 +180,12 @@ static cJSON *scalar(reader *r, const token *t) {
             fail(r, 400, "text contains a NUL byte", t->at);
             return NULL;
         }
-        char *s = malloc(t->len + 1);
+        char *s = kdr_pf_malloc(t->len + 1);
         if (s) {
             memcpy(s, t->p, t->len);
             s[t->len] = '\0';
             j = cJSON_CreateString(s);
-            free(s);
+            kdr_pf_free(s);
         }
         break;
     }
@@ -269,10 +269,12 @@ static int container(reader *r, const token *t, int depth, cJSON **out) {
         }
         if (!out)
             continue;
-        if (is_map)
-            cJSON_AddItemToObject(*out, key, item);
-        else
-            cJSON_AddItemToArray(*out, item);
+        /* adding to a map copies the key: that can run out of memory */
+        if (is_map ? !cJSON_AddItemToObject(*out, key, item)
+                   : !cJSON_AddItemToArray(*out, item)) {
+            cJSON_Delete(item);
+            return kdr_proto_error_set(r->err, 500, "body: out of memory");
+        }
     }
     return 0;
 }
@@ -310,7 +312,7 @@ static int value(reader *r, int depth, cJSON **out) {
 static int push(kdr_numarray *a, size_t *cap, double d) {
     if (a->n == *cap) {
         const size_t ncap = *cap ? 2 * *cap : 64;
-        float *v = realloc(a->v, ncap * sizeof *v);
+        float *v = kdr_pf_realloc(a->v, ncap * sizeof *v);
         if (!v)
             return -1;
         a->v = v;
@@ -332,7 +334,7 @@ static int number_array(reader *r, const token *t, kdr_numarray *a) {
     const int indef = t->kind == T_INDEF_ARRAY;
     /* each item takes a byte at least: never trust a declared size beyond that */
     size_t cap = indef ? 0 : (size_t)(t->u < r->len - r->pos ? t->u : r->len - r->pos);
-    if (cap && !(a->v = malloc(cap * sizeof *a->v)))
+    if (cap && !(a->v = kdr_pf_malloc(cap * sizeof *a->v)))
         return kdr_proto_error_set(r->err, 500, "body: out of memory");
     for (uint64_t i = 0; indef || i < t->u; i++) {
         const size_t at = r->pos;
@@ -408,15 +410,15 @@ static int member(reader *r, kdr_pf_doc *doc, const char *key) {
             strcpy(doc->fast[doc->nfast++].key, key);
             st = 0;
         } else {
-            free(doc->fast[doc->nfast].v);
+            kdr_pf_free(doc->fast[doc->nfast].v);
             doc->fast[doc->nfast].v = NULL;
         }
     } else {
         cJSON *item = NULL;
         st = value(r, 1, &item);
-        if (!st)
-            cJSON_AddItemToObject(doc->root, key, item);
-        else
+        if (!st && !cJSON_AddItemToObject(doc->root, key, item))
+            st = kdr_proto_error_set(r->err, 500, "body: out of memory");
+        if (st)
             cJSON_Delete(item);
     }
     r->path[old] = '\0';

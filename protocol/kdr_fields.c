@@ -33,24 +33,35 @@ static int cjson_doc(const char *body, size_t len, kdr_pf_doc *doc,
     return 0;
 }
 
+/* An allocation failed during the parse (cJSON reports it as a NULL, as it
+ * does malformed input): out of memory, whatever else was reported. */
+static int out_of_memory(unsigned long failures0, int st, kdr_pf_doc *doc,
+                         kdr_proto_error *err) {
+    if (kdr_pf_alloc_failures() == failures0)
+        return st;
+    kdr_pf_doc_free(doc);
+    return kdr_proto_error_set(err, 500, "body: out of memory");
+}
+
 int kdr_pf_parse_body(kdr_media media, const char *body, size_t len, kdr_pf_doc *doc,
                       kdr_proto_error *err) {
+    const unsigned long failures0 = kdr_pf_alloc_failures();
     memset(doc, 0, sizeof *doc);
     if (!body || len == 0)
         return kdr_proto_error_set(err, 400, "body: empty");
     if (media == KDR_MEDIA_CBOR) {
         doc->media = KDR_MEDIA_CBOR;
-        const int st = kdr_pf_cbor_doc(body, len, doc, err);
+        const int st = out_of_memory(failures0, kdr_pf_cbor_doc(body, len, doc, err), doc, err);
         if (st)
             kdr_pf_doc_free(doc);
         return st;
     }
     if (media != KDR_MEDIA_JSON)
         return kdr_proto_error_set(err, 415, "body: not a media type this server reads");
-    int st = kdr_pf_fast_doc(body, len, doc, err);
+    int st = out_of_memory(failures0, kdr_pf_fast_doc(body, len, doc, err), doc, err);
     if (st == 1) {
         kdr_pf_doc_free(doc);
-        st = cjson_doc(body, len, doc, err);
+        st = out_of_memory(failures0, cjson_doc(body, len, doc, err), doc, err);
     }
     if (st)
         kdr_pf_doc_free(doc);
@@ -60,7 +71,7 @@ int kdr_pf_parse_body(kdr_media media, const char *body, size_t len, kdr_pf_doc 
 void kdr_pf_doc_free(kdr_pf_doc *doc) {
     cJSON_Delete(doc->root);
     for (int i = 0; i < doc->nfast; i++)
-        free(doc->fast[i].v);
+        kdr_pf_free(doc->fast[i].v);
     memset(doc, 0, sizeof *doc);
 }
 
@@ -231,7 +242,7 @@ int kdr_pf_view(kdr_pf_field f, const char *name, size_t count, unsigned flags,
         *view = in_place;
         return 0;
     }
-    if (!(*storage = malloc((count ? count : 1) * sizeof(float))))
+    if (!(*storage = kdr_pf_malloc((count ? count : 1) * sizeof(float))))
         return kdr_proto_error_set(err, 500, "%s: out of memory", name);
     *view = *storage;
     return kdr_pf_read(f, name, *storage, count, flags, err);
@@ -301,6 +312,20 @@ int kdr_pf_encoding(const cJSON *root, kdr_encoding *out, kdr_proto_error *err) 
     if (pf_choice(root, "encoding", "json", "base64", &v, err))
         return err->status;
     *out = v ? KDR_ENCODING_BASE64 : KDR_ENCODING_JSON;
+    return 0;
+}
+
+int kdr_pf_deadline(const cJSON *root, double *out, kdr_proto_error *err) {
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(root, "deadline_ms");
+    *out = 0.0;
+    if (!it)
+        return 0;
+    if (!cJSON_IsNumber(it) || !(it->valuedouble > 0.0) ||
+        !(it->valuedouble <= KDR_PROTO_MAX_DEADLINE_MS))
+        return kdr_proto_error_set(err, 400,
+                                   "deadline_ms: must be a number of milliseconds in "
+                                   "(0, 86400000]");
+    *out = it->valuedouble;
     return 0;
 }
 

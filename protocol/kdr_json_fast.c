@@ -109,7 +109,7 @@ static double token_value(const char *s, size_t n) {
 static int push(kdr_numarray *a, size_t *cap, double d) {
     if (a->n == *cap) {
         size_t ncap = *cap ? 2 * *cap : 64;
-        float *v = realloc(a->v, ncap * sizeof *v);
+        float *v = kdr_pf_realloc(a->v, ncap * sizeof *v);
         if (!v) return -1;
         a->v = v;
         *cap = ncap;
@@ -139,7 +139,7 @@ static int number_array(cursor *c, kdr_numarray *a) {
         size_t n = number_len(k.p, k.end);
         if (n == 0 || n > KDR_FAST_TOKEN) break;
         if (push(a, &cap, token_value(k.p, n))) {
-            free(a->v);
+            kdr_pf_free(a->v);
             return -1;
         }
         k.p += n;
@@ -155,7 +155,7 @@ static int number_array(cursor *c, kdr_numarray *a) {
         }
         break;
     }
-    free(a->v);
+    kdr_pf_free(a->v);
     memset(a, 0, sizeof *a);
     return 0;
 }
@@ -267,7 +267,7 @@ static int member_value(cursor *c, const char *key, kdr_pf_doc *doc,
         if (r == 1) {
             const int dup = has_key(doc, key);
             if (dup || doc->nfast == KDR_PF_MAX_FAST) {
-                free(a.v);
+                kdr_pf_free(a.v);
                 return dup ? 0 : 1; /* many arrays: not the common case */
             }
             strcpy(a.key, key);

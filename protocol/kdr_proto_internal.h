@@ -25,9 +25,27 @@ static inline void kdr_buf_put(kdr_buf *b, const void *bytes, size_t n) {
 /* lit must be a string literal (sizeof of a pointer would be wrong). */
 #define KDR_BUF_LIT(b, lit) kdr_buf_append((b), "" lit, sizeof(lit) - 1)
 
+/* Grows b's capacity to exactly len + extra if it is smaller (no doubling):
+ * for an answer whose size is bounded beforehand. 0 or KDR_ENOMEM. */
+int kdr_buf_reserve_exact(kdr_buf *b, size_t extra);
+
 /* Appends s as a quoted JSON string (control characters escaped; bytes
  * >= 0x80 copied, so UTF-8 stays UTF-8). */
 int kdr_buf_json_string(kdr_buf *b, const char *s);
+
+/* ---- metered allocation (kdr_meter.c) ----------------------------------------- */
+
+/* malloc / realloc / free for everything a parse allocates (cJSON's hooks
+ * are these too): counted on the thread's meter (kdr_proto_meter_set)
+ * before the block exists, counted back when freed; NULL when the meter
+ * refuses or malloc fails (both counted as failures). */
+void *kdr_pf_malloc(size_t n);
+void *kdr_pf_realloc(void *p, size_t n);
+void kdr_pf_free(void *p);
+/* Allocations that failed on this thread so far: a parser that gets NULL
+ * from cJSON compares it with the value before the call (NULL with no new
+ * failure is malformed input). */
+unsigned long kdr_pf_alloc_failures(void);
 
 /* ---- CBOR writing (kdr_cbor_write.c) ---------------------------------------- */
 
@@ -145,6 +163,8 @@ typedef struct kdr_field_info {
 } kdr_field_info;
 #define KDR_FIELD_COUNT 5
 extern const kdr_field_info kdr_field_table[KDR_FIELD_COUNT];
+/* "deadline_ms": absent gives 0, else a number in (0, KDR_PROTO_MAX_DEADLINE_MS]. */
+int kdr_pf_deadline(const cJSON *root, double *out, kdr_proto_error *err);
 
 int kdr_pf_too_many(kdr_proto_error *err, uint64_t rays, size_t max_rays,
                     const char *what);

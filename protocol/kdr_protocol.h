@@ -23,7 +23,11 @@
  *    data is malloc'd: it may be handed to libmicrohttpd with free() as the
  *    free callback (then forget it: set the kdr_buf to {0}).
  *  - Thread safety: every function is reentrant (no global state; the cJSON
- *    error pointer is not used).
+ *    error pointer is not used). The one per-thread state is the parse
+ *    meter (kdr_proto_meter_set); cJSON's allocation hooks are installed
+ *    once, before main, so that cJSON's blocks are counted too.
+ *  - Out of memory while parsing (cJSON's nodes included) is a 500 whose
+ *    detail says "out of memory", never a 400.
  *
  * Limits (documented in the contract's terms):
  *  - bundle: N rays count as N; frustum: width*height; cone-shadow:
@@ -61,6 +65,31 @@ extern "C" {
 #define KDR_PROTO_MIN_TILE 4
 #define KDR_PROTO_MAX_TILE 64
 #define KDR_PROTO_MAX_IMAGE_SIDE 16384
+/* "deadline_ms" (every query kind): 0 < ms <= this (one day). */
+#define KDR_PROTO_MAX_DEADLINE_MS 86400000.0
+
+/* ---- parse memory ---------------------------------------------------------- */
+
+/* What a parse may allocate. Every block the parsers allocate on a thread,
+ * cJSON's nodes and strings included (through its allocation hooks), is
+ * counted at its heap footprint on that thread's meter, and checked BEFORE
+ * it is allocated: a block that would take `used` past `limit` first calls
+ * grow(ctx, m, more), which may raise m->limit by at least `more` and
+ * return 0; otherwise the block fails like malloc, `refused` is set and
+ * stays set, and the parse ends with a 500 "out of memory". Frees are
+ * counted back, so `used` follows the live bytes and `limit` bounds their
+ * peak. What parses take is measured by tests/test_protocol_meter.c. */
+typedef struct kdr_proto_meter {
+    size_t limit;
+    size_t used;
+    int (*grow)(void *ctx, struct kdr_proto_meter *m, size_t need); /* may be NULL */
+    void *ctx;
+    int refused;
+} kdr_proto_meter;
+
+/* Makes m the calling thread's meter (NULL: none, nothing is limited) and
+ * returns the previous one. */
+kdr_proto_meter *kdr_proto_meter_set(kdr_proto_meter *m);
 
 /* ---- output buffer ------------------------------------------------------ */
 
@@ -99,8 +128,8 @@ int kdr_proto_encode_error(const kdr_proto_error *err, kdr_buf *out);
 /* ---- requests ---------------------------------------------------------------- */
 
 /* How an answer is written. A request's "encoding" member picks JSON or
- * BASE64; the server sets CBOR when content negotiation chose
- * application/cbor (kdr_proto_answer_media). */
+ * BASE64; the executor (exec/) writes CBOR instead when content
+ * negotiation chose application/cbor (kdr_proto_answer_media). */
 typedef enum kdr_encoding {
     KDR_ENCODING_JSON = 0,   /* arrays of numbers */
     KDR_ENCODING_BASE64 = 1, /* {"f32": ...} / {"i32": ...} */
@@ -148,6 +177,7 @@ typedef struct kdr_bundle_request {
     kdr_query query;
     kdr_encoding encoding;
     unsigned fields;     /* KDR_FIELD_* bits, never 0 */
+    double deadline_ms;  /* "deadline_ms": 0 when absent */
     float *owned[4];     /* org, dir, tmin, tmax storage (internal) */
 } kdr_bundle_request;
 
@@ -167,6 +197,7 @@ typedef struct kdr_shadow_request {
     kdr_shadow_query query; /* ready for kdr_shadow_trace */
     int want_stats;         /* "stats": true */
     kdr_encoding encoding;
+    double deadline_ms;     /* "deadline_ms": 0 when absent */
     float *owned_points, *owned_normals; /* internal */
     kdr_sphere_light *owned_lights;      /* internal */
 } kdr_shadow_request;
@@ -185,6 +216,7 @@ typedef struct kdr_frustum_request {
     kdr_query query;
     kdr_encoding encoding;
     unsigned fields;   /* KDR_FIELD_* bits, never 0 */
+    double deadline_ms; /* "deadline_ms": 0 when absent */
     size_t rays;       /* width * height */
 } kdr_frustum_request;
 
@@ -216,6 +248,16 @@ int kdr_proto_encode_shadow(const float *visibility, size_t n, size_t nlights,
                             const kdr_shadow_stats *stats, kdr_encoding enc,
                             kdr_buf *out);
 
+/* The most bytes the two encoders above can need for an answer, known
+ * before anything is traced (admission charges it). Encoding into an empty
+ * kdr_buf allocates exactly this much once and never grows the buffer;
+ * the answer's length is at most this (tests/test_protocol_fields.c checks
+ * both for every encoding and field set, with the longest floats). */
+size_t kdr_proto_hits_answer_max(size_t n, kdr_query query, unsigned fields,
+                                 kdr_encoding enc);
+size_t kdr_proto_shadow_answer_max(size_t n, size_t nlights, int stats,
+                                   kdr_encoding enc);
+
 /* Scene description, independent of scenes/: the server fills it. */
 typedef struct kdr_proto_mesh_range {
     int64_t node, mesh, primitive;  /* glTF indices */
@@ -243,8 +285,11 @@ int kdr_proto_encode_health(const char *status, size_t nscenes, kdr_buf *out);
 
 /* Shortest decimal that reads back as exactly f (JSON number syntax:
  * "-0", "1", "0.1", "1e-45", "3.4028235e38"); "null" for NaN/Inf.
- * Writes at most KDR_FLOAT_CHARS bytes, no NUL; returns the length. */
+ * Writes KDR_FLOAT_CHARS bytes (one fixed-size copy), no NUL; returns the
+ * length, at most KDR_FLOAT_MAX_LEN ("-0.0000123456875": checked for all
+ * 2^32 floats by tests/float_exhaustive.c). */
 #define KDR_FLOAT_CHARS 24
+#define KDR_FLOAT_MAX_LEN 16
 size_t kdr_format_float(float f, char *dst);
 
 /* RFC 4648 base64 with padding. encode writes kdr_base64_encoded_len(n)

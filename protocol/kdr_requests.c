@@ -20,7 +20,7 @@ static const cJSON *field(const cJSON *root, const char *name) {
     return cJSON_GetObjectItemCaseSensitive(root, name);
 }
 
-static float *alloc_floats(size_t n) { return malloc((n ? n : 1) * sizeof(float)); }
+static float *alloc_floats(size_t n) { return kdr_pf_malloc((n ? n : 1) * sizeof(float)); }
 
 static size_t limit_of(size_t max_rays) {
     return max_rays ? max_rays : KDR_PROTO_DEFAULT_MAX_RAYS;
@@ -150,6 +150,8 @@ int kdr_proto_parse_bundle_as(kdr_media media, const char *body, size_t len,
     if (!st)
         st = kdr_pf_encoding(doc.root, &out->encoding, err);
     if (!st)
+        st = kdr_pf_deadline(doc.root, &out->deadline_ms, err);
+    if (!st)
         st = bundle_arrays(&doc, &sh, out, err);
     kdr_pf_doc_free(&doc);
     if (st)
@@ -161,7 +163,7 @@ void kdr_bundle_request_free(kdr_bundle_request *req) {
     if (!req)
         return;
     for (int i = 0; i < 4; i++)
-        free(req->owned[i]);
+        kdr_pf_free(req->owned[i]);
     memset(req, 0, sizeof *req);
 }
 
@@ -196,7 +198,9 @@ static int read_lights(const cJSON *root, kdr_shadow_request *out,
     if (nl < 1 || nl > KDR_PROTO_MAX_LIGHTS)
         return kdr_proto_error_set(err, 400, "lights: expected an array of 1..%d lights",
                                    KDR_PROTO_MAX_LIGHTS);
-    out->owned_lights = calloc((size_t)nl, sizeof *out->owned_lights);
+    out->owned_lights = kdr_pf_malloc((size_t)nl * sizeof *out->owned_lights);
+    if (out->owned_lights)
+        memset(out->owned_lights, 0, (size_t)nl * sizeof *out->owned_lights);
     if (!out->owned_lights)
         return kdr_proto_error_set(err, 500, "lights: out of memory");
     size_t l = 0;
@@ -208,7 +212,7 @@ static int read_lights(const cJSON *root, kdr_shadow_request *out,
     return 0;
 }
 
-/* samples, seed, epsilon, stats, encoding: the scalar options. */
+/* samples, seed, epsilon, stats, deadline_ms, encoding: the scalar options. */
 static int shadow_options(const cJSON *root, kdr_shadow_request *out,
                           kdr_proto_error *err) {
     kdr_shadow_query *q = &out->query;
@@ -235,6 +239,8 @@ static int shadow_options(const cJSON *root, kdr_shadow_request *out,
             return kdr_proto_error_set(err, 400, "stats: must be true or false");
         out->want_stats = cJSON_IsTrue(it);
     }
+    if (kdr_pf_deadline(root, &out->deadline_ms, err))
+        return err->status;
     return kdr_pf_encoding(root, &out->encoding, err);
 }
 
@@ -316,9 +322,9 @@ int kdr_proto_parse_shadow_as(kdr_media media, const char *body, size_t len,
 void kdr_shadow_request_free(kdr_shadow_request *req) {
     if (!req)
         return;
-    free(req->owned_points);
-    free(req->owned_normals);
-    free(req->owned_lights);
+    kdr_pf_free(req->owned_points);
+    kdr_pf_free(req->owned_normals);
+    kdr_pf_free(req->owned_lights);
     memset(req, 0, sizeof *req);
 }
 
@@ -410,6 +416,8 @@ int kdr_proto_parse_frustum_as(kdr_media media, const char *body, size_t len,
         st = kdr_pf_fields(root, out->query, &out->fields, err);
     if (!st)
         st = kdr_pf_encoding(root, &out->encoding, err);
+    if (!st)
+        st = kdr_pf_deadline(root, &out->deadline_ms, err);
     kdr_pf_doc_free(&doc);
     if (st) {
         memset(out, 0, sizeof *out);

@@ -60,13 +60,19 @@ static size_t put_int(char *p, int64_t v) {
     return len;
 }
 
+/* The most text one array value takes, with its comma. */
+static size_t json_value_max(const array_src *s) {
+    return s->f ? KDR_FLOAT_MAX_LEN + 1 : src_is_bytes(s) ? 2 : KDR_INT_CHARS;
+}
+
 static int json_array(kdr_buf *b, const array_src *s, size_t n) {
-    const size_t per = s->f ? KDR_FLOAT_CHARS + 1 : KDR_INT_CHARS;
+    const size_t per = json_value_max(s);
     if (kdr_buf_append(b, "[", 1))
         return KDR_ENOMEM;
     for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
         const size_t k1 = n - k0 < KDR_CHUNK ? n : k0 + KDR_CHUNK;
-        if (kdr_buf_reserve(b, (k1 - k0) * per))
+        /* kdr_format_float copies KDR_FLOAT_CHARS bytes whatever the length */
+        if (kdr_buf_reserve(b, (k1 - k0) * per + KDR_FLOAT_CHARS))
             return KDR_ENOMEM;
         char *p = b->data + b->len;
         for (size_t k = k0; k < k1; k++) {
@@ -132,6 +138,66 @@ static int cbor_array(kdr_buf *b, const array_src *s, size_t n) {
     return 0;
 }
 
+/* ---- answer sizes ------------------------------------------------------------ */
+
+/* Bytes of an answer around its arrays: braces and "count" (JSON <= 30,
+ * CBOR <= 16), the cone-shadow "stats" member (JSON <= 123, CBOR < 90),
+ * and room for what the encoders reserve beyond what they then write (a
+ * float's fixed-size copy of KDR_FLOAT_CHARS). */
+#define KDR_ANSWER_FIXED 256
+/* Per array member: its name with quotes, colon, comma and brackets, or
+ * the {"f32":"..."} wrapper, or CBOR's text, tag and byte-string heads; and
+ * the escape room kdr_buf_json_string reserves for a name of <= 8 bytes. */
+#define KDR_ANSWER_MEMBER 64
+
+static size_t array_max(const array_src *s, size_t n, kdr_encoding enc) {
+    if (enc == KDR_ENCODING_CBOR)
+        return KDR_ANSWER_MEMBER + n * (src_is_bytes(s) ? 1 : 4);
+    if (enc == KDR_ENCODING_BASE64)
+        return KDR_ANSWER_MEMBER + kdr_base64_encoded_len(4 * n);
+    return KDR_ANSWER_MEMBER + n * json_value_max(s);
+}
+
+/* The kind of values a field's array holds (pointers only mark the kind). */
+static array_src field_kind(unsigned bit) {
+    static const float f;
+    static const int32_t i;
+    static const uint8_t u8;
+    array_src s = {0};
+    if (bit == KDR_FIELD_PRIM)
+        s.i = &i;
+    else if (bit == KDR_FIELD_HIT)
+        s.u8 = &u8;
+    else
+        s.f = &f;
+    return s;
+}
+
+size_t kdr_proto_hits_answer_max(size_t n, kdr_query query, unsigned fields,
+                                 kdr_encoding enc) {
+    (void)query;
+    size_t total = KDR_ANSWER_FIXED;
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
+        if (fields & kdr_field_table[k].bit) {
+            const array_src s = field_kind(kdr_field_table[k].bit);
+            total += array_max(&s, n, enc);
+        }
+    return total;
+}
+
+size_t kdr_proto_shadow_answer_max(size_t n, size_t nlights, int stats,
+                                   kdr_encoding enc) {
+    (void)stats; /* within KDR_ANSWER_FIXED */
+    const array_src s = field_kind(KDR_FIELD_T);
+    return KDR_ANSWER_FIXED + array_max(&s, n * nlights, enc);
+}
+
+/* An empty buffer gets the answer's whole bound at once: one allocation,
+ * never a doubling (the caller charged the bound). */
+static int presize(kdr_buf *out, size_t bound) {
+    return out->cap == 0 ? kdr_buf_reserve_exact(out, bound) : 0;
+}
+
 /* One "name": array member (JSON: preceded by a comma). */
 static int named_array(kdr_buf *b, const char *name, const array_src *s, size_t n,
                        kdr_encoding enc) {
@@ -188,7 +254,8 @@ int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query
     }
     if (members == 0 || (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY)))
         return KDR_EINVAL;
-    if (count_head(out, n, members, enc))
+    if (presize(out, kdr_proto_hits_answer_max(n, query, fields, enc)) ||
+        count_head(out, n, members, enc))
         return KDR_ENOMEM;
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
@@ -229,7 +296,8 @@ int kdr_proto_encode_shadow(const float *visibility, size_t n, size_t nlights,
                             const kdr_shadow_stats *stats, kdr_encoding enc,
                             kdr_buf *out) {
     const array_src vis = {.f = visibility};
-    if (count_head(out, n, stats ? 2 : 1, enc) ||
+    if (presize(out, kdr_proto_shadow_answer_max(n, nlights, stats != NULL, enc)) ||
+        count_head(out, n, stats ? 2 : 1, enc) ||
         named_array(out, "visibility", &vis, n * nlights, enc) ||
         (stats && shadow_stats(out, stats, enc)))
         return KDR_ENOMEM;

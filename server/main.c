@@ -1,40 +1,45 @@
 /*
- * main.c — kdrayd: flags, start-up order and shutdown.
+ * main.c — kdrayd: start-up order, signals, reloads and shutdown.
  *
  * Start-up opens the HTTP port first (health and queries answer 503), then
  * loads and builds every scene on the main thread, then flips the registry
- * to ready. A scene that fails to load ends the process with status 1: a
- * daemon silently serving fewer scenes than asked is worse than none.
- * SIGINT/SIGTERM are taken by a dedicated sigwait() thread (blocked
- * everywhere else, so no handler ever runs on an HTTP thread); shutdown
- * stops accepting, lets requests in flight finish, and exits 0.
+ * to ready and tells systemd (READY=1 when run as a Type=notify unit). A
+ * scene that fails to load ends the process with status 1: a daemon
+ * silently serving fewer scenes than asked is worse than none.
+ *
+ * Signals are taken by a dedicated sigwait() thread (blocked everywhere
+ * else, so no handler ever runs on an HTTP or worker thread), which only
+ * raises flags for the main thread. The main thread, idle once the scenes
+ * are built, carries out a SIGHUP (reopen the access log, rebuild changed
+ * scene files in the background of serving, swap them in) and a
+ * SIGINT/SIGTERM (stop accepting, let requests in flight finish, exit 0).
  */
-#define _POSIX_C_SOURCE 200809L
+#define _GNU_SOURCE /* gettid: a thread's own nice value */
 #include <errno.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 #ifdef __GLIBC__
 #include <malloc.h>
 #endif
 
+#include "kdr_default_scene.h"
 #include "log.h"
+#include "notify.h"
+#include "options.h"
 #include "server.h"
 
 #ifndef KDRAY_VERSION
 #define KDRAY_VERSION "0.0.0"
 #endif
 
-static const char *const DEFAULT_LISTEN = "127.0.0.1:8080";
-static const size_t DEFAULT_MAX_BODY_MB = 64;
-static const size_t DEFAULT_MAX_RAYS = 4194304;
-static const unsigned MAX_THREADS = 256;
-static const size_t MAX_BODY_MB_LIMIT = 4096;
-/* Seconds a shutdown waits for requests in flight before closing them. */
-static const double SHUTDOWN_GRACE_S = 30.0;
+/* Descriptors beyond the connections: listen socket, logs, scene files. */
+static const rlim_t SPARE_FILES = 64;
 /* A 64K-ray request frees ~5 MiB (body, rays, hits, answer); glibc's
  * default trims that from the thread's arena after every request, so the next
  * one page-faults all of it in again (~13K faults/s, a few % of a 64K base64
@@ -43,114 +48,13 @@ static const double SHUTDOWN_GRACE_S = 30.0;
 static const int MALLOC_TRIM_BYTES = 32 << 20;
 static const int MALLOC_MMAP_BYTES = 16 << 20;
 
-typedef struct options {
-    const char *listen;
-    unsigned threads;
-    size_t max_body_mb, max_rays;
-    char **scene_args; /* NAME=PATH, pointing into argv */
-    size_t nscenes;
-} options;
-
-static void usage(FILE *f) {
-    fprintf(f,
-            "usage: kdrayd [options]\n"
-            "Serves batched ray queries (bundle, cone-shadow, frustum) over HTTP/JSON\n"
-            "on SAH kd-trees built from glTF scenes at start-up.\n\n"
-            "  --scene NAME=PATH   serve PATH (.glb or .gltf) as NAME; repeatable\n"
-            "                      (default: the bundled scene as \"default\")\n"
-            "  --listen ADDR:PORT  address to listen on (default %s; port 0 picks\n"
-            "                      a free port, logged at start-up)\n"
-            "  --threads N         HTTP and worker threads (default: number of cores)\n"
-            "  --max-body-mb N     largest request body in MiB (default %zu)\n"
-            "  --max-rays N        most rays per request (default %zu)\n"
-            "  --help, --version\n",
-            DEFAULT_LISTEN, DEFAULT_MAX_BODY_MB, DEFAULT_MAX_RAYS);
-}
-
-static int bad_flag(const char *fmt, const char *arg) {
-    fprintf(stderr, "kdrayd: ");
-    fprintf(stderr, fmt, arg);
-    fprintf(stderr, " (see kdrayd --help)\n");
-    return 2;
-}
-
-static int parse_size(const char *s, size_t lo, size_t hi, size_t *out) {
-    char *end;
-    if (!s || !*s || *s == '-' || *s == '+') return -1;
-    errno = 0;
-    unsigned long long v = strtoull(s, &end, 10);
-    if (errno || *end || v < lo || v > hi) return -1;
-    *out = (size_t)v;
-    return 0;
-}
-
-static unsigned default_threads(void) {
-    long n = sysconf(_SC_NPROCESSORS_ONLN);
-    return n < 1 ? 1 : n > (long)MAX_THREADS ? MAX_THREADS : (unsigned)n;
-}
-
-/* Splits "--flag=value" or takes the next argument; NULL if missing. */
-static const char *flag_value(int argc, char **argv, int *i, const char *eq) {
-    if (eq) return eq + 1;
-    return *i + 1 < argc ? argv[++*i] : NULL;
-}
-
-/* Returns -1 to go on, or an exit status (0 for --help/--version). */
-static int parse_one(options *o, int argc, char **argv, int *i) {
-    const char *a = argv[*i];
-    const char *eq = strncmp(a, "--", 2) ? NULL : strchr(a, '=');
-    size_t name_len = eq ? (size_t)(eq - a) : strlen(a);
-#define IS(flag) (name_len == strlen(flag) && !strncmp(a, flag, name_len))
-    if (IS("--help") && !eq) return usage(stdout), 0;
-    if (IS("--version") && !eq) return printf("kdrayd %s\n", KDRAY_VERSION), 0;
-    if (!IS("--scene") && !IS("--listen") && !IS("--threads") && !IS("--max-body-mb") &&
-        !IS("--max-rays"))
-        return bad_flag("unknown argument %s", a);
-    const char *v = flag_value(argc, argv, i, eq);
-    if (!v) return bad_flag("%s needs a value", a);
-    size_t n;
-    if (IS("--scene")) {
-        const char *sep = strchr(v, '=');
-        if (!sep || sep == v || !sep[1])
-            return bad_flag("--scene %s: expected NAME=PATH", v);
-        o->scene_args[o->nscenes++] = (char *)v; /* v is argv storage */
-    } else if (IS("--listen")) {
-        if (!kdr_http_addr_ok(v))
-            return bad_flag("--listen %s: expected ADDR:PORT (IPv4, localhost or [IPv6])",
-                            v);
-        o->listen = v;
-    } else if (IS("--threads")) {
-        if (parse_size(v, 1, MAX_THREADS, &n))
-            return bad_flag("--threads %s: expected 1..256", v);
-        o->threads = (unsigned)n;
-    } else if (IS("--max-body-mb")) {
-        if (parse_size(v, 1, MAX_BODY_MB_LIMIT, &n))
-            return bad_flag("--max-body-mb %s: expected 1..4096", v);
-        o->max_body_mb = n;
-    } else if (parse_size(v, 1, (size_t)1 << 32, &o->max_rays)) {
-        return bad_flag("--max-rays %s: expected 1..4294967296", v);
-    }
-#undef IS
-    return -1;
-}
-
-static int parse_flags(options *o, int argc, char **argv) {
-    *o = (options){.listen = DEFAULT_LISTEN,
-                   .threads = default_threads(),
-                   .max_body_mb = DEFAULT_MAX_BODY_MB,
-                   .max_rays = DEFAULT_MAX_RAYS};
-    o->scene_args = calloc((size_t)argc + 1, sizeof *o->scene_args);
-    if (!o->scene_args) return 1;
-    for (int i = 1; i < argc; i++) {
-        int rc = parse_one(o, argc, argv, &i);
-        if (rc >= 0) return rc;
-    }
-    return -1;
-}
-
 /* Fills the registry from --scene flags, or the bundled default. */
-static int add_scenes(kdr_registry *r, const options *o) {
-    if (o->nscenes == 0) return kdr_registry_add(r, "default", KDRAY_DEFAULT_SCENE);
+static int add_scenes(kdr_registry *r, const kdr_options *o, char *default_path,
+                      size_t default_len) {
+    if (o->nscenes == 0) {
+        kdr_default_scene_path(default_path, default_len);
+        return kdr_registry_add(r, "default", default_path);
+    }
     for (size_t i = 0; i < o->nscenes; i++) {
         char *arg = o->scene_args[i], *sep = strchr(arg, '=');
         *sep = '\0';
@@ -167,43 +71,66 @@ static int add_scenes(kdr_registry *r, const options *o) {
 
 /* ---- signals ------------------------------------------------------------ */
 
-typedef struct sig_waiter {
+typedef struct sig_state {
     sigset_t set;
     kdr_server *srv;
     pthread_t thread;
-} sig_waiter;
+    pthread_mutex_t m;
+    pthread_cond_t cv; /* reload or stop was raised */
+    int reload, stop;
+} sig_state;
 
-/* SIGUSR1 is the main thread's silent "wake up and return" after a failed
- * start-up; SIGINT/SIGTERM are shutdown requests. */
+/* SIGUSR1 is the main thread's silent "return now" after a failed start-up;
+ * SIGINT/SIGTERM are shutdown requests; SIGHUP asks for a reload. */
 static void *signal_main(void *arg) {
-    sig_waiter *w = arg;
-    int sig = 0;
-    while (sigwait(&w->set, &sig) != 0) {
+    sig_state *w = arg;
+    for (;;) {
+        int sig = 0;
+        if (sigwait(&w->set, &sig) != 0) continue;
+        pthread_mutex_lock(&w->m);
+        if (sig == SIGHUP) {
+            kdr_log("received SIGHUP: reloading changed scenes");
+            w->reload = 1;
+        } else {
+            if (sig != SIGUSR1)
+                kdr_log("received %s: shutting down",
+                        sig == SIGINT ? "SIGINT" : "SIGTERM");
+            w->stop = 1;
+            atomic_store(&w->srv->stopping, 1);
+        }
+        pthread_cond_signal(&w->cv);
+        pthread_mutex_unlock(&w->m);
+        if (sig != SIGHUP) return NULL;
     }
-    if (sig != SIGUSR1)
-        kdr_log("received %s: shutting down", sig == SIGINT ? "SIGINT" : "SIGTERM");
-    atomic_store(&w->srv->stopping, 1);
-    return NULL;
 }
 
-static int start_signals(sig_waiter *w, kdr_server *srv) {
+static int start_signals(sig_state *w, kdr_server *srv) {
     w->srv = srv;
+    w->reload = w->stop = 0;
+    pthread_mutex_init(&w->m, NULL);
+    pthread_cond_init(&w->cv, NULL);
     sigemptyset(&w->set);
     sigaddset(&w->set, SIGINT);
     sigaddset(&w->set, SIGTERM);
+    sigaddset(&w->set, SIGHUP);
     sigaddset(&w->set, SIGUSR1);
     signal(SIGPIPE, SIG_IGN); /* a client hanging up is not our death */
     if (pthread_sigmask(SIG_BLOCK, &w->set, NULL) != 0) return -1;
     return pthread_create(&w->thread, NULL, signal_main, w) == 0 ? 0 : -1;
 }
 
-/* Returns once a shutdown signal came, or at once (silently) if wake. */
-static void wait_signal(sig_waiter *w, int wake) {
-    if (wake) pthread_kill(w->thread, SIGUSR1);
+/* Ends the signal thread (at once, silently, unless a stop already did). */
+static void end_signals(sig_state *w) {
+    pthread_mutex_lock(&w->m);
+    int stopped = w->stop;
+    pthread_mutex_unlock(&w->m);
+    if (!stopped) pthread_kill(w->thread, SIGUSR1);
     pthread_join(w->thread, NULL);
+    pthread_cond_destroy(&w->cv);
+    pthread_mutex_destroy(&w->m);
 }
 
-/* ---- start-up ----------------------------------------------------------- */
+/* ---- start-up, reloads ---------------------------------------------------- */
 
 /* Builds every scene; 1 if one failed, 0 otherwise (also when a signal
  * cut the start-up short). */
@@ -217,7 +144,72 @@ static int build_scenes(kdr_server *srv) {
     kdr_registry_set_ready(srv->registry);
     kdr_log("ready: %zu scene%s built in %.1f ms", n, n == 1 ? "" : "s",
             (kdr_now() - t0) * 1e3);
+    char status[96];
+    snprintf(status, sizeof status, "READY=1\nSTATUS=serving %zu scene%s", n,
+             n == 1 ? "" : "s");
+    kdr_notify(status);
     return 0;
+}
+
+static void reload(kdr_server *srv) {
+    kdr_notify("RELOADING=1\nSTATUS=reloading scenes");
+    if (kdr_access_log_reopen(&srv->access_log) != 0)
+        kdr_log_error("--access-log %s: cannot reopen: %s", srv->access_log.path,
+                      strerror(errno));
+    double t0 = kdr_now();
+    size_t failed = kdr_registry_reload(srv->registry);
+    size_t n = kdr_registry_count(srv->registry);
+    if (failed)
+        kdr_log("reload: done in %.1f ms; %zu of %zu scene%s kept the previous version "
+                "(see above)",
+                (kdr_now() - t0) * 1e3, failed, n, n == 1 ? "" : "s");
+    else
+        kdr_log("reload: done in %.1f ms; %zu scene%s current", (kdr_now() - t0) * 1e3, n,
+                n == 1 ? "" : "s");
+    kdr_notify(failed
+                   ? "READY=1\nSTATUS=serving; the last reload kept old scenes (see log)"
+                   : "READY=1\nSTATUS=serving");
+}
+
+/* Waits for signals after start-up; returns when a stop was asked for. */
+static void serve_until_stopped(sig_state *w, kdr_server *srv) {
+    for (;;) {
+        pthread_mutex_lock(&w->m);
+        while (!w->stop && !w->reload)
+            pthread_cond_wait(&w->cv, &w->m);
+        int stop = w->stop, again = w->reload;
+        w->reload = 0;
+        pthread_mutex_unlock(&w->m);
+        if (stop) return;
+        if (again) reload(srv);
+    }
+}
+
+/* Each connection is a descriptor: make room for them. */
+static void raise_file_limit(unsigned connections) {
+    struct rlimit rl;
+    rlim_t want = (rlim_t)connections + SPARE_FILES;
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur >= want) return;
+    rl.rlim_cur = rl.rlim_max == RLIM_INFINITY || rl.rlim_max > want ? want : rl.rlim_max;
+    if (setrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur < want)
+        kdr_log_warn("open files limited to %llu: fewer than --max-connections %u + %llu",
+                     (unsigned long long)rl.rlim_cur, connections,
+                     (unsigned long long)SPARE_FILES);
+}
+
+/* Each worker lowers its own priority (Linux: setpriority on a thread id
+ * applies to that thread only). Raising a nice value needs no privilege;
+ * a seccomp filter may still refuse it, which is logged once. */
+static void lower_worker_priority(void *ctx) {
+    const kdr_server *srv = ctx;
+    static atomic_int warned;
+    if (srv->worker_nice <= 0) return;
+    pid_t tid = (pid_t)syscall(SYS_gettid);
+    int now = getpriority(PRIO_PROCESS, (id_t)tid);
+    if (setpriority(PRIO_PROCESS, (id_t)tid, now + srv->worker_nice) != 0 &&
+        atomic_exchange(&warned, 1) == 0)
+        kdr_log_warn("--worker-nice %d: cannot lower the workers' priority: %s",
+                     srv->worker_nice, strerror(errno));
 }
 
 static void tune_malloc(void) {
@@ -227,24 +219,33 @@ static void tune_malloc(void) {
 #endif
 }
 
-static int serve(kdr_server *srv, const options *o) {
-    sig_waiter sw;
+static int serve(kdr_server *srv, const kdr_options *o) {
+    sig_state sw;
     /* Signals first: every thread created later inherits the blocked mask. */
     if (start_signals(&sw, srv) != 0) {
-        kdr_log("error: cannot set up signal handling");
+        kdr_log_error("cannot set up signal handling");
         return 1;
     }
-    srv->pool = kdr_pool_create(srv->threads - 1);
-    if (!srv->pool) {
-        kdr_log("error: cannot start %u worker threads", srv->threads - 1);
-        wait_signal(&sw, 1);
+    kdr_exec_config cfg = {srv->threads, o->max_queue, srv->max_inflight,
+                           lower_worker_priority, srv};
+    srv->exec = kdr_exec_create(&cfg);
+    if (!srv->exec) {
+        kdr_log_error("cannot start %u worker threads: %s", srv->threads,
+                      strerror(errno));
+        end_signals(&sw);
         return 1;
     }
-    kdr_log("kdrayd %s starting: %zu scene%s, %u threads, max body %zu MiB, max "
-            "rays %zu, %s bundles",
+    raise_file_limit(srv->max_connections);
+    char deadline[32] = "none";
+    if (srv->deadline_ms > 0)
+        snprintf(deadline, sizeof deadline, "%.0f ms", srv->deadline_ms);
+    kdr_log("kdrayd %s starting: %zu scene%s, %u worker threads (nice +%d), %u HTTP "
+            "threads, queue %zu, in flight %zu MiB, max body %zu MiB, max rays %zu, "
+            "deadline %s, %u connections, %s bundles",
             KDRAY_VERSION, kdr_registry_count(srv->registry),
             kdr_registry_count(srv->registry) == 1 ? "" : "s", srv->threads,
-            o->max_body_mb, srv->max_rays,
+            srv->worker_nice, srv->http_threads, o->max_queue, o->max_inflight_mb,
+            o->max_body_mb, srv->max_rays, deadline, srv->max_connections,
             kdr_cpu_has_avx2() ? "8-wide (AVX2)" : "4-wide");
     kdr_http *h = kdr_http_start(srv, o->listen);
     int status = 1;
@@ -253,34 +254,50 @@ static int serve(kdr_server *srv, const options *o) {
         kdr_log("listening on http://%.*s:%u (503 until every scene is built)",
                 (int)(colon - o->listen), o->listen, kdr_http_port(h));
         status = build_scenes(srv);
-        wait_signal(&sw, status != 0);
+        if (status == 0) serve_until_stopped(&sw, srv);
+        kdr_notify("STOPPING=1\nSTATUS=shutting down");
         kdr_log("shutdown: %ld request%s in flight", kdr_metrics_inflight_now(),
                 kdr_metrics_inflight_now() == 1 ? "" : "s");
-        kdr_http_stop(h, SHUTDOWN_GRACE_S);
-    } else {
-        wait_signal(&sw, 1);
+        kdr_http_stop(h, o->grace_s);
     }
+    end_signals(&sw);
     kdr_log("stopped (exit %d)", status);
     return status;
 }
 
 int main(int argc, char **argv) {
-    options o;
-    int rc = parse_flags(&o, argc, argv);
+    kdr_options o;
+    char default_path[4096];
+    int rc = kdr_options_parse(&o, argc, argv);
     kdr_server srv = {.max_body = 0};
     tune_malloc();
     atomic_init(&srv.stopping, 0);
+    srv.access_log.fd = -1;
     srv.registry = kdr_registry_create();
     if (rc < 0 && !srv.registry) rc = 1;
-    if (rc < 0) rc = add_scenes(srv.registry, &o) ? 2 : -1;
+    if (rc < 0)
+        rc = add_scenes(srv.registry, &o, default_path, sizeof default_path) ? 2 : -1;
+    if (rc < 0 && o.access_log &&
+        kdr_access_log_open(&srv.access_log, o.access_log) != 0) {
+        fprintf(stderr, "kdrayd: --access-log %s: %s (see kdrayd --help)\n", o.access_log,
+                strerror(errno));
+        rc = 2;
+    }
     if (rc < 0) {
+        kdr_log_set_level((kdr_log_level)o.log_level);
         srv.threads = o.threads;
+        srv.http_threads = o.http_threads;
         srv.max_body = o.max_body_mb << 20;
         srv.max_rays = o.max_rays;
+        srv.max_inflight = o.max_inflight_mb << 20;
+        srv.max_connections = o.max_connections;
+        srv.deadline_ms = o.deadline_ms;
+        srv.worker_nice = o.worker_nice;
         rc = serve(&srv, &o);
     }
-    kdr_pool_destroy(srv.pool);
+    kdr_exec_destroy(srv.exec);
     kdr_registry_free(srv.registry);
-    free(o.scene_args);
+    kdr_access_log_close(&srv.access_log);
+    kdr_options_free(&o);
     return rc;
 }

@@ -18,8 +18,9 @@ static const double BUCKETS[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05
                                  0.1,    0.25,  0.5,    1.0,   2.5,  5.0,   10.0};
 #define NBUCKET (sizeof BUCKETS / sizeof BUCKETS[0])
 
-static const char *const EP_NAMES[KDR_EP_COUNT] = {
-    "health", "metrics", "scenes", "scene", "bundle", "cone-shadow", "frustum", "other"};
+static const char *const EP_NAMES[KDR_EP_COUNT] = {"health",      "ready",   "metrics",
+                                                   "scenes",      "scene",   "bundle",
+                                                   "cone-shadow", "frustum", "other"};
 static const char *const RAY_NAMES[KDR_RAYS_COUNT] = {"bundle", "cone-shadow", "frustum"};
 
 static atomic_uint_fast64_t requests[KDR_EP_COUNT][NSTATUS + 1];
@@ -158,4 +159,65 @@ void kdr_metrics_render(kdr_tb *tb) {
                   "or answered.\n# TYPE kdray_http_requests_in_flight gauge\n"
                   "kdray_http_requests_in_flight %ld\n",
                   kdr_metrics_inflight_now());
+}
+
+static void gauge(kdr_tb *tb, const char *name, const char *help, double v) {
+    kdr_tb_printf(tb, "# HELP %s %s\n# TYPE %s gauge\n%s %.17g\n", name, help, name, name,
+                  v);
+}
+
+static void counter(kdr_tb *tb, const char *name, const char *help, uint64_t v) {
+    kdr_tb_printf(tb, "# HELP %s %s\n# TYPE %s counter\n%s %llu\n", name, help, name,
+                  name, (unsigned long long)v);
+}
+
+void kdr_metrics_render_exec(kdr_tb *tb, const kdr_exec_stats *s) {
+    size_t receiving = s->slots_used - s->queued - s->running;
+    gauge(tb, "kdray_queue_depth", "Queries waiting for a worker.", (double)s->queued);
+    kdr_tb_printf(tb,
+                  "# HELP kdray_queries Admitted queries: body still arriving, waiting "
+                  "for a worker, or being parsed, traced or encoded.\n"
+                  "# TYPE kdray_queries gauge\n"
+                  "kdray_queries{state=\"receiving\"} %zu\n"
+                  "kdray_queries{state=\"queued\"} %zu\n"
+                  "kdray_queries{state=\"running\"} %zu\n",
+                  receiving, s->queued, s->running);
+    gauge(tb, "kdray_queue_slots",
+          "Queries admitted at most at once (--threads + "
+          "--max-queue).",
+          (double)s->slots);
+    gauge(tb, "kdray_workers", "Executor threads (--threads).", s->workers);
+    gauge(tb, "kdray_workers_busy", "Executor threads inside a query.", s->busy);
+    gauge(tb, "kdray_inflight_bytes",
+          "Bytes charged to admitted requests: bodies, parsed "
+          "arrays, results and answers (estimated before allocation).",
+          (double)s->bytes_used);
+    gauge(tb, "kdray_inflight_bytes_limit", "--max-inflight-mb in bytes.",
+          (double)s->bytes_max);
+    kdr_tb_printf(tb,
+                  "# HELP kdray_rejections_total Query requests refused (503, or 413 "
+                  "for more than the whole budget), by reason.\n"
+                  "# TYPE kdray_rejections_total counter\n"
+                  "kdray_rejections_total{reason=\"queue\"} %llu\n"
+                  "kdray_rejections_total{reason=\"memory\"} %llu\n"
+                  "kdray_rejections_total{reason=\"too_large\"} %llu\n",
+                  (unsigned long long)s->rejected_queue,
+                  (unsigned long long)s->rejected_memory,
+                  (unsigned long long)s->rejected_too_large);
+    counter(tb, "kdray_deadlines_total", "Queries stopped by their deadline (503).",
+            s->deadlines);
+    counter(tb, "kdray_cancellations_total",
+            "Queries stopped because the client hung up.", s->cancelled);
+    counter(tb, "kdray_shutdown_stopped_total", "Queries stopped by the shutdown (503).",
+            s->shutdown);
+    counter(tb, "kdray_out_of_memory_total",
+            "Queries answered 503 because memory ran out.", s->out_of_memory);
+    counter(tb, "kdray_queries_total",
+            "Queries the executor finished, whatever the "
+            "outcome.",
+            s->completed);
+    gauge(tb, "kdray_query_seconds_mean",
+          "Recent mean time of a query from its first "
+          "worker to its encoded answer (behind Retry-After).",
+          s->mean_query_s);
 }

@@ -3,17 +3,20 @@
  * status, rays traced by query kind, a request latency histogram. Every
  * update is a relaxed C11 atomic add, so the request path takes no lock;
  * a scrape reads the counters without stopping anyone (counts may be a few
- * requests apart, as Prometheus allows).
+ * requests apart, as Prometheus allows). The executor keeps its own books
+ * (kdr_exec_get_stats); they are rendered here too.
  */
 #ifndef KDR_SRV_METRICS_H
 #define KDR_SRV_METRICS_H
 
 #include <stdint.h>
 
+#include "kdr_exec.h"
 #include "textbuf.h"
 
 typedef enum kdr_endpoint {
     KDR_EP_HEALTH,
+    KDR_EP_READY,
     KDR_EP_METRICS,
     KDR_EP_SCENES,
     KDR_EP_SCENE,
@@ -42,5 +45,10 @@ long kdr_metrics_inflight_now(void);
 
 /* Appends every counter in Prometheus text format 0.0.4. */
 void kdr_metrics_render(kdr_tb *tb);
+/* Appends the executor's gauges and counters: queue depth and slots,
+ * workers busy, bytes in flight and their limit, admissions refused by
+ * reason, deadlines, cancellations, queries stopped by the shutdown, out of
+ * memory answers. */
+void kdr_metrics_render_exec(kdr_tb *tb, const kdr_exec_stats *s);
 
 #endif

@@ -1,24 +1,33 @@
 /*
  * server.h — what the HTTP layer and the route handlers share: the scene
- * registry, the job pool, the limits from the command line and the
- * shutdown flag. Built by main.c; read-only afterwards except `stopping`.
+ * registry, the query executor, the limits from the command line, the
+ * access log and the shutdown flag. Built by main.c; read-only afterwards
+ * except `stopping`.
  */
 #ifndef KDR_SRV_SERVER_H
 #define KDR_SRV_SERVER_H
 
 #include <stdatomic.h>
 #include <stddef.h>
+#include <stdint.h>
 
+#include "access_log.h"
+#include "kdr_exec.h"
 #include "metrics.h"
-#include "pool.h"
 #include "registry.h"
 
 typedef struct kdr_server {
     kdr_registry *registry;
-    kdr_pool *pool;
-    size_t max_body;  /* bytes */
-    size_t max_rays;  /* rays (or pixels, or shadow rays) per request */
-    unsigned threads; /* HTTP threads = workers + 1 */
+    kdr_exec *exec;
+    size_t max_body;          /* bytes */
+    size_t max_rays;          /* rays (or pixels, or shadow rays) per request */
+    size_t max_inflight;      /* bytes, the executor's budget */
+    unsigned threads;         /* executor workers */
+    unsigned http_threads;    /* libmicrohttpd's thread pool */
+    unsigned max_connections; /* HTTP connections at once */
+    double deadline_ms;       /* --deadline-ms, 0 = none */
+    int worker_nice;          /* --worker-nice */
+    kdr_access_log access_log;
     atomic_int stopping;
 } kdr_server;
 
@@ -31,6 +40,8 @@ typedef struct kdr_request {
     const char *accept;       /* NULL if absent */
     const char *body;
     size_t len;
+    double start;          /* kdr_now() when its headers arrived */
+    kdr_exec_claim *claim; /* query endpoints: the admitted claim */
 } kdr_request;
 
 /* An answer: body is malloc'd (or NULL when len is 0) and owned by whoever
@@ -38,10 +49,13 @@ typedef struct kdr_request {
 typedef struct kdr_response {
     unsigned status;
     const char *content_type;
-    const char *allow; /* for 405 */
+    const char *allow;    /* for 405 */
+    unsigned retry_after; /* seconds, sent as Retry-After when > 0 */
     char *body;
     size_t len;
     kdr_endpoint ep;
+    uint64_t rays; /* traced for this answer, for the access log */
+    int no_answer; /* the client left: close without answering */
 } kdr_response;
 
 /* Routing before the body is read: decides 404/405/415/503 and 413 from
@@ -49,18 +63,56 @@ typedef struct kdr_response {
  * if the request is already answered, else 0 with out->ep set. */
 int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long content_length,
                        kdr_response *out);
+/* 1 for the endpoints whose body is a query (admitted by the executor). */
+int kdr_route_is_query(kdr_endpoint ep);
 /* Answers a request whose body has fully arrived. */
 void kdr_route_handle(kdr_server *srv, const kdr_request *req, kdr_response *out);
 /* A problem+json answer (RFC 7807). */
 void kdr_route_problem(kdr_response *out, unsigned status, const char *detail);
-/* A 200 answer carrying b (content type ct), or a 500 when encoding it
- * failed (rc != 0; b is freed then). */
+/* The answer to a refused admission: 503 with Retry-After, or 413 for a
+ * request larger than the whole in-flight budget. */
+void kdr_route_refusal(kdr_server *srv, kdr_admit why, size_t bytes, kdr_response *out);
+/* A 200 answer carrying b (content type ct), or a 503 when encoding it ran
+ * out of memory (rc != 0; b is freed then). */
 struct kdr_buf;
 void kdr_route_answer_buf(kdr_response *out, int rc, struct kdr_buf *b, const char *ct);
 
-/* Answers a bundle / cone-shadow / frustum request on scene (query.c). */
-void kdr_query_answer(kdr_server *srv, const kdr_served_scene *scene, kdr_endpoint ep,
-                      const kdr_request *req, kdr_response *out);
+/* The scene index of a query endpoint's path (the precheck found it), or -1. */
+long kdr_route_scene(kdr_server *srv, const char *path);
+
+/* A bundle / cone-shadow / frustum request on its way through the executor
+ * (query.c). The HTTP thread starts it and goes back to serving other
+ * connections; a worker calls on_done when the answer is ready; the HTTP
+ * thread then finishes it. Between the two, a watcher calls
+ * kdr_query_watch every few milliseconds. */
+typedef struct kdr_query_call {
+    kdr_exec_query q;
+    kdr_scene_version *scene; /* held until finished: a reload swaps, never frees it */
+    kdr_endpoint ep;
+    const char *path;
+} kdr_query_call;
+
+/* 0: started (on_done(ctx) will be called exactly once); -1: nothing
+ * started, *out holds the answer. req's body must live until finished. */
+int kdr_query_start(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoint ep,
+                    const kdr_request *req, void (*on_done)(void *), void *ctx,
+                    kdr_response *out);
+/* The short way for a small body, on the HTTP thread: parses it and, if
+ * its work should take under 0.2 ms there (the scene's measured cost per
+ * ray for this kind of query; 256 rays until one is known), or it is an
+ * error, answers it right away: 1 with *out filled. 0: parsed, waiting for
+ * kdr_query_enqueue (on_done follows as for kdr_query_start). -1: nothing
+ * started, *out holds the answer. */
+int kdr_query_try_inline(kdr_server *srv, kdr_query_call *call, size_t scene,
+                         kdr_endpoint ep, const kdr_request *req, void (*on_done)(void *),
+                         void *ctx, kdr_response *out);
+void kdr_query_enqueue(kdr_server *srv, kdr_query_call *call);
+/* Cancels the query if its client has gone, and lets the executor stop a
+ * query past its deadline that no worker is looking at. Any thread. */
+void kdr_query_watch(kdr_query_call *call, int client_gone);
+/* After on_done: the answer in *out (out->no_answer when the client left);
+ * releases everything the call held. */
+void kdr_query_finish(kdr_query_call *call, kdr_response *out);
 
 /* HTTP daemon (http.c). */
 typedef struct kdr_http kdr_http;
@@ -70,7 +122,10 @@ kdr_http *kdr_http_start(kdr_server *srv, const char *addr);
 /* 1 if addr is a listen address kdr_http_start accepts. */
 int kdr_http_addr_ok(const char *addr);
 unsigned kdr_http_port(const kdr_http *h);
-/* Stops accepting, waits up to grace_s for requests in flight, stops. */
+/* Stops accepting at once (new connections are refused). */
+void kdr_http_quiesce(kdr_http *h);
+/* Waits up to grace_s for requests in flight, stops the queries still
+ * running after that (503), then stops the daemon. */
 void kdr_http_stop(kdr_http *h, double grace_s);
 
 #endif

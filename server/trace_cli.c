@@ -1,49 +1,42 @@
 /*
- * trace_cli.c — kdray-trace: answers one query request file with direct core
- * calls, no HTTP, and prints the response body exactly as kdrayd would. The
+ * trace_cli.c — kdray-trace: answers query request files through the same
+ * executor as kdrayd (exec/: parse, chunks over worker threads, encode),
+ * without HTTP, and prints each response body exactly as kdrayd would. The
  * integration tests compare the daemon's answers with these byte for byte;
- * the service benchmark uses --repeat to time the core in-process.
+ * the service benchmark uses --repeat to time the tracing in-process.
  *
  *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum
- *               [--mode reference|fast] [--threads T] [--repeat R] REQUEST.json
+ *               [--mode reference|fast] [--threads T] [--repeat R]
+ *               [--content-type TYPE] [--accept TYPE] REQUEST.json|REQUEST.cbor
  *   kdray-trace [--scene PATH] KIND:MODE:REQUEST.json...   (-> REQUEST.json.out)
  *
- * reference (default): one thread, single-ray / per-pixel / per-sample core
- * modes over the whole range; fast: the modes kdrayd uses (bundles, four
- * frusta at a time, cones), split over T threads like the daemon.
+ * reference (default): single-ray / per-pixel / per-sample core modes;
+ * fast: the modes kdrayd uses (bundles, four frusta at a time, cones). T
+ * workers split every request into the daemon's chunks (the answer does not
+ * depend on T). With --repeat R the request runs R times and the best and
+ * mean tracing time (chunks only: no parse, no encode) are printed.
+ * A file whose name ends in ".cbor" is read as application/cbor, any other
+ * as application/json; --content-type and --accept take the values of the
+ * HTTP headers and mean what they mean to kdrayd (without --accept the
+ * answer has the body's media type).
  */
 #define _POSIX_C_SOURCE 200809L
-#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "kdr_default_scene.h"
+#include "kdr_exec.h"
 #include "kdr_gltf.h"
-#include "kdr_protocol.h"
-#include "log.h"
-#include "pool.h"
 
 typedef struct cli {
     const char *scene_path, *kind;
+    const char *content_type, *accept; /* NULL: by file name / as the body */
     int fast;
     unsigned threads, repeat;
     char **requests; /* argv entries: PATH, or KIND:MODE:PATH */
     int nrequests;
 } cli;
-
-typedef struct job {
-    const kdr_scene *scene;
-    int fast;
-    kdr_query query;
-    kdr_hits hits;
-    const kdr_ray_batch *batch;
-    const kdr_frustum_request *fr;
-    const kdr_shadow_query *sq;
-    float *vis;
-    kdr_shadow_stats *stats;
-    size_t total, per;
-    atomic_int rc;
-} job;
 
 static char *read_file(const char *path, size_t *len) {
     FILE *f = fopen(path, "rb");
@@ -64,152 +57,85 @@ static char *read_file(const char *path, size_t *len) {
     return p;
 }
 
-static void range_of(const job *j, size_t c, size_t *first, size_t *count) {
-    *first = c * j->per;
-    *count = j->total - *first < j->per ? j->total - *first : j->per;
+static int kind_of(const char *name, kdr_exec_kind *out) {
+    if (!strcmp(name, "bundle"))
+        *out = KDR_EXEC_BUNDLE;
+    else if (!strcmp(name, "frustum"))
+        *out = KDR_EXEC_FRUSTUM;
+    else if (!strcmp(name, "cone-shadow"))
+        *out = KDR_EXEC_CONE_SHADOW;
+    else
+        return -1;
+    return 0;
 }
 
-static void bundle_chunk(void *ctx, size_t c) {
-    job *j = ctx;
-    size_t f, n;
-    range_of(j, c, &f, &n);
-    int rc = kdr_trace_batch(j->scene, j->batch, f, n, j->query,
-                             j->fast ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE, &j->hits, NULL);
-    if (rc) atomic_store(&j->rc, rc);
+/* The number of rays the timing line divides by: bundle rays, frustum
+ * pixels, cone-shadow points x lights (as before the executor existed). */
+static size_t rays_of(kdr_exec_kind kind, kdr_media media, const char *body, size_t len) {
+    kdr_proto_error err;
+    size_t n = 0;
+    const size_t max = (size_t)1 << 32;
+    if (kind == KDR_EXEC_BUNDLE) {
+        kdr_bundle_request r;
+        if (!kdr_proto_parse_bundle_as(media, body, len, max, &r, &err)) n = r.batch.n;
+        kdr_bundle_request_free(&r);
+    } else if (kind == KDR_EXEC_FRUSTUM) {
+        kdr_frustum_request r;
+        if (!kdr_proto_parse_frustum_as(media, body, len, max, &r, &err)) n = r.rays;
+    } else {
+        kdr_shadow_request r;
+        if (!kdr_proto_parse_shadow_as(media, body, len, max, &r, &err))
+            n = r.query.n * r.query.nlights;
+        kdr_shadow_request_free(&r);
+    }
+    return n;
 }
 
-static void frustum_chunk(void *ctx, size_t c) {
-    job *j = ctx;
-    size_t f, n;
-    range_of(j, c, &f, &n);
-    int rc = kdr_frustum_trace(j->scene, &j->fr->camera, j->fr->tile, f, n, j->query,
-                               j->fast ? KDR_FRUSTUM_MULTI4 : KDR_FRUSTUM_RAYS, &j->hits,
-                               NULL);
-    if (rc) atomic_store(&j->rc, rc);
+/* The body's media type: --content-type, else by the file name. */
+static kdr_media media_of(const cli *c, const char *path) {
+    if (c->content_type) return kdr_proto_media_of(c->content_type);
+    size_t n = strlen(path);
+    return n >= 5 && !strcmp(path + n - 5, ".cbor") ? KDR_MEDIA_CBOR : KDR_MEDIA_JSON;
 }
 
-static void shadow_chunk(void *ctx, size_t c) {
-    job *j = ctx;
-    size_t f, n;
-    range_of(j, c, &f, &n);
-    int rc = kdr_shadow_trace(j->scene, j->sq, f, n,
-                              j->fast ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS, j->vis,
-                              &j->stats[c]);
-    if (rc) atomic_store(&j->rc, rc);
-}
-
-static int hits_alloc(kdr_hits *h, size_t n, kdr_query q) {
-    memset(h, 0, sizeof *h);
-    size_t m = n ? n : 1;
-    if (q == KDR_ANY) return (h->hit = malloc(m)) ? 0 : -1;
-    h->t = malloc(m * sizeof(float));
-    h->prim = malloc(m * sizeof(int32_t));
-    h->u = malloc(m * sizeof(float));
-    h->v = malloc(m * sizeof(float));
-    return h->t && h->prim && h->u && h->v ? 0 : -1;
-}
-
-static void hits_free(kdr_hits *h) {
-    free(h->t);
-    free(h->prim);
-    free(h->u);
-    free(h->v);
-    free(h->hit);
-}
-
-/* Runs the job `repeat` times; logs the best and the mean rate (the mean
- * is what a loaded machine really delivers, comparable to HTTP rates). */
-static void run(kdr_pool *pool, job *j, kdr_pool_fn fn, size_t rays, unsigned repeat) {
-    size_t nchunks = (j->total + j->per - 1) / j->per;
-    double best = 1e30, t_start = kdr_now();
+/* Runs the request `repeat` times; keeps the last answer in *q; logs the
+ * best and the mean tracing rate (the mean is what a loaded machine really
+ * delivers, comparable to HTTP rates). */
+static void run(kdr_exec *ex, kdr_exec_query *q, unsigned repeat) {
+    double best = 1e30, sum = 0;
     for (unsigned r = 0; r < repeat; r++) {
-        double t0 = kdr_now();
-        kdr_pool_run(pool, nchunks, fn, j);
-        double dt = kdr_now() - t0;
+        if (r) kdr_exec_query_done(q);
+        if (kdr_exec_submit(ex, q) != 0) {
+            q->result.status = 503;
+            snprintf(q->result.detail, sizeof q->result.detail, "out of memory");
+            return;
+        }
+        kdr_exec_wait(q, -1);
+        if (q->result.status != 200) return;
+        double dt = q->result.trace_s;
+        sum += dt;
         if (dt < best) best = dt;
     }
-    double mean = (kdr_now() - t_start) / repeat;
-    if (repeat > 1)
+    if (repeat > 1) {
+        size_t rays = rays_of(q->kind, q->media, q->body, q->len);
+        double mean = sum / repeat;
         fprintf(stderr,
                 "kdray-trace: %zu rays, %u runs: best %.3f ms, %.3f Mrays/s; mean "
                 "%.3f ms, %.3f Mrays/s\n",
                 rays, repeat, best * 1e3, (double)rays / best * 1e-6, mean * 1e3,
                 (double)rays / mean * 1e-6);
-}
-
-static int do_hits(kdr_pool *pool, job *j, kdr_pool_fn fn, size_t n, kdr_encoding enc,
-                   unsigned repeat, kdr_buf *out) {
-    if (hits_alloc(&j->hits, n, j->query) != 0) return KDR_ENOMEM;
-    run(pool, j, fn, n, repeat);
-    int rc = atomic_load(&j->rc);
-    if (rc == 0) rc = kdr_proto_encode_hits(&j->hits, n, j->query, enc, out);
-    hits_free(&j->hits);
-    return rc;
-}
-
-static int do_bundle(kdr_pool *pool, job *j, const char *body, size_t len, const cli *c,
-                     kdr_buf *out, kdr_proto_error *err) {
-    kdr_bundle_request br;
-    if (kdr_proto_parse_bundle(body, len, (size_t)1 << 32, &br, err)) {
-        kdr_bundle_request_free(&br);
-        return err->status;
     }
-    j->batch = &br.batch;
-    j->query = br.query;
-    j->total = br.batch.n;
-    j->per = c->fast ? KDR_CHUNK_RAYS : br.batch.n;
-    int rc = do_hits(pool, j, bundle_chunk, br.batch.n, br.encoding, c->repeat, out);
-    kdr_bundle_request_free(&br);
-    return rc;
-}
-
-static int do_frustum(kdr_pool *pool, job *j, const char *body, size_t len, const cli *c,
-                      kdr_buf *out, kdr_proto_error *err) {
-    kdr_frustum_request fr;
-    if (kdr_proto_parse_frustum(body, len, (size_t)1 << 32, &fr, err)) return err->status;
-    j->fr = &fr;
-    j->query = fr.query;
-    j->total = kdr_frustum_tile_count(&fr.camera, fr.tile);
-    j->per = c->fast ? KDR_CHUNK_TILES : j->total;
-    return do_hits(pool, j, frustum_chunk, fr.rays, fr.encoding, c->repeat, out);
-}
-
-static int do_shadow(kdr_pool *pool, job *j, const char *body, size_t len, const cli *c,
-                     kdr_buf *out, kdr_proto_error *err) {
-    kdr_shadow_request sr;
-    if (kdr_proto_parse_shadow(body, len, (size_t)1 << 32, &sr, err)) {
-        kdr_shadow_request_free(&sr);
-        return err->status;
-    }
-    j->sq = &sr.query;
-    j->total = sr.query.n;
-    j->per = c->fast ? KDR_CHUNK_POINTS : (sr.query.n ? sr.query.n : 1);
-    size_t nchunks = (j->total + j->per - 1) / j->per;
-    j->vis = malloc((sr.query.n * sr.query.nlights + 1) * sizeof(float));
-    j->stats = calloc(nchunks + 1, sizeof(kdr_shadow_stats));
-    int rc = j->vis && j->stats ? 0 : KDR_ENOMEM;
-    if (rc == 0) {
-        run(pool, j, shadow_chunk, sr.query.n * sr.query.nlights, c->repeat);
-        kdr_shadow_stats sum = {0};
-        for (size_t i = 0; i < nchunks; i++) {
-            sum.cones_decided += j->stats[i].cones_decided;
-            sum.rays_traced += j->stats[i].rays_traced;
-            sum.nodes_visited += j->stats[i].nodes_visited;
-        }
-        rc = atomic_load(&j->rc);
-        if (rc == 0)
-            rc = kdr_proto_encode_shadow(j->vis, sr.query.n, sr.query.nlights,
-                                         sr.want_stats ? &sum : NULL, sr.encoding, out);
-    }
-    free(j->vis);
-    free(j->stats);
-    kdr_shadow_request_free(&sr);
-    return rc;
 }
 
 static int usage(void) {
-    fprintf(stderr, "usage: kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum "
-                    "[--mode reference|fast] [--threads T] [--repeat R] REQUEST.json\n");
+    fprintf(
+        stderr,
+        "usage: kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum "
+        "[--mode reference|fast] [--threads T] [--repeat R]\n"
+        "                   [--content-type TYPE] [--accept TYPE] REQUEST.json|.cbor\n"
+        "       kdray-trace [--scene PATH] [--threads T] KIND:MODE:REQUEST.json...\n"
+        "A .cbor file is read as application/cbor, others as application/json;\n"
+        "--content-type and --accept work as the HTTP headers do for kdrayd.\n");
     return 2;
 }
 
@@ -233,13 +159,14 @@ static int parse_cli(cli *c, int argc, char **argv) {
             c->threads = (unsigned)atoi(v);
         else if (!strcmp(a, "--repeat"))
             c->repeat = (unsigned)atoi(v);
+        else if (!strcmp(a, "--content-type"))
+            c->content_type = v;
+        else if (!strcmp(a, "--accept"))
+            c->accept = v;
         else
             return -1;
     }
-#ifdef KDRAY_DEFAULT_SCENE
-    if (!c->scene_path) c->scene_path = KDRAY_DEFAULT_SCENE;
-#endif
-    if (!c->scene_path || !c->nrequests || c->threads < 1 || c->repeat < 1) return -1;
+    if (!c->nrequests || c->threads < 1 || c->repeat < 1) return -1;
     return 0;
 }
 
@@ -275,19 +202,10 @@ static int write_out(const char *path, const kdr_buf *out) {
     return bad;
 }
 
-static int dispatch(kdr_pool *pool, job *j, const cli *c, const char *body, size_t len,
-                    kdr_buf *out, kdr_proto_error *err) {
-    if (!strcmp(c->kind, "bundle")) return do_bundle(pool, j, body, len, c, out, err);
-    if (!strcmp(c->kind, "frustum")) return do_frustum(pool, j, body, len, c, out, err);
-    if (!strcmp(c->kind, "cone-shadow"))
-        return do_shadow(pool, j, body, len, c, out, err);
-    return kdr_proto_error_set(err, 404, "unknown kind %s", c->kind);
-}
-
 /* Answers one request: a plain PATH goes to stdout with --kind/--mode; a
  * KIND:MODE:PATH spec (several per run share one scene build) goes to
  * PATH.out. Returns 0 or 1. */
-static int answer_one(kdr_pool *pool, const kdr_scene *scene, cli c, char *spec) {
+static int answer_one(kdr_exec *ex, const kdr_scene *scene, cli c, char *spec) {
     char *path = spec, *k = NULL, *m = NULL;
     if (strchr(spec, ':') && strchr(strchr(spec, ':') + 1, ':')) {
         k = spec;
@@ -298,8 +216,14 @@ static int answer_one(kdr_pool *pool, const kdr_scene *scene, cli c, char *spec)
         c.kind = k;
         c.fast = !strcmp(m, "fast");
     }
-    if (!c.kind) {
-        usage();
+    kdr_exec_kind kind;
+    if (!c.kind || kind_of(c.kind, &kind) != 0) return usage(), 1;
+    kdr_media media = media_of(&c, path);
+    if (media == KDR_MEDIA_OTHER) {
+        fprintf(stderr,
+                "kdray-trace: --content-type %s: expected application/json or "
+                "application/cbor\n",
+                c.content_type);
         return 1;
     }
     size_t len = 0;
@@ -308,32 +232,38 @@ static int answer_one(kdr_pool *pool, const kdr_scene *scene, cli c, char *spec)
         perror(path);
         return 1;
     }
-    job j = {.scene = scene, .fast = c.fast};
-    atomic_init(&j.rc, 0);
-    kdr_buf out;
-    kdr_buf_init(&out);
-    kdr_proto_error err = {0};
-    int rc = dispatch(pool, &j, &c, body, len, &out, &err);
-    if (rc == 0)
-        rc = write_out(k ? path : NULL, &out);
-    else if (err.status)
-        fprintf(stderr, "kdray-trace: %s: %d %s\n", path, err.status, err.detail);
-    else
-        fprintf(stderr, "kdray-trace: %s: core error %s\n", path, kdr_strerror(rc));
-    kdr_buf_free(&out);
+    kdr_exec_query q = {.kind = kind,
+                        .mode = c.fast ? KDR_EXEC_FAST : KDR_EXEC_REFERENCE,
+                        .scene = scene,
+                        .body = body,
+                        .len = len,
+                        .media = media,
+                        .answer_media = kdr_proto_answer_media(c.accept, media),
+                        .max_rays = (size_t)1 << 32,
+                        .start = kdr_exec_now()};
+    run(ex, &q, c.repeat);
+    int rc = q.result.status == 200 ? write_out(k ? path : NULL, &q.result.body) : 1;
+    if (q.result.status != 200)
+        fprintf(stderr, "kdray-trace: %s: %d %s\n", path, q.result.status,
+                q.result.detail);
+    if (q.job) kdr_exec_query_done(&q);
     free(body);
     return rc ? 1 : 0;
 }
 
 int main(int argc, char **argv) {
     cli c;
+    char default_path[4096];
     if (parse_cli(&c, argc, argv)) return usage();
+    if (!c.scene_path)
+        c.scene_path = kdr_default_scene_path(default_path, sizeof default_path);
     kdr_scene *scene = load_scene(c.scene_path);
-    kdr_pool *pool = kdr_pool_create(c.threads - 1);
-    int rc = !scene || !pool;
+    kdr_exec_config cfg = {c.threads, (size_t)c.nrequests, 0, NULL, NULL};
+    kdr_exec *ex = scene ? kdr_exec_create(&cfg) : NULL;
+    int rc = !scene || !ex;
     for (int i = 0; i < c.nrequests && !rc; i++)
-        rc = answer_one(pool, scene, c, c.requests[i]);
-    kdr_pool_destroy(pool);
+        rc = answer_one(ex, scene, c, c.requests[i]);
+    kdr_exec_destroy(ex);
     kdr_scene_free(scene);
     return rc;
 }

@@ -3,7 +3,8 @@
  * kdr_format_float: every finite one must read back bit for bit through
  * strtof and through strtod-then-float (the double path of most JSON
  * readers) and be no longer than the pre-Dragonbox printer's text
- * (tests/support/old_codecs.c); NaN and infinities must print null. Not a
+ * (tests/support/old_codecs.c) nor than KDR_FLOAT_MAX_LEN (the answer size
+ * bounds rely on it); NaN and infinities must print null. Not a
  * ctest (minutes of CPU): run by hand after touching kdr_float.c,
  *   build/tests/float_exhaustive [threads]
  * Prints the counts and exits 1 on any failure.
@@ -20,7 +21,7 @@
 
 typedef struct part {
     uint64_t first, last; /* [first, last) */
-    uint64_t bad, longer, shorter, differ;
+    uint64_t bad, longer, shorter, differ, over;
 } part;
 
 static void *run(void *arg) {
@@ -32,6 +33,7 @@ static void *run(void *arg) {
         memcpy(&f, &bits, 4);
         const size_t la = kdr_format_float(f, a);
         a[la] = '\0';
+        p->over += la > KDR_FLOAT_MAX_LEN;
         if (!isfinite(f)) {
             p->bad += strcmp(a, "null") != 0;
             continue;
@@ -59,18 +61,20 @@ int main(int argc, char **argv) {
     pthread_t th[64];
     const uint64_t total = 1ull << 32;
     for (int i = 0; i < nt; i++) {
-        parts[i] = (part){total * i / nt, total * (i + 1) / nt, 0, 0, 0, 0};
+        parts[i] = (part){total * i / nt, total * (i + 1) / nt, 0, 0, 0, 0, 0};
         pthread_create(&th[i], NULL, run, &parts[i]);
     }
-    uint64_t bad = 0, longer = 0, shorter = 0, differ = 0;
+    uint64_t bad = 0, longer = 0, shorter = 0, differ = 0, over = 0;
     for (int i = 0; i < nt; i++) {
         pthread_join(th[i], NULL);
         bad += parts[i].bad, longer += parts[i].longer;
-        shorter += parts[i].shorter, differ += parts[i].differ;
+        shorter += parts[i].shorter, differ += parts[i].differ, over += parts[i].over;
     }
     printf("float_exhaustive: %llu patterns: %llu failed round trips or null, %llu "
-           "longer than the old printer, %llu shorter, %llu same length other digits\n",
+           "longer than the old printer, %llu shorter, %llu same length other digits, "
+           "%llu longer than %d characters\n",
            (unsigned long long)total, (unsigned long long)bad, (unsigned long long)longer,
-           (unsigned long long)shorter, (unsigned long long)differ);
-    return bad || longer ? 1 : 0;
+           (unsigned long long)shorter, (unsigned long long)differ,
+           (unsigned long long)over, KDR_FLOAT_MAX_LEN);
+    return bad || longer || over ? 1 : 0;
 }

@@ -70,8 +70,8 @@ target_include_directories(float_exhaustive PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/
 target_link_libraries(float_exhaustive PRIVATE kdray_protocol Threads::Threads)
 
 # CBOR bodies and answers (JSON twins, in place, answers read back), CBOR
-# errors, answer fields and media negotiation.
-foreach(t cbor cbor_errors fields)
+# errors, answer fields and media negotiation, the parse meter.
+foreach(t cbor cbor_errors fields meter)
   add_executable(test_protocol_${t} ${CMAKE_CURRENT_SOURCE_DIR}/test_protocol_${t}.c)
   target_include_directories(test_protocol_${t} PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
   target_link_libraries(test_protocol_${t} PRIVATE kdray_protocol)

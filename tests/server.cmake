@@ -1,9 +1,13 @@
 # Server integration tests (owner: server): the real kdrayd on a free
 # loopback port, driven over HTTP by the Python client and by curl, answers
-# compared with direct core calls (kdray-trace); plus the job pool unit test.
-add_executable(test_server_pool ${CMAKE_CURRENT_SOURCE_DIR}/test_server_pool.c)
-target_link_libraries(test_server_pool PRIVATE kdray_server)
-add_test(NAME server_pool COMMAND test_server_pool)
+# compared with direct core calls (kdray-trace); operation (admission,
+# deadlines, hang-ups, reload, logs), memory, health latency, install.
+# Python 3 and curl are required (tests/cmake/required_tools.cmake): a
+# missing tool fails the configure step rather than silently dropping these
+# tests.
+# systemd-analyze (Debian package systemd) checks the installed unit; the
+# install test fails, naming it, when it is missing.
+find_program(KDRAY_SYSTEMD_ANALYZE systemd-analyze)
 
 # python3 and curl: tests/cmake/required_tools.cmake (configure fails
 # without them).
@@ -25,3 +29,30 @@ add_test(NAME server_codecs
          COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_server_codecs.py
                  $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
 set_tests_properties(server_codecs PROPERTIES TIMEOUT 600)
+
+add_test(NAME server_ops
+         COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_server_ops.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(server_ops PROPERTIES TIMEOUT 600)
+
+# Two tests belong to the normal build's run only. Latency: the sanitizers
+# make every request cost two to three times the CPU, so a millisecond
+# target says nothing there; it also runs alone, so that no other test's
+# CPU use is measured. Memory: RSS and address-space limits mean nothing
+# under AddressSanitizer (shadow memory, quarantine).
+if(NOT KDRAY_SANITIZE)
+  add_test(NAME server_health_latency
+           COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_server_ops.py
+                   $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients health_latency)
+  set_tests_properties(server_health_latency PROPERTIES TIMEOUT 300 RUN_SERIAL TRUE)
+
+  add_test(NAME server_memory
+           COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_server_memory.py
+                   $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+  set_tests_properties(server_memory PROPERTIES TIMEOUT 300)
+endif()
+
+add_test(NAME server_install
+         COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_install.py
+                 ${CMAKE_BINARY_DIR} "${KDRAY_SYSTEMD_ANALYZE}" ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(server_install PROPERTIES TIMEOUT 300)

@@ -282,6 +282,12 @@ static const struct err_case {
      "encoding: must be \"json\" or \"base64\""},
     {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0,0,1,0,0,0,1]}", 2, 413,
      "batch of 3 rays exceeds the limit of 2"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"deadline_ms\":0}", 0, 400, "deadline_ms: must be a number of milliseconds in (0, 86400000]"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"deadline_ms\":-5}", 0, 400, "deadline_ms: must be a number of milliseconds in (0, 86400000]"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"deadline_ms\":\"9\"}", 0, 400,
+     "deadline_ms: must be a number of milliseconds in (0, 86400000]"},
+    {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"deadline_ms\":86400001}", 0,
+     400, "deadline_ms: must be a number of milliseconds in (0, 86400000]"},
 
     {SHADOW, "{}", 0, 400, "lights: required"},
     {SHADOW, "{\"lights\":[]}", 0, 400, "lights: expected an array of 1..64 lights"},
@@ -311,6 +317,7 @@ static const struct err_case {
     {SHADOW, "{" LIGHT ",\"encoding\":\"hex\"}", 0, 400,
      "encoding: must be \"json\" or \"base64\""},
     {SHADOW, "{" LIGHT "}", 0, 400, "points: required"},
+    {SHADOW, "{" LIGHT ",\"points\":[0,0,0],\"deadline_ms\":null}", 0, 400, "deadline_ms: must be a number of milliseconds in (0, 86400000]"},
     {SHADOW, "{" LIGHT ",\"points\":[0,0]}", 0, 400,
      "points: length 2 is not 3*N with N >= 1"},
     {SHADOW, "{" LIGHT ",\"points\":[0,0,0],\"normals\":[0,0,1,0]}", 0, 400,
@@ -362,6 +369,8 @@ static const struct err_case {
      400, "query: must be \"closest\" or \"any\""},
     {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," CAMOK "},\"encoding\":null}",
      0, 400, "encoding: must be \"json\" or \"base64\""},
+    {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0]," CAMOK "},\"deadline_ms\":1e99}",
+     0, 400, "deadline_ms: must be a number of milliseconds in (0, 86400000]"},
     {FRUSTUM, "{\"camera\":{\"eye\":[0,0,5],\"target\":[0,0,0],\"fov_y_deg\":60,\"width\":100,"
               "\"height\":100}}",
      9999, 413, "batch of 10000 rays exceeds the limit of 9999"},
@@ -429,12 +438,13 @@ static void test_bundle_ok(void) {
         CHECK(b->dir[4] == -0.5f && same_bits(b->dir[5], 1e-45f) && b->dir[0] == 1, "dirs");
         CHECK(b->tmin[0] == 0.0f && isinf(b->tmax[0]) && b->tmax[0] > 0, "defaults");
         CHECK(r.query == KDR_CLOSEST && r.encoding == KDR_ENCODING_JSON, "enums");
+        CHECK(r.deadline_ms == 0.0, "no deadline by default");
         kdr_bundle_request_free(&r);
     }
     /* per-ray arrays, tmax 1e30 and 1e300 (saturates), any, base64 */
     if (!parse_bundle_str("{\"origins\":[0,0,0,1,1,1],\"directions\":[1,0,0,0,1,0],"
                           "\"tmin\":[0.5,-1e300],\"tmax\":[1e30,1e300],\"query\":\"any\","
-                          "\"encoding\":\"base64\"}",
+                          "\"encoding\":\"base64\",\"deadline_ms\":86400000}",
                           &r)) {
         const kdr_ray_batch *b = &r.batch;
         CHECK(b->org_stride == 3 && b->tmin_stride == 1 && b->tmax_stride == 1, "strides");
@@ -442,6 +452,7 @@ static void test_bundle_ok(void) {
               "tmin");
         CHECK(b->tmax[0] == 1e30f && isinf(b->tmax[1]), "tmax");
         CHECK(r.query == KDR_ANY && r.encoding == KDR_ENCODING_BASE64, "enums");
+        CHECK(r.deadline_ms == 86400000.0, "deadline_ms at its maximum");
         kdr_bundle_request_free(&r);
     }
     /* scalar tmin/tmax numbers */
@@ -527,13 +538,14 @@ static void test_shadow_ok(void) {
     kdr_shadow_request_free(&r);
     body = "{\"points\":[0,0,0],\"normals\":[0,0,0],\"lights\":[{\"center\":[0,10,0],"
            "\"radius\":0.5}],\"samples\":4096,\"seed\":9007199254740992,\"epsilon\":0,"
-           "\"stats\":true,\"encoding\":\"base64\"}";
+           "\"stats\":true,\"encoding\":\"base64\",\"deadline_ms\":0.5}";
     st = kdr_proto_parse_shadow(body, strlen(body), 0, &r, &err);
     CHECK(st == 0, "%s", err.detail);
     if (!st) {
         const kdr_shadow_query *q = &r.query;
         CHECK(q->normals && q->samples == 4096 && q->seed == 9007199254740992ull &&
-                  q->epsilon == 0.0f && r.want_stats && r.encoding == KDR_ENCODING_BASE64,
+                  q->epsilon == 0.0f && r.want_stats && r.encoding == KDR_ENCODING_BASE64 &&
+                  r.deadline_ms == 0.5,
               "options");
     }
     kdr_shadow_request_free(&r);
@@ -551,9 +563,11 @@ static void test_frustum_ok(void) {
               r.camera.fov_y_deg == 60.0f && r.camera.eye[2] == 5.0f,
           "frustum fields");
     body = "{\"camera\":{\"eye\":[0,0,0],\"target\":[0,5,0],\"up\":[0,0,1],\"fov_y_deg\":"
-           "179.9,\"width\":16384,\"height\":1},\"tile\":64,\"query\":\"any\"}";
+           "179.9,\"width\":16384,\"height\":1},\"tile\":64,\"query\":\"any\","
+           "\"deadline_ms\":250}";
     st = kdr_proto_parse_frustum(body, strlen(body), 0, &r, &err);
-    CHECK(st == 0 && r.tile == 64 && r.query == KDR_ANY && r.camera.width == 16384,
+    CHECK(st == 0 && r.tile == 64 && r.query == KDR_ANY && r.camera.width == 16384 &&
+              r.deadline_ms == 250.0,
           "%s", err.detail);
 }
 

@@ -2,7 +2,10 @@
  * test_protocol_fields.c — the answer-field choice ("fields") as parsed for
  * bundle and frustum requests (defaults, subsets, every error), and media
  * negotiation: Content-Type to JSON / CBOR / other, Accept q-values to the
- * answer's media type. A plain C program.
+ * answer's media type; and the answer size bounds (kdr_proto_*_answer_max)
+ * that admission charges: every answer fits its bound, and encoding into
+ * an empty buffer allocates the bound once and never grows it. A plain C
+ * program.
  */
 #include "cbor_body.h"
 
@@ -99,9 +102,94 @@ static void test_media(void) {
           "answer media names");
 }
 
+/* ---- answer size bounds ------------------------------------------------------------------ */
+
+/* The longest values: a float printed in 16 characters, the largest
+ * triangle index, every ray a hit (or, for misses, prim -1 and t -1). */
+static void worst_hits(kdr_hits *h, size_t n, int misses) {
+    for (size_t i = 0; i < n; i++) {
+        const float f = i % 2 ? -1.23456875e-5f : -9.87654321e-38f; /* 16 / 15 chars */
+        h->t[i] = h->u[i] = h->v[i] = f;
+        h->prim[i] = misses && i % 3 == 0 ? -7 : 2147483647;
+        h->hit[i] = 1;
+    }
+}
+
+static void check_bound(kdr_buf *out, size_t bound, int rc, const char *what) {
+    CHECK(rc == 0 && out->len <= bound && out->cap == bound,
+          "%s: rc %d, %zu bytes, capacity %zu, bound %zu", what, rc, out->len, out->cap,
+          bound);
+}
+
+static void test_answer_bounds(void) {
+    static const size_t sizes[] = {1, 2, 3, 4, 3071, 3072, 3073, 10000};
+    static const kdr_encoding encs[] = {KDR_ENCODING_JSON, KDR_ENCODING_BASE64,
+                                        KDR_ENCODING_CBOR};
+    char what[128];
+    char tmp[KDR_FLOAT_CHARS];
+    CHECK(kdr_format_float(-1.23456875e-5f, tmp) == KDR_FLOAT_MAX_LEN,
+          "the 16-character float");
+    for (size_t si = 0; si < sizeof sizes / sizeof sizes[0]; si++) {
+        const size_t n = sizes[si];
+        kdr_hits h = {xmalloc(4 * n), xmalloc(4 * n), xmalloc(4 * n), xmalloc(4 * n),
+                      xmalloc(n)};
+        for (int misses = 0; misses < 2; misses++) {
+            worst_hits(&h, n, misses);
+            for (int e = 0; e < 3; e++)
+                for (int q = 0; q < 2; q++)
+                    for (unsigned f = 1; f <= (KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY); f++) {
+                        const kdr_query query = q ? KDR_ANY : KDR_CLOSEST;
+                        if (query == KDR_ANY && (f & KDR_FIELDS_CLOSEST))
+                            continue;
+                        kdr_buf out;
+                        kdr_buf_init(&out);
+                        const size_t bound = kdr_proto_hits_answer_max(n, query, f, encs[e]);
+                        snprintf(what, sizeof what, "hits n=%zu enc %d query %d fields %u",
+                                 n, e, q, f);
+                        check_bound(&out, bound,
+                                    kdr_proto_encode_hits_fields(&h, n, query, f, encs[e],
+                                                                 &out),
+                                    what);
+                        kdr_buf_free(&out);
+                    }
+            /* fewer fields, smaller bound; CBOR below base64 below JSON */
+            const size_t all = kdr_proto_hits_answer_max(n, KDR_CLOSEST, KDR_FIELDS_CLOSEST,
+                                                         KDR_ENCODING_JSON);
+            CHECK(kdr_proto_hits_answer_max(n, KDR_CLOSEST, KDR_FIELD_T, KDR_ENCODING_JSON) <
+                      all,
+                  "t alone is smaller");
+            CHECK(kdr_proto_hits_answer_max(n, KDR_CLOSEST, KDR_FIELDS_CLOSEST,
+                                            KDR_ENCODING_CBOR) <
+                      kdr_proto_hits_answer_max(n, KDR_CLOSEST, KDR_FIELDS_CLOSEST,
+                                                KDR_ENCODING_BASE64),
+                  "CBOR is smaller than base64");
+        }
+        /* cone-shadow: n points x 3 lights, with the largest stats */
+        const kdr_shadow_stats st = {UINT64_MAX, UINT64_MAX, UINT64_MAX};
+        for (int e = 0; e < 3; e++)
+            for (int with = 0; with < 2; with++) {
+                float *vis = xmalloc(3 * n * sizeof(float));
+                for (size_t i = 0; i < 3 * n; i++)
+                    vis[i] = i % 2 ? 0.000123456789f : 1.0f / 3.0f;
+                kdr_buf out;
+                kdr_buf_init(&out);
+                const size_t bound = kdr_proto_shadow_answer_max(n, 3, with, encs[e]);
+                snprintf(what, sizeof what, "shadow n=%zu enc %d stats %d", n, e, with);
+                check_bound(&out, bound,
+                            kdr_proto_encode_shadow(vis, n, 3, with ? &st : NULL, encs[e],
+                                                    &out),
+                            what);
+                kdr_buf_free(&out);
+                free(vis);
+            }
+        free(h.t), free(h.prim), free(h.u), free(h.v), free(h.hit);
+    }
+}
+
 int main(void) {
     test_fields_json();
     test_media();
+    test_answer_bounds();
     if (failures) {
         fprintf(stderr, "test_protocol_fields: %d checks failed\n", failures);
         return 1;

@@ -9,20 +9,25 @@ checks that every query kind answers the same values in JSON and in CBOR
 (application/cbor, RFC 8746 typed arrays) whichever way each body travels;
 that Content-Type and Accept pick the answer's media type; that "fields"
 trims answers; that malformed CBOR bodies get 400 problem+json naming the
-field (problem+json even when the client accepts only CBOR); and that a
-typed array at a misaligned offset (copied) answers as one read in place.
+field (problem+json even when the client accepts only CBOR); that a
+typed array at a misaligned offset (copied) answers as one read in place;
+and that kdray-trace reads a .cbor request file (or --content-type) and
+answers it byte for byte as kdrayd does, in the media type --accept picks.
 """
 
 import json
 import os
 import struct
+import subprocess
 import sys
+import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import test_server_lib as lib  # noqa: E402
 
 KDRAYD, CLIENTS = sys.argv[1], sys.argv[2]
+TRACE = os.path.join(os.path.dirname(KDRAYD), "kdray-trace")
 lib.add_client_path(CLIENTS)
 import cbor2  # noqa: E402  (python3-cbor2: required, see above)
 from kdray_client import (CBOR, Client, KdrayError, _f32_array, cbor_body,  # noqa: E402
@@ -216,13 +221,56 @@ def test_misaligned_typed_array(t, c, b):
         t.eq(a, answers[0], "aligned and misaligned typed arrays answer the same")
 
 
+def trace(args, what):
+    out = subprocess.run([TRACE] + args, capture_output=True, timeout=300)
+    if out.returncode != 0:
+        raise RuntimeError("kdray-trace %s: %s" % (what, out.stderr.decode()))
+    return out.stdout
+
+
+def test_trace_reads_cbor(t, c, b):
+    """kdray-trace answers a CBOR file as kdrayd answers the same body."""
+    bounds = c.scene(SCENE)["bounds"]
+    o, d = lib.rays_into_box(bounds, RAYS, seed=5)
+    pts, _ = lib.rays_into_box(bounds, 150, seed=6)
+    bodies = {
+        "bundle": cbor_body({"origins": _f32_array(o), "directions": _f32_array(d)}),
+        "cone-shadow": cbor_body({
+            "points": _f32_array(pts), "samples": 64, "stats": True,
+            "lights": [{"center": [0, 50, 0], "radius": 3}]}),
+    }
+    tmp = tempfile.mkdtemp(prefix="kdray-cbor-")
+    try:
+        for kind, body in bodies.items():
+            path = "/v1/scenes/%s/%s" % (SCENE, kind)
+            file_cbor = os.path.join(tmp, kind + ".cbor")
+            file_bin = os.path.join(tmp, kind + ".bin")
+            for name in (file_cbor, file_bin):
+                with open(name, "wb") as f:
+                    f.write(body)
+            code, headers, served = raw_post(c, path, body)
+            t.eq(code, 200, kind + " over HTTP")
+            base = ["--kind", kind, "--mode", "fast", "--threads", "2"]
+            t.eq(trace(base + [file_cbor], kind), served,
+                 kind + ": kdray-trace on a .cbor file == kdrayd, byte for byte")
+            t.eq(trace(base + ["--content-type", CBOR, file_bin], kind), served,
+                 kind + ": --content-type application/cbor")
+            code, headers, served_json = raw_post(c, path, body, accept="application/json")
+            t.eq(trace(base + ["--accept", "application/json", file_cbor], kind),
+                 served_json, kind + ": --accept application/json == kdrayd's JSON")
+    finally:
+        for name in os.listdir(tmp):
+            os.unlink(os.path.join(tmp, name))
+        os.rmdir(tmp)
+
+
 def main():
     t = lib.Runner()
     d = lib.Daemon(KDRAYD, ["--threads", "2"])
     c, b = Client(d.url), Client(d.url, binary=True)
     try:
         for fn in (test_every_kind_both_ways, test_negotiation, test_fields,
-                   test_bad_bodies, test_misaligned_typed_array):
+                   test_bad_bodies, test_misaligned_typed_array, test_trace_reads_cbor):
             t.run(fn, c, b)
     finally:
         rc = d.stop()

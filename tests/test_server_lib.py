@@ -29,12 +29,13 @@ LISTEN_RE = re.compile(r"listening on (http://[^ ]+)")
 class Daemon:
     """A running kdrayd; its stderr is collected in .log (list of lines)."""
 
-    def __init__(self, kdrayd, args=(), wait_ready=True, default_scene=True):
+    def __init__(self, kdrayd, args=(), wait_ready=True, default_scene=True,
+                 stdout=subprocess.DEVNULL, env=None):
         scene = ["--scene", "default=" + SCENE_PATH] if SCENE_PATH else []
         scene = scene if default_scene else []
         self.proc = subprocess.Popen(
             [kdrayd, "--listen", "127.0.0.1:0"] + scene + list(args),
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            stdout=stdout, stderr=subprocess.PIPE, text=True, env=env)
         self.log = []
         self.url = None
         self._seen_url = threading.Event()
@@ -188,6 +189,32 @@ def rays_into_box(bounds, n, seed, shared_origin=False):
             d = [0.0, 0.0, 1.0]
         dirs += d
     return origins, dirs
+
+
+def metric(text, name, **labels):
+    """The value of one Prometheus sample (0.0 if absent)."""
+    want = ",".join('%s="%s"' % kv for kv in sorted(labels.items()))
+    for line in text.splitlines():
+        if line.startswith(name + "{") or line.startswith(name + " "):
+            head, _, value = line.rpartition(" ")
+            got = head[len(name):].strip("{}")
+            if ",".join(sorted(got.split(","))) == want or (not labels and not got):
+                return float(value)
+    return 0.0
+
+
+def long_shadow_payload(points, seed=5):
+    """A cone-shadow query on the bundled scene that takes long: points on
+    the ground, four big lights above, 4096 samples, so most (point, light)
+    pairs are in penumbra and traced in full (about 2 ms of one core per
+    point here; 10,000 points is ~20 s). Needs --max-rays >= points*16384."""
+    rng = random.Random(seed)
+    pts = []
+    for _ in range(points):
+        pts += [rng.uniform(-5, 5), 0.02, rng.uniform(-5, 5)]
+    lights = [{"center": [x, 9, z], "radius": 2.5}
+              for x, z in ((0, 0), (4, 4), (-4, 4), (4, -4))]
+    return {"points": pts, "lights": lights, "samples": 4096}
 
 
 def add_client_path(clients_dir):

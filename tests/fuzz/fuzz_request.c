@@ -6,7 +6,11 @@
  * so a parser that lets a bad query through is a crash, not a silent wrong
  * answer. An accepted CBOR bundle is also written out as its JSON twin,
  * which must parse to the same rays bit for bit, and answers of the
- * request's shape are encoded in every encoding.
+ * request's shape are encoded in every encoding. Each body is parsed once
+ * more under a parse meter whose limit comes from the input, so that an
+ * allocation fails at an arbitrary point: the parse must then end in a 500
+ * "out of memory" (never a 400, never a crash or a leak), must never pass
+ * the limit, and freeing the request must count back every byte.
  */
 #include <math.h>
 #include <stdio.h>
@@ -198,6 +202,35 @@ static void fuzz_paths_agree(const char *body, size_t len) {
     free(other);
 }
 
+/* The three parsers under a meter of limit bytes, in both media types. */
+static void fuzz_metered(const char *body, size_t len, size_t limit) {
+    for (int m = 0; m < 2; m++) {
+        const kdr_media media = m ? KDR_MEDIA_CBOR : KDR_MEDIA_JSON;
+        for (int kind = 0; kind < 3; kind++) {
+            kdr_proto_meter meter = {.limit = limit};
+            kdr_proto_meter *outer = kdr_proto_meter_set(&meter);
+            kdr_proto_error err;
+            int st;
+            if (kind == 0) {
+                kdr_bundle_request r;
+                st = kdr_proto_parse_bundle_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
+                kdr_bundle_request_free(&r);
+            } else if (kind == 1) {
+                kdr_shadow_request r;
+                st = kdr_proto_parse_shadow_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
+                kdr_shadow_request_free(&r);
+            } else {
+                kdr_frustum_request r;
+                st = kdr_proto_parse_frustum_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
+            }
+            kdr_proto_meter_set(outer);
+            check(meter.used == 0); /* every block counted back */
+            check((st == 500) == (meter.refused != 0));
+            check(st != 500 || strstr(err.detail, "out of memory") != NULL);
+        }
+    }
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     /* an exact-size copy, so ASan catches any read past the body */
     char *body = malloc(size ? size : 1);
@@ -212,6 +245,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     }
     fuzz_base64(body, size);
     fuzz_paths_agree(body, size);
+    if (size)
+        fuzz_metered(body, size, (size_t)data[size - 1] * 48);
     free(body);
     return 0;
 }

@@ -1,0 +1,130 @@
+/*
+ * kdr_exec_internal.h — what the scheduler (kdr_exec.c), its books
+ * (kdr_exec_admit.c) and the query kinds (kdr_exec_kinds.c) share: the
+ * executor struct, the job that carries one query through it, and the table
+ * of steps each kind implements. Not installed, not used outside exec/.
+ */
+#ifndef KDR_EXEC_INTERNAL_H
+#define KDR_EXEC_INTERNAL_H
+
+#include <pthread.h>
+#include <stdatomic.h>
+
+#include "kdr_exec.h"
+
+/* A job's place in its life; changed under the executor's lock. */
+typedef enum job_state {
+    JOB_QUEUED,    /* waiting for a worker */
+    JOB_PREPARING, /* one worker parses it and allocates the outputs */
+    JOB_RUNNING,   /* chunks are claimed by any worker */
+    JOB_FINISHING, /* one thread encodes the answer and settles the claim */
+} job_state;
+
+/* One query kind: parse the body and size the work, allocate the outputs,
+ * trace a chunk, encode the answer, free everything the kind allocated.
+ * parse and encode report errors through kdr_exec_fail(). core_error (may be
+ * NULL) turns a core error that is really the client's into a problem
+ * answer and returns 1; otherwise a core error is a 500 (our bug). */
+typedef struct kdr_exec_kind_ops {
+    int (*parse)(kdr_exec_job *j);
+    int (*alloc)(kdr_exec_job *j);
+    void (*chunk)(kdr_exec_job *j, size_t c);
+    int (*encode)(kdr_exec_job *j);
+    void (*release)(kdr_exec_job *j);
+    int (*core_error)(kdr_exec_job *j, int rc);
+} kdr_exec_kind_ops;
+
+struct kdr_exec_job {
+    kdr_exec *ex;
+    kdr_exec_query *q;
+    const kdr_exec_kind_ops *ops;
+
+    /* scheduling (under ex->lock) */
+    job_state state;
+    unsigned users; /* workers inside the job */
+    int picked;     /* a worker has taken it (it counts as running) */
+    int inline_run; /* traced on the caller's thread (kdr_exec_try_inline) */
+    kdr_exec_job *link;
+
+    /* set by parse, read by every worker once the job runs */
+    size_t nchunks;
+    uint64_t work_rays;     /* worst-case rays: bundle N, frustum pixels,
+                               cone-shadow points x lights x samples */
+    size_t parsed_bytes;    /* the parsed request's arrays */
+    size_t answer_estimate; /* result arrays + encoded answer */
+    double deadline;        /* absolute (kdr_exec_now), 0 = none */
+    double deadline_ms;     /* the one applied, for the message */
+
+    atomic_size_t next;  /* next chunk to claim */
+    atomic_size_t done;  /* chunks finished */
+    atomic_int stop;     /* kdr_exec_stop, first reason wins */
+    atomic_int cancel;   /* kdr_exec_cancel was called */
+    atomic_int core_rc;  /* first core error of any chunk */
+    atomic_llong cpu_ns; /* thread CPU time spent on it, summed */
+
+    double t_submit, t_pick, t_trace0, t_trace1;
+
+    /* completion, for kdr_exec_wait */
+    pthread_mutex_t m;
+    pthread_cond_t cv;
+    int finished;
+
+    /* the kind's own state */
+    union {
+        struct {
+            kdr_bundle_request req;
+            kdr_hits hits;
+        } bundle;
+        struct {
+            kdr_frustum_request req;
+            kdr_hits hits;
+        } frustum;
+        struct {
+            kdr_shadow_request req;
+            float *visibility;
+            kdr_shadow_stats *stats; /* one per chunk, summed by encode */
+            size_t per_chunk;        /* points */
+        } shadow;
+    } k;
+};
+
+/* The executor: its job list, its threads and its books. */
+struct kdr_exec {
+    pthread_mutex_t lock;
+    pthread_cond_t work; /* a job may be ready for a worker, or stop */
+    kdr_exec_job *head, *tail;
+    int stop;
+    atomic_int shutting_down;
+    kdr_exec_config cfg;
+    size_t slots;
+    /* books, under lock */
+    size_t slots_used, queued, running, bytes_used;
+    unsigned busy;
+    uint64_t admitted, rejected_queue, rejected_memory, rejected_too_large;
+    uint64_t completed, deadlines, cancelled, shutdown, out_of_memory;
+    double mean_s;
+    unsigned nthreads;
+    pthread_t threads[];
+};
+
+/* Under ex->lock: returns c's queue slot if it still holds one. */
+void kdr_exec_drop_slot(kdr_exec *ex, kdr_exec_claim *c);
+
+/* The step table of a kind (kdr_exec_kinds.c). */
+const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind);
+
+/* Records a problem answer on the job's result (the first one wins). */
+void kdr_exec_fail(kdr_exec_job *j, int status, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+/* A protocol error: 500 (protocol/ runs out of memory) becomes 503. */
+void kdr_exec_fail_proto(kdr_exec_job *j, const kdr_proto_error *err);
+/* Notes a core error from a chunk (the first one wins). */
+void kdr_exec_note_rc(kdr_exec_job *j, int rc);
+/* First item and count of chunk c, for work of total items in chunks of per. */
+void kdr_exec_chunk_range(size_t total, size_t per, size_t c, size_t *first,
+                          size_t *count);
+
+#endif

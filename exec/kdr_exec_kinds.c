@@ -1,0 +1,289 @@
+/*
+ * kdr_exec_kinds.c — the three query kinds as the executor runs them: how a
+ * body is parsed (protocol/), how much memory the parsed request and the
+ * answer take (estimated before anything is allocated, so the claim can be
+ * charged first), how one chunk is traced (core/, over a disjoint range of
+ * the output) and how the answer is encoded: the fields the request chose,
+ * as JSON or base64 text (its "encoding" member) or as CBOR when the answer
+ * media type is CBOR. Bodies are parsed by their media type (JSON or CBOR).
+ * Fast and reference modes differ only in the core mode a chunk asks for.
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kdr_exec_internal.h"
+
+/* The encoding an answer is written in: CBOR when the answer media type is
+ * CBOR, else the JSON or base64 text the request asked for. */
+static kdr_encoding answer_encoding(const kdr_exec_job *j, kdr_encoding asked) {
+    return j->q->answer_media == KDR_MEDIA_CBOR ? KDR_ENCODING_CBOR : asked;
+}
+
+/* Result arrays plus the encoded answer's bound (protocol/ knows it exactly
+ * for every encoding and field set, and allocates no more): only the
+ * fields asked for are encoded, though the core fills every result array
+ * of the query. */
+static size_t hits_estimate(size_t n, kdr_query q, unsigned fields, kdr_encoding enc) {
+    size_t arrays = q == KDR_ANY ? n : n * (3 * sizeof(float) + sizeof(int32_t));
+    return arrays + kdr_proto_hits_answer_max(n, q, fields, enc);
+}
+
+static int hits_alloc(kdr_hits *h, size_t n, kdr_query q) {
+    memset(h, 0, sizeof *h);
+    size_t m = n ? n : 1;
+    if (q == KDR_ANY) return (h->hit = malloc(m)) ? 0 : KDR_ENOMEM;
+    h->t = malloc(m * sizeof *h->t);
+    h->prim = malloc(m * sizeof *h->prim);
+    h->u = malloc(m * sizeof *h->u);
+    h->v = malloc(m * sizeof *h->v);
+    return h->t && h->prim && h->u && h->v ? 0 : KDR_ENOMEM;
+}
+
+static void hits_free(kdr_hits *h) {
+    free(h->t);
+    free(h->prim);
+    free(h->u);
+    free(h->v);
+    free(h->hit);
+    memset(h, 0, sizeof *h);
+}
+
+static size_t chunks_of(size_t total, size_t per) { return (total + per - 1) / per; }
+
+/* rc: the encoder's. The answer's Content-Type goes with it. The buffer
+ * was allocated at the answer's bound; what the answer did not use goes
+ * back to the allocator (a shrinking realloc stays in place), so the claim
+ * is settled to what is really held. */
+static int encoded(kdr_exec_job *j, int rc, kdr_encoding enc) {
+    kdr_buf *b = &j->q->result.body;
+    if (rc != 0) kdr_exec_fail(j, 503, "out of memory while encoding the answer");
+    j->q->result.content_type = kdr_proto_encoding_media(enc);
+    if (rc == 0 && b->len > 0 && b->len < b->cap) {
+        char *p = realloc(b->data, b->len);
+        if (p) {
+            b->data = p;
+            b->cap = b->len;
+        }
+    }
+    return rc;
+}
+
+/* ---- bundle ------------------------------------------------------------------ */
+
+static int bundle_parse(kdr_exec_job *j) {
+    kdr_proto_error err = {0};
+    kdr_bundle_request *r = &j->k.bundle.req;
+    if (kdr_proto_parse_bundle_as(j->q->media, j->q->body, j->q->len, j->q->max_rays, r,
+                                  &err) != 0) {
+        kdr_exec_fail_proto(j, &err);
+        return -1;
+    }
+    const kdr_ray_batch *b = &r->batch;
+    /* arrays the parser allocated; a CBOR typed array read in place
+     * (owned[i] NULL) lives in the body, which is charged already */
+    const size_t floats[4] = {b->org_stride ? 3 * b->n : 3, 3 * b->n,
+                              b->tmin_stride ? b->n : 1, b->tmax_stride ? b->n : 1};
+    j->parsed_bytes = 0;
+    for (int i = 0; i < 4; i++)
+        if (r->owned[i]) j->parsed_bytes += floats[i] * sizeof(float);
+    j->answer_estimate =
+        hits_estimate(b->n, r->query, r->fields, answer_encoding(j, r->encoding));
+    j->nchunks = chunks_of(b->n, KDR_EXEC_CHUNK_RAYS);
+    j->work_rays = b->n;
+    j->deadline_ms = r->deadline_ms;
+    return 0;
+}
+
+static int bundle_alloc(kdr_exec_job *j) {
+    return hits_alloc(&j->k.bundle.hits, j->k.bundle.req.batch.n, j->k.bundle.req.query);
+}
+
+static void bundle_chunk(kdr_exec_job *j, size_t c) {
+    const kdr_bundle_request *r = &j->k.bundle.req;
+    size_t first, count;
+    kdr_exec_chunk_range(r->batch.n, KDR_EXEC_CHUNK_RAYS, c, &first, &count);
+    kdr_trav_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE;
+    kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &r->batch, first, count, r->query,
+                                        mode, &j->k.bundle.hits, NULL));
+}
+
+static int bundle_encode(kdr_exec_job *j) {
+    const kdr_bundle_request *r = &j->k.bundle.req;
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    j->q->result.rays = r->batch.n;
+    return encoded(j,
+                   kdr_proto_encode_hits_fields(&j->k.bundle.hits, r->batch.n, r->query,
+                                                r->fields, enc, &j->q->result.body),
+                   enc);
+}
+
+static void bundle_release(kdr_exec_job *j) {
+    hits_free(&j->k.bundle.hits);
+    kdr_bundle_request_free(&j->k.bundle.req);
+}
+
+/* ---- frustum ------------------------------------------------------------------ */
+
+static int frustum_parse(kdr_exec_job *j) {
+    kdr_proto_error err = {0};
+    kdr_frustum_request *r = &j->k.frustum.req;
+    if (kdr_proto_parse_frustum_as(j->q->media, j->q->body, j->q->len, j->q->max_rays, r,
+                                   &err) != 0) {
+        kdr_exec_fail_proto(j, &err);
+        return -1;
+    }
+    j->parsed_bytes = 0; /* a camera: nothing beyond the job itself */
+    j->answer_estimate =
+        hits_estimate(r->rays, r->query, r->fields, answer_encoding(j, r->encoding));
+    j->nchunks =
+        chunks_of(kdr_frustum_tile_count(&r->camera, r->tile), KDR_EXEC_CHUNK_TILES);
+    j->work_rays = r->rays;
+    j->deadline_ms = r->deadline_ms;
+    return 0;
+}
+
+static int frustum_alloc(kdr_exec_job *j) {
+    return hits_alloc(&j->k.frustum.hits, j->k.frustum.req.rays, j->k.frustum.req.query);
+}
+
+static void frustum_chunk(kdr_exec_job *j, size_t c) {
+    const kdr_frustum_request *r = &j->k.frustum.req;
+    size_t first, count;
+    kdr_exec_chunk_range(kdr_frustum_tile_count(&r->camera, r->tile),
+                         KDR_EXEC_CHUNK_TILES, c, &first, &count);
+    kdr_frustum_mode mode =
+        j->q->mode == KDR_EXEC_FAST ? KDR_FRUSTUM_MULTI4 : KDR_FRUSTUM_RAYS;
+    kdr_exec_note_rc(j, kdr_frustum_trace(j->q->scene, &r->camera, r->tile, first, count,
+                                          r->query, mode, &j->k.frustum.hits, NULL));
+}
+
+static int frustum_encode(kdr_exec_job *j) {
+    const kdr_frustum_request *r = &j->k.frustum.req;
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    j->q->result.rays = r->rays;
+    return encoded(j,
+                   kdr_proto_encode_hits_fields(&j->k.frustum.hits, r->rays, r->query,
+                                                r->fields, enc, &j->q->result.body),
+                   enc);
+}
+
+static void frustum_release(kdr_exec_job *j) { hits_free(&j->k.frustum.hits); }
+
+/* ---- cone-shadow ---------------------------------------------------------------- */
+
+static int shadow_parse(kdr_exec_job *j) {
+    kdr_proto_error err = {0};
+    kdr_shadow_request *r = &j->k.shadow.req;
+    if (kdr_proto_parse_shadow_as(j->q->media, j->q->body, j->q->len, j->q->max_rays, r,
+                                  &err) != 0) {
+        kdr_exec_fail_proto(j, &err);
+        return -1;
+    }
+    const kdr_shadow_query *q = &r->query;
+    size_t nvis = q->n * q->nlights;
+    size_t per = KDR_EXEC_CHUNK_SHADOW_RAYS / (q->nlights * q->samples);
+    j->k.shadow.per_chunk = per < 1                       ? 1
+                            : per > KDR_EXEC_CHUNK_POINTS ? KDR_EXEC_CHUNK_POINTS
+                                                          : per;
+    j->nchunks = chunks_of(q->n, j->k.shadow.per_chunk);
+    j->work_rays = (uint64_t)q->n * q->nlights * q->samples;
+    /* arrays the parser allocated (not CBOR typed arrays read in place) */
+    j->parsed_bytes = (r->owned_points ? 3 * q->n * sizeof(float) : 0) +
+                      (r->owned_normals ? 3 * q->n * sizeof(float) : 0) +
+                      q->nlights * sizeof(kdr_sphere_light);
+    j->answer_estimate = nvis * sizeof(float) + j->nchunks * sizeof(kdr_shadow_stats) +
+                         kdr_proto_shadow_answer_max(q->n, q->nlights, r->want_stats,
+                                                     answer_encoding(j, r->encoding));
+    j->deadline_ms = r->deadline_ms;
+    return 0;
+}
+
+static int shadow_alloc(kdr_exec_job *j) {
+    const kdr_shadow_query *q = &j->k.shadow.req.query;
+    size_t nvis = q->n * q->nlights;
+    j->k.shadow.visibility = malloc((nvis ? nvis : 1) * sizeof(float));
+    j->k.shadow.stats = calloc(j->nchunks ? j->nchunks : 1, sizeof(kdr_shadow_stats));
+    return j->k.shadow.visibility && j->k.shadow.stats ? 0 : KDR_ENOMEM;
+}
+
+static void shadow_chunk(kdr_exec_job *j, size_t c) {
+    const kdr_shadow_query *q = &j->k.shadow.req.query;
+    size_t first, count;
+    kdr_exec_chunk_range(q->n, j->k.shadow.per_chunk, c, &first, &count);
+    kdr_shadow_mode mode =
+        j->q->mode == KDR_EXEC_FAST ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS;
+    kdr_exec_note_rc(j, kdr_shadow_trace(j->q->scene, q, first, count, mode,
+                                         j->k.shadow.visibility, &j->k.shadow.stats[c]));
+}
+
+/* The core refuses a point whose offset start lies inside a light (the
+ * protocol checked the point itself): name the first such point. */
+static void shadow_name_invalid(kdr_exec_job *j) {
+    const kdr_shadow_query *q = &j->k.shadow.req.query;
+    kdr_ray ray;
+    for (size_t i = 0; i < q->n; i++)
+        for (size_t l = 0; l < q->nlights; l++)
+            if (kdr_shadow_ray(j->q->scene, q, i, l, 0, &ray) == KDR_EINVAL) {
+                kdr_exec_fail(j, 400,
+                              "points[%zu]: inside lights[%zu] (distance to the center "
+                              "<= radius)",
+                              i, l);
+                return;
+            }
+}
+
+static int shadow_encode(kdr_exec_job *j) {
+    const kdr_shadow_request *r = &j->k.shadow.req;
+    kdr_shadow_stats sum = {0, 0, 0};
+    for (size_t c = 0; c < j->nchunks; c++) {
+        sum.cones_decided += j->k.shadow.stats[c].cones_decided;
+        sum.rays_traced += j->k.shadow.stats[c].rays_traced;
+        sum.nodes_visited += j->k.shadow.stats[c].nodes_visited;
+    }
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    j->q->result.rays = sum.rays_traced;
+    return encoded(j,
+                   kdr_proto_encode_shadow(j->k.shadow.visibility, r->query.n,
+                                           r->query.nlights, r->want_stats ? &sum : NULL,
+                                           enc, &j->q->result.body),
+                   enc);
+}
+
+static void shadow_release(kdr_exec_job *j) {
+    free(j->k.shadow.visibility);
+    free(j->k.shadow.stats);
+    j->k.shadow.visibility = NULL;
+    j->k.shadow.stats = NULL;
+    kdr_shadow_request_free(&j->k.shadow.req);
+}
+
+/* A cone-shadow chunk that failed with KDR_EINVAL hit a point the core
+ * refuses: that is the client's 400, not our 500. */
+static int shadow_core_error(kdr_exec_job *j, int rc) {
+    if (rc != KDR_EINVAL) return 0;
+    shadow_name_invalid(j);
+    return j->q->result.status == 400;
+}
+
+/* ---- the table -------------------------------------------------------------------- */
+
+static const kdr_exec_kind_ops BUNDLE = {bundle_parse,  bundle_alloc,   bundle_chunk,
+                                         bundle_encode, bundle_release, NULL};
+static const kdr_exec_kind_ops FRUSTUM = {frustum_parse,  frustum_alloc,   frustum_chunk,
+                                          frustum_encode, frustum_release, NULL};
+static const kdr_exec_kind_ops SHADOW = {shadow_parse,   shadow_alloc,
+                                         shadow_chunk,   shadow_encode,
+                                         shadow_release, shadow_core_error};
+
+const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
+    switch (kind) {
+    case KDR_EXEC_BUNDLE:
+        return &BUNDLE;
+    case KDR_EXEC_FRUSTUM:
+        return &FRUSTUM;
+    case KDR_EXEC_CONE_SHADOW:
+        return &SHADOW;
+    }
+    return NULL;
+}
