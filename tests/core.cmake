@@ -27,3 +27,10 @@ endif()
 add_executable(test_core_tri4 ${CMAKE_CURRENT_SOURCE_DIR}/test_core_tri4.c)
 target_include_directories(test_core_tri4 PRIVATE ${CMAKE_SOURCE_DIR}/core)
 add_test(NAME test_core_tri4 COMMAND test_core_tri4)
+
+# kdray-tree-digest: a tool, not a test: per ladder scene the tree's
+# statistics, build time and digests of its node and reference arrays (equal
+# digests = byte-identical trees; used to check pure refactors of the build).
+add_executable(kdray_tree_digest ${CMAKE_CURRENT_SOURCE_DIR}/tree_digest.c)
+set_target_properties(kdray_tree_digest PROPERTIES OUTPUT_NAME kdray-tree-digest)
+target_link_libraries(kdray_tree_digest PRIVATE kdray_testsupport)
