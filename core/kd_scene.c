@@ -1,7 +1,7 @@
 /*
  * kd_scene.c — the small things around a built scene: error strings, the
  * tuned default build options, accessors and freeing. The build itself is
- * in kd_build.c, the walks in kd_traverse_*.c.
+ * in kd_build*.c, the walks in kd_traverse_*.c.
  */
 #include <stdlib.h>
 #include <string.h>
