@@ -1,19 +1,26 @@
 /*
- * kd_build.c — SAH kd-tree construction in O(N log N), after Wald and
- * Havran, "On building fast kd-trees for ray tracing, and on doing that in
- * O(N log N)" (2006): the recursion, the node and reference arrays it
- * fills, and the public kdr_scene_build. The stages it calls live in
- * kd_build_events.c (sorted event lists and their partition),
- * kd_build_clip.c (perfect splits) and kd_build_sah.c (the split search);
+ * kd_build.c — SAH kd-tree construction: the recursion, and the public
+ * kdr_scene_build. The stages it calls live in kd_build_events.c (sorted
+ * event lists and their partition), kd_build_clip.c (perfect splits),
+ * kd_build_sah.c (the split searches), kd_build_bin.c (the binned top) and
+ * kd_build_par.c (threads, and the final node and reference arrays);
  * kd_build.h says what they share.
  *
- * Every node has three sorted event lists, one per axis, sorted once at
- * the root. A node becomes a leaf when it is small, deep, or when pbrt's
- * bad-refine rule says its best split does not pay; otherwise its lists
- * are split and both children are built depth-first, below child first,
- * so the below child is always the node right after its parent. A
- * triangle lying in the split plane goes to the cheaper side; a triangle
+ * A node with more than opts.exact_max triangles is binned: its triangles
+ * are a plain array with their bounds, its plane comes from min-max bins
+ * (Mitsuba 0.6's scheme). Smaller nodes use the exact O(N log N) sweep of
+ * Wald and Havran, "On building fast kd-trees for ray tracing, and on doing
+ * that in O(N log N)" (2006): three sorted event lists per node, made once
+ * where the node turned exact (or at the root). A node becomes a leaf when
+ * it is small, deep, or when pbrt's bad-refine rule says its best split
+ * does not pay; otherwise both children are built depth-first, below child
+ * first, so the below child is always the node right after its parent. A
+ * triangle lying in the split plane goes to one side only; a triangle
  * touching the plane from one side goes to that side only.
+ *
+ * With threads, a child subtree big enough (builder.spawn_min) is handed
+ * to another worker instead of being built in place; the decisions never
+ * depend on where a subtree is built, so neither does the tree.
  */
 #include <assert.h>
 #include <math.h>
@@ -26,75 +33,145 @@
 #include "kd_build.h"
 #include "kd_traverse.h"
 
-#define KD_MAX_NODES ((size_t)1 << 30) /* above-child index fits 30 bits */
-#define KD_LOG_PHASES 1000000          /* log each phase above this size */
-#define KD_ROOT_PAD 0x1p-20f           /* root padding, relative (~8 ulps) */
+#define KD_LOG_PHASES 1000000 /* log each phase above this size */
+#define KD_ROOT_PAD 0x1p-20f  /* root padding, relative (~8 ulps) */
 
-static double box_area(const kdr_bounds *b) {
-    double dx = (double)b->max[0] - b->min[0];
-    double dy = (double)b->max[1] - b->min[1];
-    double dz = (double)b->max[2] - b->min[2];
-    return 2.0 * (dx * dy + dy * dz + dz * dx);
-}
-
-/* ---- the recursion ------------------------------------------------------------- */
+/* ---- fragments: where a task writes ------------------------------------------- */
 
 static int push_node(builder *b, size_t *idx) {
-    if (b->nnodes >= KD_MAX_NODES)
+    kd_frag *f = b->frag;
+    if (f->nnodes >= KD_MAX_NODES)
         return KDR_ERANGE;
-    if (b->nnodes == b->cap_nodes) {
-        size_t cap = b->cap_nodes ? 2 * b->cap_nodes : 1024;
-        kd_node *n = realloc(b->nodes, cap * sizeof *n);
+    if (f->nnodes == f->cap_nodes) {
+        size_t cap = f->cap_nodes ? 2 * f->cap_nodes : 1024;
+        kd_node *n = realloc(f->nodes, cap * sizeof *n);
         if (!n)
             return KDR_ENOMEM;
-        b->nodes = n;
-        b->cap_nodes = cap;
+        f->nodes = n;
+        f->cap_nodes = cap;
     }
-    *idx = b->nnodes++;
+    *idx = f->nnodes++;
     return KDR_OK;
 }
 
 static int reserve_refs(builder *b, size_t more) {
-    if (b->nrefs + more > UINT32_MAX)
+    kd_frag *f = b->frag;
+    if (f->nrefs + more > UINT32_MAX)
         return KDR_ERANGE;
-    if (b->nrefs + more <= b->cap_refs)
+    if (f->nrefs + more <= f->cap_refs)
         return KDR_OK;
-    size_t cap = b->cap_refs ? b->cap_refs : 1024;
-    while (cap < b->nrefs + more)
+    size_t cap = f->cap_refs ? f->cap_refs : 1024;
+    while (cap < f->nrefs + more)
         cap *= 2;
-    uint32_t *r = realloc(b->refs, cap * sizeof *r);
+    uint32_t *r = realloc(f->refs, cap * sizeof *r);
     if (!r)
         return KDR_ENOMEM;
-    b->refs = r;
-    b->cap_refs = cap;
+    f->refs = r;
+    f->cap_refs = cap;
     return KDR_OK;
 }
 
-static void make_leaf(builder *b, const ev_list *ev, const kdr_bounds *box,
-                      int depth) {
+/* A new leaf of count references; returns where they go, NULL on error. */
+static uint32_t *push_leaf(builder *b, size_t count) {
     size_t idx;
-    const size_t count = ev->ntri;
     int err = count >= KD_MAX_TRIS ? KDR_ERANGE : reserve_refs(b, count);
     if (err == KDR_OK)
         err = push_node(b, &idx);
     if (err != KDR_OK) {
         b->err = err;
-        return;
+        return NULL;
     }
-    b->nodes[idx].u.first = (uint32_t)b->nrefs;
-    b->nodes[idx].bits = ((uint32_t)count << 2) | KD_LEAF;
-    for (size_t i = 0; i < ev->n[0]; i++)
-        if (ev_type(ev->e[0][i]) != EV_END)
-            b->refs[b->nrefs++] = ev_tri(ev->e[0][i]);
-    b->leaves++;
-    b->empty_leaves += count == 0;
-    if ((uint64_t)depth > b->depth_seen)
-        b->depth_seen = (uint64_t)depth;
-    b->sah += b->o.isect_cost * (double)count * box_area(box) * b->inv_root_area;
+    kd_frag *f = b->frag;
+    f->nodes[idx].u.first = (uint32_t)f->nrefs;
+    f->nodes[idx].bits = ((uint32_t)count << 2) | KD_LEAF;
+    f->nrefs += count;
+    return f->refs + f->nrefs - count;
 }
 
-static void build_node(builder *b, const kdr_bounds *box, const ev_list *ev,
-                       int depth, int bad);
+/* The placeholder of a subtree another worker builds into fragment id. */
+static void push_link(builder *b, uint32_t id) {
+    size_t idx;
+    int err = push_node(b, &idx);
+    if (err != KDR_OK) {
+        b->err = err;
+        return;
+    }
+    b->frag->nodes[idx].u.first = KD_LINK;
+    b->frag->nodes[idx].bits = (id << 2) | KD_LEAF;
+    b->frag->links++;
+}
+
+/* An interior node at split s; its above child is set by set_above. */
+static int push_interior(builder *b, const kd_split *s, size_t *idx) {
+    int err = push_node(b, idx);
+    if (err != KDR_OK) {
+        b->err = err;
+        return err;
+    }
+    b->frag->nodes[*idx].u.split = s->pos;
+    b->frag->nodes[*idx].bits = (uint32_t)s->axis;
+    return KDR_OK;
+}
+
+static void set_above(builder *b, size_t idx, int axis) {
+    b->frag->nodes[idx].bits = ((uint32_t)b->frag->nnodes << 2) | (uint32_t)axis;
+}
+
+static int stopped(builder *b) { return b->err || kd_build_failed(b); }
+
+/* pbrt's termination: is splitting a node of n triangles at s worth it?
+ * Updates the count of bad refines on the path. */
+static int split_pays(size_t n, const kd_split *s, const builder *b, int *bad) {
+    const float leaf_cost = b->o.isect_cost * (float)n;
+    if (s->cost > leaf_cost)
+        ++*bad;
+    return !((s->cost > 4.0f * leaf_cost && n < KD_BAD_SMALL) ||
+             *bad >= KD_BAD_REFINES);
+}
+
+/* ---- the exact sweep (event lists) --------------------------------------------- */
+
+static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
+                        int depth, int bad);
+
+static void make_leaf(builder *b, const ev_list *ev) {
+    uint32_t *r = push_leaf(b, ev->ntri);
+    if (!r)
+        return;
+    for (size_t i = 0; i < ev->n[0]; i++)
+        if (ev_type(ev->e[0][i]) != EV_END)
+            *r++ = ev_tri(ev->e[0][i]);
+}
+
+/* Hands the above child's lists (copied out of this worker's scratch) to
+ * another worker; 0 if it must be built here. */
+static int spawn_exact(builder *b, const kdr_bounds *cbox, const ev_list *ch,
+                       int depth, int bad, uint32_t *id) {
+    if (!b->pool || ch->ntri < b->spawn_min)
+        return 0;
+    kd_task t;
+    memset(&t, 0, sizeof t);
+    t.kind = KD_TASK_EXACT;
+    t.box = *cbox;
+    t.depth = depth;
+    t.bad = bad;
+    t.block = malloc((ch->n[0] + ch->n[1] + ch->n[2] + 1) * sizeof(kd_event));
+    if (!t.block)
+        return 0;
+    kd_event *w = t.block;
+    for (int k = 0; k < 3; k++) {
+        memcpy(w, ch->e[k], ch->n[k] * sizeof *w);
+        t.ev.e[k] = w;
+        t.ev.n[k] = ch->n[k];
+        w += ch->n[k];
+    }
+    t.ev.ntri = ch->ntri;
+    if (kd_spawn(b, &t, id) != KDR_OK) {
+        free(t.block);
+        return 0;
+    }
+    return 1;
+}
 
 static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
                           const kd_split *s, int depth, int bad) {
@@ -103,37 +180,146 @@ static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
     ev_list ch[2];
     size_t idx = 0;
     int err = kd_split_events(b, ev, s, box, cbox, depth, ch);
-    if (err == KDR_OK)
-        err = push_node(b, &idx);
     if (err != KDR_OK) {
         b->err = err;
         return;
     }
-    b->nodes[idx].u.split = s->pos;
-    b->nodes[idx].bits = (uint32_t)s->axis;
-    b->sah += b->o.trav_cost * box_area(box) * b->inv_root_area;
-    build_node(b, &cbox[0], &ch[0], depth + 1, bad);
-    b->nodes[idx].bits = ((uint32_t)b->nnodes << 2) | (uint32_t)s->axis;
-    build_node(b, &cbox[1], &ch[1], depth + 1, bad);
+    if (push_interior(b, s, &idx) != KDR_OK)
+        return;
+    uint32_t id;
+    const int spawned = spawn_exact(b, &cbox[1], &ch[1], depth + 1, bad, &id);
+    build_exact(b, &cbox[0], &ch[0], depth + 1, bad);
+    set_above(b, idx, s->axis);
+    if (spawned)
+        push_link(b, id);
+    else
+        build_exact(b, &cbox[1], &ch[1], depth + 1, bad);
 }
 
-static void build_node(builder *b, const kdr_bounds *box, const ev_list *ev,
-                       int depth, int bad) {
+static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
+                        int depth, int bad) {
     kd_split s;
-    if (b->err)
+    if (stopped(b))
         return;
     if (ev->ntri > (size_t)b->o.leaf_size && depth < b->max_depth &&
-        kd_find_split(b, box, ev, &s)) {
-        const float leaf_cost = b->o.isect_cost * (float)ev->ntri;
-        if (s.cost > leaf_cost)
-            bad++;
-        if (!((s.cost > 4.0f * leaf_cost && ev->ntri < KD_BAD_SMALL) ||
-              bad >= KD_BAD_REFINES)) {
-            make_interior(b, box, ev, &s, depth, bad);
-            return;
-        }
+        kd_find_split(b, box, ev, &s) && split_pays(ev->ntri, &s, b, &bad)) {
+        make_interior(b, box, ev, &s, depth, bad);
+        return;
     }
-    make_leaf(b, ev, box, depth);
+    make_leaf(b, ev);
+}
+
+/* ---- the binned top (prim arrays) ------------------------------------------------ */
+
+static void build_binned(builder *b, const kdr_bounds *box, kd_prims *p,
+                         int depth, int bad);
+
+/* The subtree of a node small enough for the exact sweep. */
+static void binned_to_exact(builder *b, const kdr_bounds *box, kd_prims *p,
+                            int depth, int bad) {
+    ev_list ev;
+    kd_event *block;
+    int err = kd_prims_to_events(p, &ev, &block);
+    free(p->p);
+    p->p = NULL;
+    if (err == KDR_OK && !b->side && !(b->side = malloc(b->ntris)))
+        err = KDR_ENOMEM;
+    if (err == KDR_OK)
+        build_exact(b, box, &ev, depth, bad);
+    else
+        b->err = err;
+    free(block);
+}
+
+static int spawn_binned(builder *b, const kdr_bounds *cbox, kd_prims *ch,
+                        int depth, int bad, uint32_t *id) {
+    if (!b->pool || ch->n < b->spawn_min)
+        return 0;
+    kd_task t;
+    memset(&t, 0, sizeof t);
+    t.kind = KD_TASK_BINNED;
+    t.box = *cbox;
+    t.depth = depth;
+    t.bad = bad;
+    t.prims = *ch;
+    if (kd_spawn(b, &t, id) != KDR_OK)
+        return 0;
+    ch->p = NULL; /* the task owns it now */
+    return 1;
+}
+
+static void make_interior_binned(builder *b, const kdr_bounds *box, kd_prims *p,
+                                 const kd_split *s, int depth, int bad) {
+    kdr_bounds cbox[2] = {*box, *box};
+    cbox[0].max[s->axis] = cbox[1].min[s->axis] = s->pos;
+    kd_prims ch[2];
+    size_t idx;
+    int err = kd_bin_partition(b, box, s, cbox, p, ch);
+    free(p->p);
+    p->p = NULL;
+    if (err != KDR_OK) {
+        b->err = err;
+        return;
+    }
+    if (push_interior(b, s, &idx) != KDR_OK) {
+        free(ch[0].p);
+        free(ch[1].p);
+        return;
+    }
+    uint32_t id;
+    const int spawned = spawn_binned(b, &cbox[1], &ch[1], depth + 1, bad, &id);
+    build_binned(b, &cbox[0], &ch[0], depth + 1, bad);
+    set_above(b, idx, s->axis);
+    if (spawned)
+        push_link(b, id);
+    else
+        build_binned(b, &cbox[1], &ch[1], depth + 1, bad);
+}
+
+/* Builds the subtree of a binned node; frees p->p. */
+static void build_binned(builder *b, const kdr_bounds *box, kd_prims *p,
+                         int depth, int bad) {
+    kd_split s;
+    if (stopped(b)) {
+        free(p->p);
+        p->p = NULL;
+        return;
+    }
+    if (p->n <= (size_t)b->o.exact_max) {
+        binned_to_exact(b, box, p, depth, bad);
+        return;
+    }
+    if (p->n > (size_t)b->o.leaf_size && depth < b->max_depth &&
+        kd_bin_split(b, box, p, &s) && split_pays(p->n, &s, b, &bad)) {
+        make_interior_binned(b, box, p, &s, depth, bad);
+        return;
+    }
+    uint32_t *r = push_leaf(b, p->n);
+    for (size_t i = 0; r && i < p->n; i++)
+        r[i] = p->p[i].tri;
+    free(p->p);
+    p->p = NULL;
+}
+
+void kd_run_task(builder *b, kd_task *t) {
+    switch (t->kind) {
+    case KD_TASK_SORT:
+        kd_radix_sort(t->ev.e[0], t->block, t->ev.n[0]);
+        break;
+    case KD_TASK_EXACT:
+        b->frag = t->frag;
+        if (!b->side && !(b->side = malloc(b->ntris)))
+            b->err = KDR_ENOMEM;
+        else
+            build_exact(b, &t->box, &t->ev, t->depth, t->bad);
+        break;
+    case KD_TASK_BINNED:
+        b->frag = t->frag;
+        build_binned(b, &t->box, &t->prims, t->depth, t->bad);
+        break;
+    }
+    free(t->block);
+    t->block = NULL;
 }
 
 /* ---- the public build -------------------------------------------------------- */
@@ -157,7 +343,8 @@ static void logf_(kdr_log_fn log, void *user, const char *fmt, ...) {
 
 static int check_opts(const kdr_build_opts *o) {
     if (!(o->isect_cost > 0.0f) || !(o->trav_cost >= 0.0f) ||
-        !(o->empty_bonus >= 0.0f && o->empty_bonus < 1.0f) || o->leaf_size < 0)
+        !(o->empty_bonus >= 0.0f && o->empty_bonus < 1.0f) || o->leaf_size < 0 ||
+        o->threads < 0 || o->exact_max < 0)
         return KDR_EINVAL;
     return KDR_OK;
 }
@@ -202,12 +389,17 @@ static void pad_root(kdr_scene *s) {
     s->diagonal = (float)sqrt(d2);
 }
 
-static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev) {
-    kd_event *tmp = malloc((2 * nvalid + 1) * sizeof *tmp);
-    int err = tmp ? KDR_OK : KDR_ENOMEM;
+/* The root's sorted event lists (exact build from the root): made in
+ * triangle order, each axis sorted on its own (SORT tasks, in parallel when
+ * there are threads). */
+static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev,
+                       kd_task sort[3]) {
+    int err = KDR_OK;
     memset(ev, 0, sizeof *ev);
+    memset(sort, 0, 3 * sizeof *sort);
     for (int k = 0; k < 3 && err == KDR_OK; k++)
-        if (!(ev->e[k] = malloc((2 * nvalid + 1) * sizeof(kd_event))))
+        if (!(ev->e[k] = malloc((2 * nvalid + 1) * sizeof(kd_event))) ||
+            !(sort[k].block = malloc((2 * nvalid + 1) * sizeof(kd_event))))
             err = KDR_ENOMEM;
     for (size_t i = 0; i < s->ntris && err == KDR_OK; i++) {
         const float *t = s->tris + 9 * i;
@@ -220,12 +412,17 @@ static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev) {
         }
         ev_add(ev->e, ev->n, &bb, (uint32_t)i);
     }
-    for (int k = 0; k < 3 && err == KDR_OK; k++)
-        kd_radix_sort(ev->e[k], tmp, ev->n[k]);
     ev->ntri = nvalid;
-    free(tmp);
-    if (err != KDR_OK)
+    for (int k = 0; k < 3; k++) {
+        sort[k].kind = KD_TASK_SORT;
+        sort[k].ev.e[0] = ev->e[k];
+        sort[k].ev.n[0] = ev->n[k];
+    }
+    if (err != KDR_OK) {
         kd_ev_free(ev);
+        for (int k = 0; k < 3; k++)
+            free(sort[k].block);
+    }
     return err;
 }
 
@@ -237,55 +434,53 @@ static int max_depth_for(const kdr_build_opts *o, size_t n) {
     return d < KD_MAX_DEPTH ? d : KD_MAX_DEPTH;
 }
 
+/* Subtrees worth a task: big enough to repay the hand-over, few enough
+ * (KD_TASKS_PER_THREAD per thread) to keep the copies of exact lists cheap.
+ * Only where the work is cut depends on the thread count, never the tree. */
+static size_t spawn_min_for(size_t nvalid, int threads) {
+    const size_t per = nvalid / ((size_t)KD_TASKS_PER_THREAD * (size_t)threads);
+    return per > KD_SPAWN_MIN ? per : KD_SPAWN_MIN;
+}
+
 static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
                       kdr_log_fn log, void *user) {
-    builder b;
-    memset(&b, 0, sizeof b);
-    b.tris = s->tris;
-    b.o = *o;
-    b.max_depth = max_depth_for(o, nvalid);
-    double area = box_area(&s->bounds);
-    b.inv_root_area = area > 0.0 ? 1.0 / area : 0.0;
+    const int threads = o->threads > 1 ? o->threads : 1;
+    builder proto;
+    memset(&proto, 0, sizeof proto);
+    proto.tris = s->tris;
+    proto.ntris = s->ntris;
+    proto.o = *o;
+    proto.max_depth = max_depth_for(o, nvalid);
+    proto.spawn_min = spawn_min_for(nvalid, threads);
     const int phases = nvalid > KD_LOG_PHASES;
     double t0 = now_ms();
-    ev_list ev = {{NULL, NULL, NULL}, {0, 0, 0}, 0};
-    b.side = malloc(s->ntris);
-    int err = b.side ? root_events(s, nvalid, &ev) : KDR_ENOMEM;
+    kd_task root, sort[3];
+    memset(&root, 0, sizeof root);
+    root.box = s->bounds;
+    int err, nsort = 0;
+    if (nvalid > (size_t)o->exact_max) {
+        root.kind = KD_TASK_BINNED;
+        err = kd_root_prims(s->tris, s->ntris, nvalid, &root.prims);
+    } else {
+        root.kind = KD_TASK_EXACT;
+        err = root_events(s, nvalid, &root.ev, sort);
+        nsort = 3;
+    }
+    kd_frag **frags = NULL;
+    size_t nfrags = 0;
+    if (err == KDR_OK)
+        err = kd_build_run(&proto, threads, sort, nsort, &root, &frags, &nfrags);
+    else
+        free(root.prims.p);
+    kd_ev_free(&root.ev);
     if (err == KDR_OK) {
-        if (phases)
-            logf_(log, user, "kd build: %zu events sorted in %.1f ms",
-                  ev.n[0] + ev.n[1] + ev.n[2], now_ms() - t0);
-        build_node(&b, &s->bounds, &ev, 0, 0);
-        err = b.err;
-        if (phases && err == KDR_OK)
-            logf_(log, user, "kd build: %zu nodes, %zu refs after %.1f ms",
-                  b.nnodes, b.nrefs, now_ms() - t0);
+        if (phases || threads > 1)
+            logf_(log, user, "kd build: %zu pieces on %d thread%s after %.1f ms",
+                  nfrags, threads, threads == 1 ? "" : "s", now_ms() - t0);
+        err = kd_stitch(frags, nfrags, o, s);
     }
-    free(b.side);
-    kd_ev_free(&ev);
-    for (int d = 0; d <= KD_MAX_DEPTH; d++)
-        free(b.lvl[d]);
-    free(b.both);
-    free(b.add);
-    if (err != KDR_OK) {
-        free(b.nodes);
-        free(b.refs);
-        return err;
-    }
-    s->nodes = b.nodes;
-    s->nnodes = b.nnodes;
-    s->refs = b.refs;
-    s->nrefs = b.nrefs;
-    s->stats.nodes = b.nnodes;
-    s->stats.leaves = b.leaves;
-    s->stats.empty_leaves = b.empty_leaves;
-    s->stats.max_depth = b.depth_seen;
-    s->stats.refs = b.nrefs;
-    s->stats.refs_per_leaf = b.leaves > b.empty_leaves
-                                 ? (double)b.nrefs / (double)(b.leaves - b.empty_leaves)
-                                 : 0.0;
-    s->stats.sah_cost = b.sah;
-    return KDR_OK;
+    kd_frags_free(frags, nfrags);
+    return err;
 }
 
 #ifndef NDEBUG

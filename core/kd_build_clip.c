@@ -118,24 +118,36 @@ static int tri_bounds_in_box(const float *tri, const kdr_bounds *box,
     return 1;
 }
 
+/* The bounds of the parts of tri inside cbox[0] and cbox[1], the halves of
+ * box split at pos on axis; bit s of the result is set when side s keeps
+ * something. The triangle is clipped to the node's box once, then that
+ * polygon to either side of the plane. */
+unsigned kd_clip_tri(const float *tri, const kdr_bounds *box, int axis, float pos,
+                     const kdr_bounds cbox[2], kdr_bounds bb[2]) {
+    cvert poly[16], half[16];
+    const int n = clip_to_box(tri, box, poly);
+    unsigned sides = 0;
+    for (int side = 0; side < 2; side++) {
+        const int m = n ? clip_plane(poly, n, half, axis, pos, side ? 1.0 : -1.0) : 0;
+        if (poly_bounds(half, m, &cbox[side], &bb[side]) ||
+            tri_bounds_in_box(tri, &cbox[side], &bb[side]))
+            sides |= 1u << side;
+    }
+    return sides;
+}
+
 /* Clips the straddlers to both child boxes; their new events go to
- * add[0..2] (left) and add[3..5] (right), sorted. Each triangle is clipped
- * to the node's box once, then that polygon to either side of the plane. */
+ * add[0..2] (left) and add[3..5] (right), sorted. */
 void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
                   const kd_split *s, const kdr_bounds cbox[2], kd_event *add[6],
                   size_t nadd[6], size_t ntri[2]) {
     for (size_t i = 0; i < nboth; i++) {
         const float *tri = b->tris + 9 * (size_t)b->both[i];
-        cvert poly[16], half[16];
-        const int n = clip_to_box(tri, box, poly);
+        kdr_bounds bb[2];
+        const unsigned sides = kd_clip_tri(tri, box, s->axis, s->pos, cbox, bb);
         for (int side = 0; side < 2; side++) {
-            kdr_bounds bb;
-            const int m = n ? clip_plane(poly, n, half, s->axis, s->pos,
-                                         side ? 1.0 : -1.0)
-                            : 0;
-            if (poly_bounds(half, m, &cbox[side], &bb) ||
-                tri_bounds_in_box(tri, &cbox[side], &bb)) {
-                ev_add(add + 3 * side, nadd + 3 * side, &bb, b->both[i]);
+            if (sides & (1u << side)) {
+                ev_add(add + 3 * side, nadd + 3 * side, &bb[side], b->both[i]);
                 ntri[side]++;
             }
         }

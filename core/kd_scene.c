@@ -32,6 +32,8 @@ void kdr_build_opts_default(kdr_build_opts *opts) {
     opts->empty_bonus = KD_EMPTY_BONUS;
     opts->max_depth = 0;
     opts->leaf_size = KD_LEAF_SIZE;
+    opts->exact_max = KD_EXACT_MAX;
+    opts->threads = 0;
 }
 
 void kdr_scene_free(kdr_scene *scene) {

@@ -42,6 +42,17 @@
 #define KD_DEPTH_BASE 6.0
 #define KD_DEPTH_PER_LOG2 1.3
 
+/* ---- binned and parallel build (kd_build*.c) -------------------------------
+ * Nodes with more than KD_EXACT_MAX triangles choose their plane from
+ * KD_BINS min-max bins per axis (Mitsuba 0.6's scheme), smaller ones by the
+ * exact sweep over sorted events. A subtree with at least
+ * max(KD_SPAWN_MIN, N / (KD_TASKS_PER_THREAD * threads)) triangles is
+ * handed to another build thread. */
+#define KD_EXACT_MAX 16384
+#define KD_BINS 256
+#define KD_SPAWN_MIN 4096
+#define KD_TASKS_PER_THREAD 16
+
 /* ---- single rays (kd_traverse_single.c) ----------------------------------- */
 
 /* Leaves with at least this many references are tested four at a time,
