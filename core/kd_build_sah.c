@@ -17,19 +17,23 @@ typedef struct sah_ctx {
     float isect, trav, bonus;
 } sah_ctx;
 
+/* Counts stay below 2^30: the signed conversion is one instruction and
+ * gives the same float as the unsigned one. */
 static float sah_cost(const sah_ctx *c, float p, size_t nl, size_t nr) {
     float pl = 2.0f * (c->cap + (p - c->min) * c->perim) * c->inv_area;
     float pr = 2.0f * (c->cap + (c->max - p) * c->perim) * c->inv_area;
     float eb = (nl == 0 || nr == 0) ? 1.0f - c->bonus : 1.0f;
-    return c->trav + c->isect * eb * (pl * (float)nl + pr * (float)nr);
+    return c->trav +
+           c->isect * eb * (pl * (float)(int64_t)nl + pr * (float)(int64_t)nr);
 }
 
 /* Evaluates plane p with nl left, np planar, nr right; planar triangles go
- * to the cheaper side (left on ties). */
+ * to the cheaper side (left on ties). Without planar triangles both sides
+ * cost the same: one evaluation. */
 static void sah_try(const sah_ctx *c, int k, float p, size_t nl, size_t np,
                     size_t nr, kd_split *best) {
     float cl = sah_cost(c, p, nl + np, nr);
-    float cr = sah_cost(c, p, nl, nr + np);
+    float cr = np ? sah_cost(c, p, nl, nr + np) : cl;
     float cost = cl <= cr ? cl : cr;
     if (cost < best->cost) {
         best->cost = cost;
