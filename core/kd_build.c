@@ -444,7 +444,9 @@ static size_t spawn_min_for(size_t nvalid, int threads) {
 
 static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
                       kdr_log_fn log, void *user) {
-    const int threads = o->threads > 1 ? o->threads : 1;
+    /* below two tasks' worth, helper threads would only be started and
+     * joined: build on the caller */
+    const int threads = o->threads > 1 && nvalid >= 2 * KD_SPAWN_MIN ? o->threads : 1;
     builder proto;
     memset(&proto, 0, sizeof proto);
     proto.tris = s->tris;
