@@ -1,7 +1,8 @@
 /*
- * registry.c — the scene table. Writes happen on the main thread only,
- * before kdr_registry_set_ready(); the ready flag's release store publishes
- * them to the HTTP threads, which read entries only after an acquire load.
+ * registry.c — the scene table. Entries are added on the main thread, then
+ * each is built by one start-up thread (kdr_registry_build, several at
+ * once); an entry's `built` flag and the table's ready flag are release
+ * stores, read by the HTTP threads with acquire loads.
  */
 #include "registry.h"
 
@@ -63,7 +64,9 @@ int kdr_registry_add(kdr_registry *r, const char *name, const char *path) {
         r->s = s;
         r->cap = cap;
     }
-    r->s[r->n++] = (kdr_served_scene){.name = name, .path = path};
+    r->s[r->n] = (kdr_served_scene){.name = name, .path = path};
+    atomic_init(&r->s[r->n].built, 0);
+    r->n++;
     return 0;
 }
 
@@ -88,7 +91,7 @@ static void log_stats(const kdr_served_scene *s) {
             b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]);
 }
 
-int kdr_registry_build(kdr_registry *r, size_t i) {
+int kdr_registry_build(kdr_registry *r, size_t i, int threads) {
     kdr_served_scene *s = &r->s[i];
     char err[ERR_LEN] = "";
     kdr_gltf_scene g;
@@ -99,6 +102,7 @@ int kdr_registry_build(kdr_registry *r, size_t i) {
     }
     kdr_build_opts opts;
     kdr_build_opts_default(&opts);
+    opts.threads = threads;
     double t0 = kdr_now();
     int rc = kdr_scene_build(g.tris, g.ntris, &opts, build_log, s, &s->scene);
     s->build_ms = (kdr_now() - t0) * 1e3;
@@ -113,6 +117,7 @@ int kdr_registry_build(kdr_registry *r, size_t i) {
         return -1;
     }
     log_stats(s);
+    atomic_store_explicit(&s->built, 1, memory_order_release);
     atomic_fetch_add(&r->built, 1);
     return 0;
 }
@@ -141,25 +146,32 @@ const kdr_served_scene *kdr_registry_at(const kdr_registry *r, size_t i) {
     return i < r->n ? &r->s[i] : NULL;
 }
 
-/* Only the first `built` entries are complete; the rest may be in the
- * middle of a build on the main thread. */
+/* An entry not yet flagged built may be in the middle of a build on a
+ * start-up thread: only flagged entries are read. */
+static int entry_built(const kdr_registry *r, size_t i) {
+    return atomic_load_explicit(&((kdr_registry *)r)->s[i].built, memory_order_acquire);
+}
+
 void kdr_registry_render_metrics(const kdr_registry *r, kdr_tb *tb) {
-    size_t nb = kdr_registry_built(r);
+    const size_t nb = r->n;
     kdr_tb_printf(tb, "# HELP kdray_scene_build_seconds Wall time of the kd-tree "
                       "build, per scene.\n# TYPE kdray_scene_build_seconds gauge\n");
     for (size_t i = 0; i < nb; i++)
-        kdr_tb_printf(tb, "kdray_scene_build_seconds{scene=\"%s\"} %.6f\n", r->s[i].name,
-                      r->s[i].build_ms * 1e-3);
+        if (entry_built(r, i))
+            kdr_tb_printf(tb, "kdray_scene_build_seconds{scene=\"%s\"} %.6f\n",
+                          r->s[i].name, r->s[i].build_ms * 1e-3);
     kdr_tb_printf(tb, "# HELP kdray_scene_load_seconds Wall time of the glTF load, "
                       "per scene.\n# TYPE kdray_scene_load_seconds gauge\n");
     for (size_t i = 0; i < nb; i++)
-        kdr_tb_printf(tb, "kdray_scene_load_seconds{scene=\"%s\"} %.6f\n", r->s[i].name,
-                      r->s[i].load_ms * 1e-3);
+        if (entry_built(r, i))
+            kdr_tb_printf(tb, "kdray_scene_load_seconds{scene=\"%s\"} %.6f\n",
+                          r->s[i].name, r->s[i].load_ms * 1e-3);
     kdr_tb_printf(tb, "# HELP kdray_scene_triangles Triangles per scene.\n"
                       "# TYPE kdray_scene_triangles gauge\n");
     for (size_t i = 0; i < nb; i++)
-        kdr_tb_printf(tb, "kdray_scene_triangles{scene=\"%s\"} %zu\n", r->s[i].name,
-                      kdr_scene_triangle_count(r->s[i].scene));
+        if (entry_built(r, i))
+            kdr_tb_printf(tb, "kdray_scene_triangles{scene=\"%s\"} %zu\n",
+                          r->s[i].name, kdr_scene_triangle_count(r->s[i].scene));
     kdr_tb_printf(tb,
                   "# HELP kdray_ready 1 once every scene is built.\n"
                   "# TYPE kdray_ready gauge\nkdray_ready %d\n",

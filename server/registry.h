@@ -1,14 +1,16 @@
 /*
  * registry.h — the scenes kdrayd serves: name, source path, the loaded mesh
  * ranges and the built kd-tree. The table is filled from the command line
- * before the HTTP port opens; scenes are then built one by one while the
- * port already answers 503. A scene becomes visible to requests only
- * through kdr_registry_ready() (a release/acquire flag), after which every
- * entry is read-only and shared by all threads.
+ * before the HTTP port opens; scenes are then built (several at once, each
+ * entry by one thread) while the port already answers 503. An entry's own
+ * `built` flag (release/acquire) publishes it to the metrics page; requests
+ * see scenes only through kdr_registry_ready(), after which every entry is
+ * read-only and shared by all threads.
  */
 #ifndef KDR_SRV_REGISTRY_H
 #define KDR_SRV_REGISTRY_H
 
+#include <stdatomic.h>
 #include <stddef.h>
 
 #include "kdr_gltf.h"
@@ -22,6 +24,7 @@ typedef struct kdr_served_scene {
     kdr_mesh_range *ranges;
     size_t nranges;
     double load_ms, build_ms;
+    atomic_int built; /* 1 once the fields above are final (release) */
 } kdr_served_scene;
 
 typedef struct kdr_registry kdr_registry;
@@ -32,9 +35,10 @@ void kdr_registry_free(kdr_registry *r);
 int kdr_registry_add(kdr_registry *r, const char *name, const char *path);
 size_t kdr_registry_count(const kdr_registry *r);
 
-/* Loads and builds scene i, logging its statistics. Returns 0, or -1 after
- * logging a one-line error. */
-int kdr_registry_build(kdr_registry *r, size_t i);
+/* Loads and builds scene i with `threads` build threads (kdr_build_opts),
+ * logging its statistics. Returns 0, or -1 after logging a one-line error.
+ * Different entries may be built by different threads at the same time. */
+int kdr_registry_build(kdr_registry *r, size_t i, int threads);
 /* Marks every scene built: queries may start. */
 void kdr_registry_set_ready(kdr_registry *r);
 int kdr_registry_ready(const kdr_registry *r);

@@ -10,7 +10,8 @@
  *
  * reference (default): one thread, single-ray / per-pixel / per-sample core
  * modes over the whole range; fast: the modes kdrayd uses (bundles, four
- * frusta at a time, cones), split over T threads like the daemon.
+ * frusta at a time, cones), split over T threads like the daemon. The
+ * kd-tree is built on T threads too (the same tree as on one).
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
@@ -245,7 +246,7 @@ static int parse_cli(cli *c, int argc, char **argv) {
     return 0;
 }
 
-static kdr_scene *load_scene(const char *path) {
+static kdr_scene *load_scene(const char *path, unsigned threads) {
     kdr_gltf_scene g;
     char err[512];
     if (kdr_gltf_load(path, &g, err, sizeof err)) {
@@ -255,6 +256,7 @@ static kdr_scene *load_scene(const char *path) {
     kdr_scene *s = NULL;
     kdr_build_opts opts;
     kdr_build_opts_default(&opts);
+    opts.threads = (int)threads;
     int rc = kdr_scene_build(g.tris, g.ntris, &opts, NULL, NULL, &s);
     kdr_gltf_free(&g);
     if (rc) fprintf(stderr, "kdray-trace: build: %s\n", kdr_strerror(rc));
@@ -330,7 +332,7 @@ static int answer_one(kdr_pool *pool, const kdr_scene *scene, cli c, char *spec)
 int main(int argc, char **argv) {
     cli c;
     if (parse_cli(&c, argc, argv)) return usage();
-    kdr_scene *scene = load_scene(c.scene_path);
+    kdr_scene *scene = load_scene(c.scene_path, c.threads);
     kdr_pool *pool = kdr_pool_create(c.threads - 1);
     int rc = !scene || !pool;
     for (int i = 0; i < c.nrequests && !rc; i++)
