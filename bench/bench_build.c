@@ -1,0 +1,332 @@
+/*
+ * bench_build.c — kdray_bench_build: the kd-tree build against Embree's,
+ * and what the binned top costs the traversals. Not a test.
+ *
+ * Section "build", per ladder scene, best of --repeat:
+ *   one thread, process CPU time: kdray's default build (binned above
+ *   exact_max), kdray's exact sweep everywhere (exact_max = INT_MAX), and
+ *   Embree's RTC_BUILD_QUALITY_HIGH and MEDIUM builds (device "threads=1");
+ *   --threads T (default: the number of online cores), wall time: kdray's
+ *   default build with opts.threads = T, Embree HIGH and MEDIUM with
+ *   "threads=T". Wall time is the only fair clock for a parallel build;
+ *   the load average printed beside it says how busy the machine was.
+ * Section "ab": the exact tree (A) against the default binned tree (B) on
+ *   the same rays, same run, interleaved, this thread's CPU time: single
+ *   rays (camera and random closest, ambient-occlusion any), bundles
+ *   (kdr_trace_batch, camera closest and AO any, 64 rays per origin) and
+ *   four-frustum traversal (tile 8). Prints Mrays/s of A and B, B/A, nodes
+ *   and triangle tests per random ray, and fails if any answer differs
+ *   (both trees must give every ray the same hit, bit for bit).
+ *
+ * Flags: bench.h's (--dir, --rays, --max-tris, --only, --repeat, --csv,
+ * --section build|ab), plus --threads T and --exact-max N (tree B's
+ * threshold; default the library's).
+ */
+#define _POSIX_C_SOURCE 200809L
+#include <limits.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "bench.h"
+#include "oracle.h"
+
+#define SEED 5u
+#define AO_PER_POINT 64
+#define FRUSTUM_TILE 8
+
+static int g_threads, g_exact_max = -1;
+
+static double clock_ms(clockid_t id) {
+    struct timespec ts;
+    clock_gettime(id, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static double load_avg(void) {
+    double l = -1;
+    FILE *f = fopen("/proc/loadavg", "r");
+    if (f) {
+        if (fscanf(f, "%lf", &l) != 1)
+            l = -1;
+        fclose(f);
+    }
+    return l;
+}
+
+/* ---- builds ------------------------------------------------------------------ */
+
+typedef struct timing {
+    double cpu, wall; /* ms, best of the repetitions */
+} timing;
+
+static kdr_build_opts opts_for(int exact_max, int threads) {
+    kdr_build_opts o;
+    kdr_build_opts_default(&o);
+    if (exact_max >= 0)
+        o.exact_max = exact_max;
+    o.threads = threads;
+    return o;
+}
+
+/* Builds R times, keeps the fastest CPU and wall times and the last tree. */
+static kdr_scene *kd_timed(const bench_scene *s, kdr_build_opts o, int repeat,
+                           timing *t) {
+    kdr_scene *kd = NULL;
+    t->cpu = t->wall = INFINITY;
+    for (int r = 0; r < repeat; r++) {
+        kdr_scene_free(kd);
+        const double w0 = clock_ms(CLOCK_MONOTONIC), c0 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
+        if (kdr_scene_build(s->tris, s->ntris, &o, NULL, NULL, &kd) != KDR_OK) {
+            fprintf(stderr, "%s: kd build failed\n", s->name);
+            return NULL;
+        }
+        t->cpu = fmin(t->cpu, clock_ms(CLOCK_PROCESS_CPUTIME_ID) - c0);
+        t->wall = fmin(t->wall, clock_ms(CLOCK_MONOTONIC) - w0);
+    }
+    return kd;
+}
+
+static int embree_timed(const bench_scene *s, enum RTCBuildQuality q, int threads,
+                        int repeat, timing *t) {
+    char cfg[32];
+    snprintf(cfg, sizeof cfg, "threads=%d", threads);
+    oracle_opts o;
+    oracle_opts_default(&o);
+    o.robust = 0;
+    o.quality = q;
+    o.device_config = cfg;
+    t->cpu = t->wall = INFINITY;
+    for (int r = 0; r < repeat; r++) {
+        oracle *e = oracle_create(s->tris, s->ntris, &o);
+        if (!e)
+            return -1;
+        t->cpu = fmin(t->cpu, oracle_build_cpu_ms(e));
+        t->wall = fmin(t->wall, oracle_build_ms(e));
+        oracle_free(e);
+    }
+    return 0;
+}
+
+static int build_section(const bench_scene *s, const bench_opts *opts, bench_csv *csv) {
+    static int header;
+    const int T = g_threads;
+    if (!header++) {
+        printf("build: one thread = process CPU ms; %d threads = wall ms (load = 1-min "
+               "load average before the scene)\n", T);
+        printf("%-10s %8s | %8s %8s %8s %8s %6s %6s | %8s %8s %8s %6s %6s | %8s %8s | %5s\n",
+               "scene", "tris", "kd", "kd exact", "emb HQ", "emb MED", "kd/HQ", "kd/MED",
+               "kd", "emb HQ", "emb MED", "kd/HQ", "kd/MED", "SAH", "SAH ex", "load");
+    }
+    const double load = load_avg();
+    timing kd1, kdx, kdt, hq1, med1, hqt, medt;
+    kdr_scene *a = kd_timed(s, opts_for(g_exact_max, 1), opts->repeat, &kd1);
+    kdr_scene *x = kd_timed(s, opts_for(INT_MAX, 1), opts->repeat, &kdx);
+    kdr_scene *p = kd_timed(s, opts_for(g_exact_max, T), opts->repeat, &kdt);
+    if (!a || !x || !p || embree_timed(s, RTC_BUILD_QUALITY_HIGH, 1, opts->repeat, &hq1) ||
+        embree_timed(s, RTC_BUILD_QUALITY_MEDIUM, 1, opts->repeat, &med1) ||
+        embree_timed(s, RTC_BUILD_QUALITY_HIGH, T, opts->repeat, &hqt) ||
+        embree_timed(s, RTC_BUILD_QUALITY_MEDIUM, T, opts->repeat, &medt)) {
+        kdr_scene_free(a);
+        kdr_scene_free(x);
+        kdr_scene_free(p);
+        return -1;
+    }
+    kdr_tree_stats sa, sx;
+    kdr_scene_tree_stats(a, &sa);
+    kdr_scene_tree_stats(x, &sx);
+    printf("%-10s %8zu | %8.1f %8.1f %8.1f %8.1f %6.2f %6.2f | %8.1f %8.1f %8.1f %6.2f "
+           "%6.2f | %8.1f %8.1f | %5.1f\n",
+           s->name, s->ntris, kd1.cpu, kdx.cpu, hq1.cpu, med1.cpu, kd1.cpu / hq1.cpu,
+           kd1.cpu / med1.cpu, kdt.wall, hqt.wall, medt.wall, kdt.wall / hqt.wall,
+           kdt.wall / medt.wall, sa.sah_cost, sx.sah_cost, load);
+    fflush(stdout);
+    bench_csv_row(csv, "build", s, "kd_cpu_ms_1t", kd1.cpu);
+    bench_csv_row(csv, "build", s, "kd_exact_cpu_ms_1t", kdx.cpu);
+    bench_csv_row(csv, "build", s, "embree_hq_cpu_ms_1t", hq1.cpu);
+    bench_csv_row(csv, "build", s, "embree_med_cpu_ms_1t", med1.cpu);
+    bench_csv_row(csv, "build", s, "kd_wall_ms_nt", kdt.wall);
+    bench_csv_row(csv, "build", s, "embree_hq_wall_ms_nt", hqt.wall);
+    bench_csv_row(csv, "build", s, "embree_med_wall_ms_nt", medt.wall);
+    bench_csv_row(csv, "build", s, "threads", T);
+    bench_csv_row(csv, "build", s, "sah_default", sa.sah_cost);
+    bench_csv_row(csv, "build", s, "sah_exact", sx.sah_cost);
+    bench_csv_row(csv, "build", s, "load_avg", load);
+    kdr_scene_free(a);
+    kdr_scene_free(x);
+    kdr_scene_free(p);
+    return 0;
+}
+
+/* ---- A/B: exact tree against binned tree -------------------------------------------- */
+
+typedef struct work {
+    const char *name;
+    int kind; /* 0 single, 1 batch, 2 frustum */
+    kdr_query q;
+    const kdr_ray *rays; /* single; batch: origins/intervals from these */
+    float *dirs;         /* batch: 3n */
+    size_t n, group;     /* batch: rays sharing an origin */
+    const kdr_camera *cam;
+} work;
+
+typedef struct out {
+    float *t, *u, *v;
+    int32_t *prim;
+    uint8_t *hit;
+} out;
+
+static double run(const kdr_scene *kd, const work *w, out *o, kdr_trav_stats *st) {
+    memset(st, 0, sizeof *st);
+    const double t0 = clock_ms(CLOCK_THREAD_CPUTIME_ID);
+    if (w->kind == 0) {
+        for (size_t i = 0; i < w->n; i++) {
+            if (w->q == KDR_ANY) {
+                o->hit[i] = (uint8_t)kdr_occluded1(kd, &w->rays[i], st);
+            } else {
+                kdr_hit h;
+                kdr_intersect1(kd, &w->rays[i], &h, st);
+                o->t[i] = h.t, o->u[i] = h.u, o->v[i] = h.v, o->prim[i] = h.prim;
+            }
+        }
+    } else if (w->kind == 1) {
+        for (size_t first = 0; first < w->n; first += w->group) {
+            const size_t g = w->n - first < w->group ? w->n - first : w->group;
+            const kdr_ray *r = &w->rays[first];
+            kdr_ray_batch b = {g, r->org, 0, w->dirs + 3 * first, &r->tmin, 0, &r->tmax, 0};
+            kdr_hits h = {o->t + first, o->prim + first, o->u + first, o->v + first,
+                          o->hit + first};
+            kdr_trace_batch(kd, &b, 0, g, w->q, KDR_TRAV_AUTO, &h, st);
+        }
+    } else {
+        kdr_hits h = {o->t, o->prim, o->u, o->v, o->hit};
+        kdr_frustum_trace(kd, w->cam, FRUSTUM_TILE, 0,
+                          kdr_frustum_tile_count(w->cam, FRUSTUM_TILE), w->q,
+                          KDR_FRUSTUM_MULTI4, &h, st);
+    }
+    return clock_ms(CLOCK_THREAD_CPUTIME_ID) - t0;
+}
+
+static size_t differences(const work *w, const out *a, const out *b) {
+    size_t d = 0;
+    for (size_t i = 0; i < w->n; i++) {
+        if (w->q == KDR_ANY)
+            d += a->hit[i] != b->hit[i];
+        else
+            d += a->prim[i] != b->prim[i] || memcmp(&a->t[i], &b->t[i], 4) ||
+                 memcmp(&a->u[i], &b->u[i], 4) || memcmp(&a->v[i], &b->v[i], 4);
+    }
+    return d;
+}
+
+static int out_alloc(out *o, size_t n) {
+    o->t = malloc(n * 4), o->u = malloc(n * 4), o->v = malloc(n * 4);
+    o->prim = malloc(n * 4), o->hit = malloc(n);
+    return o->t && o->u && o->v && o->prim && o->hit ? 0 : -1;
+}
+
+static void out_free(out *o) {
+    free(o->t), free(o->u), free(o->v), free(o->prim), free(o->hit);
+}
+
+/* Runs w on both trees, interleaved, best CPU time of each; 0 if equal. */
+static int ab_one(const bench_scene *s, const kdr_scene *ta, const kdr_scene *tb,
+                  const work *w, int repeat, bench_csv *csv) {
+    out oa, ob;
+    int rc = out_alloc(&oa, w->n) | out_alloc(&ob, w->n);
+    double best[2] = {INFINITY, INFINITY};
+    kdr_trav_stats st[2];
+    for (int r = 0; r < repeat && rc == 0; r++) {
+        best[0] = fmin(best[0], run(ta, w, &oa, &st[0]));
+        best[1] = fmin(best[1], run(tb, w, &ob, &st[1]));
+    }
+    const size_t diff = rc ? 0 : differences(w, &oa, &ob);
+    const double ma = (double)w->n / best[0] * 1e-3, mb = (double)w->n / best[1] * 1e-3;
+    printf("  %-14s %8.2f %8.2f %6.3f | %7.1f %7.1f | %7.1f %7.1f%s\n", w->name, ma, mb,
+           mb / ma, (double)st[0].nodes_visited / (double)w->n,
+           (double)st[1].nodes_visited / (double)w->n,
+           (double)st[0].tri_tests / (double)w->n, (double)st[1].tri_tests / (double)w->n,
+           diff ? "  ANSWERS DIFFER" : "");
+    if (diff)
+        fprintf(stderr, "%s %s: %zu of %zu answers differ between the trees\n", s->name,
+                w->name, diff, w->n);
+    char m[64];
+    snprintf(m, sizeof m, "%s_mrays_exact", w->name);
+    bench_csv_row(csv, "ab", s, m, ma);
+    snprintf(m, sizeof m, "%s_mrays_binned", w->name);
+    bench_csv_row(csv, "ab", s, m, mb);
+    out_free(&oa);
+    out_free(&ob);
+    return rc || diff ? -1 : 0;
+}
+
+static int ab_section(const bench_scene *s, const bench_opts *opts, bench_csv *csv) {
+    timing t;
+    kdr_scene *ta = kd_timed(s, opts_for(INT_MAX, 1), 1, &t);
+    kdr_scene *tb = kd_timed(s, opts_for(g_exact_max, 1), 1, &t);
+    const size_t n = opts->rays;
+    kdr_ray *cam = malloc(n * sizeof *cam), *rnd = malloc(n * sizeof *rnd),
+            *ao = malloc(n * sizeof *ao);
+    float *cam_dirs = malloc(n * 12), *ao_dirs = malloc(n * 12);
+    int fail = !ta || !tb || !cam || !rnd || !ao || !cam_dirs || !ao_dirs;
+    if (!fail) {
+        kdr_tree_stats sa, sb;
+        kdr_scene_tree_stats(ta, &sa);
+        kdr_scene_tree_stats(tb, &sb);
+        printf("ab %s (%zu tris): A = exact, SAH %.1f, %llu nodes; B = exact_max %d, SAH "
+               "%.1f, %llu nodes\n",
+               s->name, s->ntris, sa.sah_cost, (unsigned long long)sa.nodes,
+               g_exact_max >= 0 ? g_exact_max : opts_for(-1, 0).exact_max, sb.sah_cost,
+               (unsigned long long)sb.nodes);
+        printf("  %-14s %8s %8s %6s | %7s %7s | %7s %7s\n", "rays", "A Mray/s", "B Mray/s",
+               "B/A", "nodes A", "nodes B", "tris A", "tris B");
+        kdr_camera c;
+        const size_t ncam = bench_camera_rays(ta, n, &c, cam);
+        bench_random_rays(ta, SEED, n, rnd);
+        bench_ao_rays(ta, SEED, n, AO_PER_POINT, ao);
+        for (size_t i = 0; i < n; i++) {
+            memcpy(cam_dirs + 3 * i, cam[i < ncam ? i : 0].dir, 12);
+            memcpy(ao_dirs + 3 * i, ao[i].dir, 12);
+        }
+        const work ws[] = {
+            {"camera", 0, KDR_CLOSEST, cam, NULL, ncam, 1, NULL},
+            {"random", 0, KDR_CLOSEST, rnd, NULL, n, 1, NULL},
+            {"ao_any", 0, KDR_ANY, ao, NULL, n, 1, NULL},
+            {"bundle_camera", 1, KDR_CLOSEST, cam, cam_dirs, ncam, ncam, NULL},
+            {"bundle_ao_any", 1, KDR_ANY, ao, ao_dirs, n, AO_PER_POINT, NULL},
+            {"frustum4", 2, KDR_CLOSEST, NULL, NULL, (size_t)c.width * c.height, 0, &c},
+        };
+        for (size_t i = 0; i < sizeof ws / sizeof *ws; i++)
+            fail |= ab_one(s, ta, tb, &ws[i], opts->repeat, csv) != 0;
+        fflush(stdout);
+    }
+    kdr_scene_free(ta);
+    kdr_scene_free(tb);
+    free(cam), free(rnd), free(ao), free(cam_dirs), free(ao_dirs);
+    return fail ? -1 : 0;
+}
+
+int main(int argc, char **argv) {
+    static const bench_section sections[] = {{"build", build_section}, {"ab", ab_section}};
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    g_threads = cores > 0 ? (int)cores : 1;
+    /* take our flags out, pass the rest to the harness */
+    int m = 1;
+    for (int i = 1; i < argc; i++) {
+        if (i + 1 < argc && !strcmp(argv[i], "--threads")) {
+            g_threads = atoi(argv[++i]);
+        } else if (i + 1 < argc && !strcmp(argv[i], "--exact-max")) {
+            g_exact_max = atoi(argv[++i]);
+        } else {
+            argv[m++] = argv[i];
+        }
+    }
+    if (g_threads < 1) {
+        fprintf(stderr, "%s: --threads must be at least 1\n", argv[0]);
+        return 2;
+    }
+    return bench_main(m, argv, sections, sizeof sections / sizeof *sections);
+}
