@@ -49,7 +49,7 @@ if(NOT KDRAY_SANITIZE)
       COMMENT "Building test_core_build with clang -fsanitize=thread"
       VERBATIM)
     add_custom_target(test_core_build_tsan ALL DEPENDS ${KDRAY_TSAN_BIN})
-    add_test(NAME test_core_build_tsan COMMAND ${KDRAY_TSAN_BIN} quick)
+    add_test(NAME test_core_build_tsan COMMAND ${KDRAY_TSAN_BIN})
     set_tests_properties(test_core_build_tsan PROPERTIES
                          ENVIRONMENT "TSAN_OPTIONS=halt_on_error=1:exitcode=66")
   else()

@@ -477,20 +477,20 @@ int main(void) {
     test_small_scenes();
     test_build_options();
     test_log_and_stats();
-    /* the exact sweep, then binned trees (every node, and binned tops over
-     * exact subtrees) built on several threads: every answer must still
-     * equal brute force */
-    static const struct { int exact_max, threads; } builds[] = {{-1, 0}, {0, 3}, {40, 2}};
+    /* the exact sweep (default and 1-triangle leaves), then binned trees
+     * (every node binned, and binned tops over exact subtrees) built on
+     * several threads: every answer must still equal brute force */
+    static const struct { int exact_max, threads, leaf_size; } builds[] = {
+        {-1, 0, 0}, {-1, 0, 1}, {0, 3, 1}, {40, 2, 0}};
     for (size_t i = 0; i < sizeof builds / sizeof *builds; i++) {
         g_exact_max = builds[i].exact_max;
         g_threads = builds[i].threads;
-        for (g_leaf_size = 0; g_leaf_size <= 1; g_leaf_size++) {
-            test_random_soups();
-            test_box_grid();
-            test_huge_offsets();
-            test_extreme_rays();
-            test_flat_scene();
-        }
+        g_leaf_size = builds[i].leaf_size;
+        test_random_soups();
+        test_box_grid();
+        test_huge_offsets();
+        test_extreme_rays();
+        test_flat_scene();
     }
     if (g_failures)
         fprintf(stderr, "test_core: %d failures\n", g_failures);
