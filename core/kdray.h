@@ -58,7 +58,7 @@ typedef struct kdr_build_opts {
     int leaf_size;      /* never split a node with at most this many refs */
     int exact_max;      /* >= 0: nodes with more triangles than this choose
                            their plane from min-max bins, smaller ones by the
-                           exact SAH sweep (default 16384; INT_MAX: exact
+                           exact SAH sweep (default 65536; INT_MAX: exact
                            everywhere, 0: binned everywhere) */
     int threads;        /* build threads: 0 or 1 = the calling thread only
                            (the default: the caller decides); N > 1 = the

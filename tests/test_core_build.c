@@ -3,7 +3,7 @@
  *
  * 1. The tree does not depend on the thread count: scenes large enough to
  *    be cut into many tasks are built with 1, 2, 3 and 8 threads, with the
- *    exact sweep everywhere, the default binned top and a low switch-over;
+ *    exact sweep everywhere and binned tops over exact subtrees;
  *    node and reference arrays must be byte-identical
  *    and the statistics equal, and a build with threads must really have
  *    run in pieces (the build's log says how many).
@@ -164,15 +164,14 @@ static size_t check_rays(const scene *sc, const kdr_scene *s, int nrays) {
     return bad;
 }
 
-/* Modes: exact everywhere, a low switch-over, the default. (Binning
- * every node is checked on small scenes by test_core; on these it is slow.) */
+/* Modes: exact everywhere, a low and a middle switch-over (the default is
+ * above these scenes' sizes: exact too). Binning every node is checked on
+ * small scenes by test_core; on these it is slow. */
 static void test_scene(const scene *sc) {
-    static const int modes[] = {INT_MAX, 500, -1};
+    static const int modes[] = {INT_MAX, 500, 8000};
     static const int threads[] = {3, 2, 8};
     for (size_t m = 0; m < sizeof modes / sizeof *modes; m++) {
-        kdr_build_opts d;
-        kdr_build_opts_default(&d);
-        const int exact_max = modes[m] < 0 ? d.exact_max : modes[m];
+        const int exact_max = modes[m];
         int pieces;
         kdr_scene *ref = build(sc, exact_max, 1, &pieces);
         for (size_t t = 0; t < sizeof threads / sizeof *threads; t++) {
