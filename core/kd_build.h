@@ -99,6 +99,7 @@ typedef struct builder {
     size_t add_cap;
     kd_frag *frag;
     int err;
+    double cpu_ms; /* this worker's thread CPU time in the build */
 } builder;
 
 /* ---- event keys ---------------------------------------------------------- */
@@ -226,9 +227,10 @@ typedef struct kd_task {
 /* Builds the tree of root (a BINNED or EXACT task on frags[0]) with the
  * caller and threads-1 helper threads; `proto` holds the shared inputs. A
  * SORT task list (nsort, may be 0) runs first. On success *frags holds
- * the pieces (kd_stitch them, kd_frags_free). */
+ * the pieces (kd_stitch them, kd_frags_free). cpu_ms[0..1] receive the
+ * CPU time of the busiest thread and of all of them (for the log). */
 int kd_build_run(const builder *proto, int threads, kd_task *sort, int nsort,
-                 kd_task *root, kd_frag ***frags, size_t *nfrags);
+                 kd_task *root, kd_frag ***frags, size_t *nfrags, double cpu_ms[2]);
 /* Hands t (copied) to another worker; *frag receives the fragment it will
  * write. Returns KDR_OK, or an error (then the caller builds t itself). */
 int kd_spawn(builder *b, const kd_task *t, uint32_t *frag);

@@ -23,6 +23,7 @@
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "kd_build.h"
 
@@ -107,9 +108,16 @@ static void run_one(kd_pool *p, builder *b) {
         pthread_cond_broadcast(&p->cond);
 }
 
+static double thread_cpu_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
 static void *worker_main(void *arg) {
     builder *b = arg;
     kd_pool *p = b->pool;
+    const double c0 = thread_cpu_ms();
     pthread_mutex_lock(&p->lock);
     for (;;) {
         if (p->head < p->tail)
@@ -120,6 +128,7 @@ static void *worker_main(void *arg) {
             pthread_cond_wait(&p->cond, &p->lock);
     }
     pthread_mutex_unlock(&p->lock);
+    b->cpu_ms = thread_cpu_ms() - c0;
     return NULL;
 }
 
@@ -169,7 +178,8 @@ static void free_scratch(builder *b) {
 }
 
 int kd_build_run(const builder *proto, int threads, kd_task *sort, int nsort,
-                 kd_task *root, kd_frag ***frags, size_t *nfrags) {
+                 kd_task *root, kd_frag ***frags, size_t *nfrags, double cpu_ms[2]) {
+    const double c0 = thread_cpu_ms();
     kd_pool p;
     memset(&p, 0, sizeof p);
     atomic_init(&p.failed, KDR_OK);
@@ -217,8 +227,14 @@ int kd_build_run(const builder *proto, int threads, kd_task *sort, int nsort,
     p.stop = 1;
     pthread_cond_broadcast(&p.cond);
     pthread_mutex_unlock(&p.lock);
+    w[0].cpu_ms = thread_cpu_ms() - c0;
     for (int i = 1; i < started; i++)
         pthread_join(th[i], NULL);
+    cpu_ms[0] = cpu_ms[1] = 0.0;
+    for (int i = 0; i < started; i++) {
+        cpu_ms[0] = w[i].cpu_ms > cpu_ms[0] ? w[i].cpu_ms : cpu_ms[0];
+        cpu_ms[1] += w[i].cpu_ms;
+    }
     if (err == KDR_OK)
         err = w[0].err != KDR_OK ? w[0].err : atomic_load(&p.failed);
     for (int i = 0; i < threads; i++)
