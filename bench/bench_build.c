@@ -1,11 +1,14 @@
 /*
  * bench_build.c — kdray_bench_build: the kd-tree build against Embree's,
- * and what the binned top costs the traversals. Not a test.
+ * and what the binned top costs the traversals. Not a test. Its own main
+ * (builds are what it measures, so it does not use bench_main's
+ * pre-built scenes); rays come from bench.h's workloads.
  *
  * Section "build", per ladder scene, best of --repeat:
  *   one thread, process CPU time: kdray's default build (binned above
  *   exact_max), kdray's exact sweep everywhere (exact_max = INT_MAX), and
- *   Embree's RTC_BUILD_QUALITY_HIGH and MEDIUM builds (device "threads=1");
+ *   Embree's RTC_BUILD_QUALITY_HIGH and MEDIUM builds (device "threads=1",
+ *   fast scenes; times of rtcCommitScene);
  *   --threads T (default: the number of online cores), wall time: kdray's
  *   default build with opts.threads = T, Embree HIGH and MEDIUM with
  *   "threads=T". Wall time is the only fair clock for a parallel build;
@@ -18,11 +21,12 @@
  *   rays (camera and random closest, ambient-occlusion any), bundles
  *   (kdr_trace_batch, camera closest and AO any, 64 rays per origin) and
  *   four-frustum traversal (tile 8). Prints Mrays/s of A and B, B/A, nodes
- *   and triangle tests per random ray, and fails if any answer differs
- *   (both trees must give every ray the same hit, bit for bit).
+ *   and triangle tests per ray, and fails if any answer differs (both
+ *   trees must give every ray the same hit, bit for bit).
  *
- * Flags: bench.h's (--dir, --rays, --max-tris, --only, --repeat, --csv,
- * --section build|ab), plus --threads T and --exact-max N (tree B's
+ * Flags: --dir DIR, --only NAME (repeatable), --max-tris N, --rays N
+ * (default 262144), --repeat R (default 3), --csv PATH, --section build|ab
+ * (repeatable; default both), --threads T, --exact-max N (tree B's
  * threshold; default the library's).
  */
 #define _POSIX_C_SOURCE 200809L
@@ -35,13 +39,33 @@
 #include <unistd.h>
 
 #include "bench.h"
+#include "ladder.h"
 #include "oracle.h"
 
-#define SEED 5u
-#define AO_PER_POINT 64
 #define FRUSTUM_TILE 8
+#define MAX_ONLY 16
 
 static int g_threads, g_exact_max = -1;
+
+/* What the old harness handed every section: one scene, the run's flags,
+ * and a long-format CSV (scene,triangles,section,metric,value). */
+typedef struct scene_in {
+    const char *name;
+    const float *tris;
+    size_t ntris;
+} scene_in;
+
+typedef struct run_opts {
+    size_t rays;
+    int repeat;
+    FILE *csv;
+} run_opts;
+
+static void csv_row(const run_opts *o, const char *section, const scene_in *s,
+                    const char *metric, double v) {
+    if (o->csv)
+        fprintf(o->csv, "%s,%zu,%s,%s,%.6g\n", s->name, s->ntris, section, metric, v);
+}
 
 static double clock_ms(clockid_t id) {
     struct timespec ts;
@@ -86,7 +110,7 @@ static void log_cpu(void *user, const char *msg) {
 /* Builds R times, keeps the fastest CPU and wall times and the last tree.
  * t->idle: a lower bound of the wall time on an idle machine, the CPU time
  * outside the parallel phase plus that phase's busiest thread. */
-static kdr_scene *kd_timed(const bench_scene *s, kdr_build_opts o, int repeat,
+static kdr_scene *kd_timed(const scene_in *s, kdr_build_opts o, int repeat,
                            timing *t) {
     kdr_scene *kd = NULL;
     t->cpu = t->wall = t->idle = INFINITY;
@@ -106,7 +130,7 @@ static kdr_scene *kd_timed(const bench_scene *s, kdr_build_opts o, int repeat,
     return kd;
 }
 
-static int embree_timed(const bench_scene *s, enum RTCBuildQuality q, int threads,
+static int embree_timed(const scene_in *s, enum RTCBuildQuality q, int threads,
                         int repeat, timing *t) {
     char cfg[32];
     snprintf(cfg, sizeof cfg, "threads=%d", threads);
@@ -127,7 +151,7 @@ static int embree_timed(const bench_scene *s, enum RTCBuildQuality q, int thread
     return 0;
 }
 
-static int build_section(const bench_scene *s, const bench_opts *opts, bench_csv *csv) {
+static int build_section(const scene_in *s, const run_opts *opts) {
     static int header;
     const int T = g_threads;
     if (!header++) {
@@ -164,18 +188,18 @@ static int build_section(const bench_scene *s, const bench_opts *opts, bench_csv
            kd1.cpu / med1.cpu, kdt.wall, kdt.idle, hqt.wall, medt.wall, kdt.wall / hqt.wall,
            kdt.wall / medt.wall, sa.sah_cost, sx.sah_cost, load);
     fflush(stdout);
-    bench_csv_row(csv, "build", s, "kd_cpu_ms_1t", kd1.cpu);
-    bench_csv_row(csv, "build", s, "kd_exact_cpu_ms_1t", kdx.cpu);
-    bench_csv_row(csv, "build", s, "embree_hq_cpu_ms_1t", hq1.cpu);
-    bench_csv_row(csv, "build", s, "embree_med_cpu_ms_1t", med1.cpu);
-    bench_csv_row(csv, "build", s, "kd_wall_ms_nt", kdt.wall);
-    bench_csv_row(csv, "build", s, "kd_idle_bound_ms_nt", kdt.idle);
-    bench_csv_row(csv, "build", s, "embree_hq_wall_ms_nt", hqt.wall);
-    bench_csv_row(csv, "build", s, "embree_med_wall_ms_nt", medt.wall);
-    bench_csv_row(csv, "build", s, "threads", T);
-    bench_csv_row(csv, "build", s, "sah_default", sa.sah_cost);
-    bench_csv_row(csv, "build", s, "sah_exact", sx.sah_cost);
-    bench_csv_row(csv, "build", s, "load_avg", load);
+    csv_row(opts, "build", s, "kd_cpu_ms_1t", kd1.cpu);
+    csv_row(opts, "build", s, "kd_exact_cpu_ms_1t", kdx.cpu);
+    csv_row(opts, "build", s, "embree_hq_cpu_ms_1t", hq1.cpu);
+    csv_row(opts, "build", s, "embree_med_cpu_ms_1t", med1.cpu);
+    csv_row(opts, "build", s, "kd_wall_ms_nt", kdt.wall);
+    csv_row(opts, "build", s, "kd_idle_bound_ms_nt", kdt.idle);
+    csv_row(opts, "build", s, "embree_hq_wall_ms_nt", hqt.wall);
+    csv_row(opts, "build", s, "embree_med_wall_ms_nt", medt.wall);
+    csv_row(opts, "build", s, "threads", T);
+    csv_row(opts, "build", s, "sah_default", sa.sah_cost);
+    csv_row(opts, "build", s, "sah_exact", sx.sah_cost);
+    csv_row(opts, "build", s, "load_avg", load);
     kdr_scene_free(a);
     kdr_scene_free(x);
     kdr_scene_free(p);
@@ -254,13 +278,13 @@ static void out_free(out *o) {
 }
 
 /* Runs w on both trees, interleaved, best CPU time of each; 0 if equal. */
-static int ab_one(const bench_scene *s, const kdr_scene *ta, const kdr_scene *tb,
-                  const work *w, int repeat, bench_csv *csv) {
+static int ab_one(const scene_in *s, const kdr_scene *ta, const kdr_scene *tb,
+                  const work *w, const run_opts *opts) {
     out oa, ob;
     int rc = out_alloc(&oa, w->n) | out_alloc(&ob, w->n);
     double best[2] = {INFINITY, INFINITY};
     kdr_trav_stats st[2];
-    for (int r = 0; r < repeat && rc == 0; r++) {
+    for (int r = 0; r < opts->repeat && rc == 0; r++) {
         best[0] = fmin(best[0], run(ta, w, &oa, &st[0]));
         best[1] = fmin(best[1], run(tb, w, &ob, &st[1]));
     }
@@ -276,23 +300,39 @@ static int ab_one(const bench_scene *s, const kdr_scene *ta, const kdr_scene *tb
                 w->name, diff, w->n);
     char m[64];
     snprintf(m, sizeof m, "%s_mrays_exact", w->name);
-    bench_csv_row(csv, "ab", s, m, ma);
+    csv_row(opts, "ab", s, m, ma);
     snprintf(m, sizeof m, "%s_mrays_binned", w->name);
-    bench_csv_row(csv, "ab", s, m, mb);
+    csv_row(opts, "ab", s, m, mb);
     out_free(&oa);
     out_free(&ob);
     return rc || diff ? -1 : 0;
 }
 
-static int ab_section(const bench_scene *s, const bench_opts *opts, bench_csv *csv) {
+/* The camera of the frustum workload: bench.h's camera-ray view. */
+static kdr_camera view_of(const kdr_scene *kd, size_t n) {
+    kdr_bounds b;
+    kdr_scene_bounds(kd, &b);
+    const float diag = kdr_scene_diagonal(kd);
+    static const float view[3] = {0.55f, 0.35f, 0.75f};
+    uint32_t side = (uint32_t)sqrt((double)n) & ~3u;
+    kdr_camera c = {.up = {0, 1, 0}, .fov_y_deg = 45.0f};
+    c.width = c.height = side < 4 ? 4 : side;
+    for (int k = 0; k < 3; k++) {
+        c.target[k] = 0.5f * (b.min[k] + b.max[k]);
+        c.eye[k] = c.target[k] + 1.1f * diag * view[k];
+    }
+    return c;
+}
+
+static int ab_section(const scene_in *s, const run_opts *opts) {
     timing t;
     kdr_scene *ta = kd_timed(s, opts_for(INT_MAX, 1), 1, &t);
     kdr_scene *tb = kd_timed(s, opts_for(g_exact_max, 1), 1, &t);
-    const size_t n = opts->rays;
-    kdr_ray *cam = malloc(n * sizeof *cam), *rnd = malloc(n * sizeof *rnd),
-            *ao = malloc(n * sizeof *ao);
-    float *cam_dirs = malloc(n * 12), *ao_dirs = malloc(n * 12);
-    int fail = !ta || !tb || !cam || !rnd || !ao || !cam_dirs || !ao_dirs;
+    bench_workload cam, rnd, ao;
+    memset(&cam, 0, sizeof cam), memset(&rnd, 0, sizeof rnd), memset(&ao, 0, sizeof ao);
+    int fail = !ta || !tb || bench_workload_make(&cam, ta, "camera", opts->rays) ||
+               bench_workload_make(&rnd, ta, "random", opts->rays) ||
+               bench_workload_make(&ao, ta, "ao_any", opts->rays);
     if (!fail) {
         kdr_tree_stats sa, sb;
         kdr_scene_tree_stats(ta, &sa);
@@ -304,50 +344,107 @@ static int ab_section(const bench_scene *s, const bench_opts *opts, bench_csv *c
                (unsigned long long)sb.nodes);
         printf("  %-14s %8s %8s %6s | %7s %7s | %7s %7s\n", "rays", "A Mray/s", "B Mray/s",
                "B/A", "nodes A", "nodes B", "tris A", "tris B");
-        kdr_camera c;
-        const size_t ncam = bench_camera_rays(ta, n, &c, cam);
-        bench_random_rays(ta, SEED, n, rnd);
-        bench_ao_rays(ta, SEED, n, AO_PER_POINT, ao);
-        for (size_t i = 0; i < n; i++) {
-            memcpy(cam_dirs + 3 * i, cam[i < ncam ? i : 0].dir, 12);
-            memcpy(ao_dirs + 3 * i, ao[i].dir, 12);
-        }
+        const kdr_camera c = view_of(ta, opts->rays);
         const work ws[] = {
-            {"camera", 0, KDR_CLOSEST, cam, NULL, ncam, 1, NULL},
-            {"random", 0, KDR_CLOSEST, rnd, NULL, n, 1, NULL},
-            {"ao_any", 0, KDR_ANY, ao, NULL, n, 1, NULL},
-            {"bundle_camera", 1, KDR_CLOSEST, cam, cam_dirs, ncam, ncam, NULL},
-            {"bundle_ao_any", 1, KDR_ANY, ao, ao_dirs, n, AO_PER_POINT, NULL},
+            {"camera", 0, KDR_CLOSEST, cam.rays, NULL, cam.n, 1, NULL},
+            {"random", 0, KDR_CLOSEST, rnd.rays, NULL, rnd.n, 1, NULL},
+            {"ao_any", 0, KDR_ANY, ao.rays, NULL, ao.n, 1, NULL},
+            {"bundle_camera", 1, KDR_CLOSEST, cam.rays, cam.dir, cam.n, cam.n, NULL},
+            {"bundle_ao_any", 1, KDR_ANY, ao.rays, ao.dir, ao.n, BENCH_AO_PER_POINT, NULL},
             {"frustum4", 2, KDR_CLOSEST, NULL, NULL, (size_t)c.width * c.height, 0, &c},
         };
         for (size_t i = 0; i < sizeof ws / sizeof *ws; i++)
-            fail |= ab_one(s, ta, tb, &ws[i], opts->repeat, csv) != 0;
+            fail |= ab_one(s, ta, tb, &ws[i], opts) != 0;
         fflush(stdout);
     }
     kdr_scene_free(ta);
     kdr_scene_free(tb);
-    free(cam), free(rnd), free(ao), free(cam_dirs), free(ao_dirs);
+    bench_workload_free(&cam), bench_workload_free(&rnd), bench_workload_free(&ao);
     return fail ? -1 : 0;
 }
 
+static int wanted(const char *const *list, int n, const char *name) {
+    for (int i = 0; i < n; i++)
+        if (!strcmp(list[i], name))
+            return 1;
+    return n == 0;
+}
+
 int main(int argc, char **argv) {
-    static const bench_section sections[] = {{"build", build_section}, {"ab", ab_section}};
     long cores = sysconf(_SC_NPROCESSORS_ONLN);
     g_threads = cores > 0 ? (int)cores : 1;
-    /* take our flags out, pass the rest to the harness */
-    int m = 1;
-    for (int i = 1; i < argc; i++) {
-        if (i + 1 < argc && !strcmp(argv[i], "--threads")) {
-            g_threads = atoi(argv[++i]);
-        } else if (i + 1 < argc && !strcmp(argv[i], "--exact-max")) {
-            g_exact_max = atoi(argv[++i]);
-        } else {
-            argv[m++] = argv[i];
+    const char *dir = ladder_default_dir(), *csv_path = NULL;
+    const char *only[MAX_ONLY], *sections[2];
+    int nonly = 0, nsections = 0;
+    size_t max_tris = (size_t)-1;
+    run_opts o = {262144, 3, NULL};
+    for (int i = 1; i < argc; i += 2) {
+        const char *f = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!v)
+            goto usage;
+        if (!strcmp(f, "--dir"))
+            dir = v;
+        else if (!strcmp(f, "--only") && nonly < MAX_ONLY)
+            only[nonly++] = v;
+        else if (!strcmp(f, "--max-tris"))
+            max_tris = strtoull(v, NULL, 10);
+        else if (!strcmp(f, "--rays") && strtoull(v, NULL, 10) > 0)
+            o.rays = strtoull(v, NULL, 10);
+        else if (!strcmp(f, "--repeat") && atoi(v) > 0)
+            o.repeat = atoi(v);
+        else if (!strcmp(f, "--csv"))
+            csv_path = v;
+        else if (!strcmp(f, "--section") && nsections < 2 &&
+                 (!strcmp(v, "build") || !strcmp(v, "ab")))
+            sections[nsections++] = v;
+        else if (!strcmp(f, "--threads") && atoi(v) >= 1)
+            g_threads = atoi(v);
+        else if (!strcmp(f, "--exact-max") && atoi(v) >= 0)
+            g_exact_max = atoi(v);
+        else
+            goto usage;
+    }
+    ladder_entry *v;
+    char err[512];
+    const int n = ladder_read(dir, &v, err, sizeof err);
+    if (n < 0) {
+        fprintf(stderr, "%s\n", err);
+        return 1;
+    }
+    if (csv_path && !(o.csv = fopen(csv_path, "w"))) {
+        fprintf(stderr, "%s: cannot write\n", csv_path);
+        free(v);
+        return 1;
+    }
+    if (o.csv)
+        fprintf(o.csv, "scene,triangles,section,metric,value\n");
+    int fail = 0;
+    for (int i = 0; i < n; i++) {
+        if (v[i].triangles > max_tris || !wanted(only, nonly, v[i].name))
+            continue;
+        float *tris;
+        size_t ntris;
+        if (ladder_load(&v[i], &tris, &ntris, err, sizeof err) != 0) {
+            fprintf(stderr, "%s\n", err);
+            fail = 1;
+            continue;
         }
+        const scene_in s = {v[i].name, tris, ntris};
+        if (wanted(sections, nsections, "build"))
+            fail |= build_section(&s, &o) != 0;
+        if (wanted(sections, nsections, "ab"))
+            fail |= ab_section(&s, &o) != 0;
+        free(tris);
     }
-    if (g_threads < 1) {
-        fprintf(stderr, "%s: --threads must be at least 1\n", argv[0]);
-        return 2;
-    }
-    return bench_main(m, argv, sections, sizeof sections / sizeof *sections);
+    if (o.csv)
+        fclose(o.csv);
+    free(v);
+    return fail;
+usage:
+    fprintf(stderr,
+            "usage: %s [--dir DIR] [--only NAME]... [--max-tris N] [--rays N] "
+            "[--repeat R] [--csv PATH] [--section build|ab]... [--threads T] "
+            "[--exact-max N]\n",
+            argv[0]);
+    return 2;
 }

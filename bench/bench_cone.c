@@ -1,71 +1,55 @@
 /*
- * bench_cone.c — run time against error for soft shadows toward sphere
- * lights: (a) Embree rtcOccluded1 per sample ray, (b) kd-tree single rays
- * (KDR_SHADOW_RAYS), (c) cone traversal + sampling (KDR_SHADOW_CONE), for
- * 1..256 samples per point, RMSE against a 4096-sample Embree reference.
+ * bench_cone.c — the "cone" section (kdray_bench_cone; default scenes
+ * "default" and "engine"): soft-shadow visibility toward a sphere light,
+ * run time against error.
  *
- * Points are the primary hits of a camera looking at the scene; each scene
- * gets a small light (mostly fully lit or umbra points) and a large close one
- * (penumbra-heavy). All three methods trace the very same kdr_shadow_ray
- * rays, so at equal samples they have (almost exactly) the same RMSE and the
- * comparison at equal error is the time ratio. Single thread, all methods
- * measured in the same run. Writes a CSV, a gnuplot data file and (if
- * gnuplot is installed) a log-log PNG through bench/plot_cone.gp.
- *
- * usage: kdray_bench_cone [--res N] [--max-samples N] [--out PREFIX]
- *                         [--methods MASK] [--ref-samples N] [scene.glb ...]
- * --methods 4 --ref-samples 1 runs the cone alone (for a profiler).
+ * Points are the primary hits of a --res x --res camera; each scene gets a
+ * small light (points mostly lit or in umbra) and a large close one
+ * (penumbra-heavy). For each sample count (--samples), in the same run:
+ *   kd_cone   kdr_shadow_trace KDR_SHADOW_CONE, as the daemon calls it;
+ *   kd_rays   kdr_shadow_trace KDR_SHADOW_RAYS (every sample walks the tree);
+ *   embree_*  every rival API for shadow samples: rtcOccluded1 per sample,
+ *             rtcOccluded8/16 packets of consecutive samples (a point's
+ *             samples share packets; below the width, neighbours fill them).
+ * kdray generates the sample rays inside its timed call, so Embree's timed
+ * call generates them too, with the same sampler (rival_shadow_job): all
+ * methods trace the same rays, hence have the same RMSE, and the ratio at
+ * equal error is the time ratio. RMSE is against a --ref-samples reference
+ * traced by robust Embree (0: no reference, as in --quick). With --out
+ * PREFIX: PREFIX.csv, PREFIX.dat and PREFIX.png (bench/plot_cone.gp).
  */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
-#include <embree3/rtcore.h>
+#include "bench.h"
+#include "rival.h"
 
-#include "kd_cone.h"
-#include "kdr_gltf.h"
-#include "kdray.h"
-#include "ladder.h"
-#include "oracle.h"
+#define CONE_EPSILON 1e-4f
+#define CONE_MIN_MS 150.0 /* passes are short: keep each sample count this long */
+#define CONE_QUICK_MIN_MS 40.0
+/* Samples on which Embree's answer may differ from kdray's: fast mode
+ * lets a few rays slip through shared edges. */
+#define SAMPLE_TOLERANCE 0.001
 
-#define BENCH_RES 64             /* camera is RES x RES points */
-#define BENCH_MAX_SAMPLES 256
-#define BENCH_REF_SAMPLES 4096
-#define BENCH_MIN_SECONDS 0.15   /* all methods' passes at one sample count */
-#define BENCH_MIN_ROUNDS 3
-#define BENCH_EPSILON 1e-4f
-#define BENCH_LADDER_SCENE "2CylinderEngine"
-#define BENCH_FALLBACK_ENGINE \
-    "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb"
-
-enum { M_EMBREE, M_KD_RAYS, M_KD_CONE, M_COUNT };
-static const char *method_name[M_COUNT] = {"embree_rays", "kd_rays", "kd_cone"};
-static int method_mask = (1 << M_COUNT) - 1;
-static int ref_samples = BENCH_REF_SAMPLES;
-
-static double now_s(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-/* ---- points: primary hits of a camera ------------------------------------ */
+#ifndef KDRAY_CONE_PLOT
+#define KDRAY_CONE_PLOT "bench/plot_cone.gp"
+#endif
 
 typedef struct point_set {
     float *p, *n;
     size_t count;
 } point_set;
 
-static void camera_points(const kdr_scene *s, int res, point_set *ps) {
+static int camera_points(const kdr_scene *s, int res, point_set *ps) {
     kdr_bounds b;
     kdr_scene_bounds(s, &b);
     const float diag = kdr_scene_diagonal(s);
     const float dir[3] = {0.55f, 0.45f, 0.70f};
-    kdr_camera cam = {.up = {0, 1, 0}, .fov_y_deg = 50.0f,
-                      .width = (uint32_t)res, .height = (uint32_t)res};
+    kdr_camera cam = {.up = {0, 1, 0}, .fov_y_deg = 50.0f, .width = (uint32_t)res,
+                      .height = (uint32_t)res};
     for (int k = 0; k < 3; k++) {
         cam.target[k] = 0.5f * (b.min[k] + b.max[k]);
         cam.eye[k] = cam.target[k] + 0.9f * diag * dir[k];
@@ -73,7 +57,9 @@ static void camera_points(const kdr_scene *s, int res, point_set *ps) {
     ps->p = malloc((size_t)res * res * 3 * sizeof(float));
     ps->n = malloc((size_t)res * res * 3 * sizeof(float));
     ps->count = 0;
-    for (int y = 0; y < res; y++) {
+    if (!ps->p || !ps->n)
+        return -1;
+    for (int y = 0; y < res; y++)
         for (int x = 0; x < res; x++) {
             kdr_ray r;
             kdr_hit h;
@@ -81,8 +67,7 @@ static void camera_points(const kdr_scene *s, int res, point_set *ps) {
             if (!kdr_intersect1(s, &r, &h, NULL))
                 continue;
             const float *t = kdr_scene_triangle(s, (size_t)h.prim);
-            float *p = ps->p + 3 * ps->count, *n = ps->n + 3 * ps->count;
-            float e1[3], e2[3];
+            float *p = ps->p + 3 * ps->count, *n = ps->n + 3 * ps->count, e1[3], e2[3];
             for (int k = 0; k < 3; k++) {
                 p[k] = r.org[k] + h.t * r.dir[k];
                 e1[k] = t[3 + k] - t[k];
@@ -93,112 +78,8 @@ static void camera_points(const kdr_scene *s, int res, point_set *ps) {
             n[2] = e1[0] * e2[1] - e1[1] * e2[0];
             ps->count++;
         }
-    }
-}
-
-/* ---- the three methods ---------------------------------------------------- */
-
-/* Embree per sample: the same rays as the kd modes, built with the same
- * per-(point, light) frame so ray generation costs the same everywhere. */
-static int embree_visibility(const kdr_scene *s, RTCScene es,
-                             const kdr_shadow_query *q, float *vis) {
-    struct RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    for (size_t i = 0; i < q->n; i++) {
-        kd_shadow_frame f;
-        if (kd_shadow_frame_init(s, q, i, 0, &f) != KDR_OK)
-            return -1;
-        uint32_t lit = 0;
-        for (uint32_t k = 0; k < q->samples; k++) {
-            kdr_ray r;
-            struct RTCRay er;
-            kd_shadow_frame_ray(&f, k, q->samples, &r);
-            er.org_x = r.org[0];
-            er.org_y = r.org[1];
-            er.org_z = r.org[2];
-            er.dir_x = r.dir[0];
-            er.dir_y = r.dir[1];
-            er.dir_z = r.dir[2];
-            er.tnear = r.tmin;
-            er.tfar = r.tmax;
-            er.time = 0.0f;
-            er.mask = 0xFFFFFFFFu;
-            er.id = 0;
-            er.flags = 0;
-            rtcOccluded1(es, &ctx, &er);
-            lit += er.tfar == -INFINITY ? 0u : 1u;
-        }
-        vis[i] = (float)lit / (float)q->samples;
-    }
     return 0;
 }
-
-typedef struct run_result {
-    double seconds; /* fastest full pass over the points */
-    double rmse;
-    uint64_t rays, decided;
-} run_result;
-
-static int run_once(int method, const kdr_scene *s, RTCScene es,
-                    const kdr_shadow_query *q, float *vis, kdr_shadow_stats *st) {
-    if (method == M_EMBREE)
-        return embree_visibility(s, es, q, vis);
-    return kdr_shadow_trace(s, q, 0, q->n,
-                            method == M_KD_CONE ? KDR_SHADOW_CONE : KDR_SHADOW_RAYS,
-                            vis, st);
-}
-
-/* Times one pass of a method (best so far kept in *out) and scores it. */
-static int measure(int method, const kdr_scene *s, RTCScene es,
-                   const kdr_shadow_query *q, const float *ref, float *vis,
-                   run_result *out) {
-    kdr_shadow_stats st = {0};
-    const double ts = now_s();
-    if (run_once(method, s, es, q, vis, &st) != 0)
-        return -1;
-    const double sec = now_s() - ts;
-    if (sec >= out->seconds)
-        return 0;
-    double se = 0.0;
-    for (size_t i = 0; i < q->n; i++)
-        se += ((double)vis[i] - ref[i]) * ((double)vis[i] - ref[i]);
-    out->seconds = sec;
-    out->rmse = sqrt(se / (double)q->n);
-    out->rays = method == M_EMBREE ? (uint64_t)q->n * q->samples : st.rays_traced;
-    out->decided = st.cones_decided;
-    return 0;
-}
-
-/* The methods take turns, pass after pass, until each has run
- * BENCH_MIN_ROUNDS passes and BENCH_MIN_SECONDS in all; each keeps its
- * fastest pass. Interleaving matters on a shared machine whose load drifts. */
-static int measure_all(const kdr_scene *s, RTCScene es, const kdr_shadow_query *q,
-                       const float *ref, float *vis, run_result *res) {
-    const double t0 = now_s();
-    for (int m = 0; m < M_COUNT; m++)
-        res[m] = (run_result){INFINITY, 1.0, 0, 0};
-    for (int round = 0; round < BENCH_MIN_ROUNDS || now_s() - t0 < BENCH_MIN_SECONDS;
-         round++) {
-        for (int m = 0; m < M_COUNT; m++) {
-            if (((method_mask >> m) & 1) &&
-                measure(m, s, es, q, ref, vis, &res[m]) != 0)
-                return -1;
-        }
-    }
-    for (int m = 0; m < M_COUNT; m++)
-        if (!((method_mask >> m) & 1))
-            res[m].seconds = 1.0;
-    return 0;
-}
-
-/* ---- one scene, one light --------------------------------------------------- */
-
-typedef struct bench_out {
-    FILE *csv, *dat;
-    int blocks;
-    char titles[1024];
-    double worst_ratio, best_ratio; /* embree time / cone time, n >= 4 */
-} bench_out;
 
 static void light_for(const kdr_scene *s, int large, kdr_sphere_light *li) {
     kdr_bounds b;
@@ -212,7 +93,7 @@ static void light_for(const kdr_scene *s, int large, kdr_sphere_light *li) {
 }
 
 /* Keeps only the points outside the light (the query rejects the others). */
-static size_t points_outside(point_set *ps, const kdr_sphere_light *li) {
+static void points_outside(point_set *ps, const kdr_sphere_light *li) {
     size_t out = 0;
     for (size_t i = 0; i < ps->count; i++) {
         double d2 = 0;
@@ -226,204 +107,264 @@ static size_t points_outside(point_set *ps, const kdr_sphere_light *li) {
             out++;
         }
     }
-    return ps->count = out;
+    ps->count = out;
 }
 
-static int bench_config(const char *name, const kdr_scene *s, RTCScene es,
-                        point_set *ps, int large, int max_samples, bench_out *bo) {
-    kdr_sphere_light li;
-    light_for(s, large, &li);
-    points_outside(ps, &li);
-    kdr_shadow_query q = {.n = ps->count, .points = ps->p, .normals = ps->n,
-                          .lights = &li, .nlights = 1, .seed = 0x5eed,
-                          .epsilon = BENCH_EPSILON};
-    float *ref = malloc(q.n * sizeof *ref), *vis = malloc(q.n * sizeof *vis);
-    q.samples = (uint32_t)ref_samples;
-    q.seed = 0xfeedbeef; /* independent of the measured estimates */
-    double t0 = now_s();
-    if (embree_visibility(s, es, &q, ref) != 0)
+/* ---- kdray's methods ----------------------------------------------------------- */
+
+typedef struct kd_shadow {
+    const kdr_scene *kd;
+    const kdr_shadow_query *q;
+    kdr_shadow_mode mode;
+    float *vis;
+    kdr_shadow_stats *stats;
+    int rc;
+} kd_shadow;
+
+static void kd_shadow_run(void *ctx) {
+    kd_shadow *k = ctx;
+    const int rc = kdr_shadow_trace(k->kd, k->q, 0, k->q->n, k->mode, k->vis, k->stats);
+    k->rc = k->rc ? k->rc : rc;
+}
+
+/* ---- plot files ---------------------------------------------------------------- */
+
+static struct {
+    FILE *csv, *dat;
+    int blocks;
+    char titles[1024];
+    double lo, hi; /* best Embree time / cone time over n >= 4 */
+} g_out = {NULL, NULL, 0, "", INFINITY, 0.0};
+
+static int open_out(const bench_opts *o) {
+    if (!o->out_prefix || g_out.csv)
+        return 0;
+    char f[1100];
+    snprintf(f, sizeof f, "%s.csv", o->out_prefix);
+    g_out.csv = fopen(f, "w");
+    snprintf(f, sizeof f, "%s.dat", o->out_prefix);
+    g_out.dat = fopen(f, "w");
+    if (!g_out.csv || !g_out.dat) {
+        fprintf(stderr, "bench cone: cannot write %s.*\n", o->out_prefix);
         return -1;
-    const double ref_s = now_s() - t0;
-    size_t lit = 0, dark = 0;
-    for (size_t i = 0; i < q.n; i++) {
-        lit += ref[i] == 1.0f;
-        dark += ref[i] == 0.0f;
     }
-    const char *lname = large ? "large" : "small";
-    printf("\n%s, %s light: %zu points, lit %.1f%%, umbra %.1f%%, penumbra "
-           "%.1f%% (reference %d spp: %.2f s)\n",
-           name, lname, q.n, 100.0 * lit / q.n, 100.0 * dark / q.n,
-           100.0 * (q.n - lit - dark) / q.n, ref_samples, ref_s);
-    printf("%8s %12s %10s %9s %12s %10s %9s %12s %10s %9s %9s %8s\n", "samples",
-           "embree_s", "rmse", "Mray/s", "kd_rays_s", "rmse", "Mray/s",
-           "kd_cone_s", "rmse", "decided", "cone/emb", "rays/emb");
-    q.seed = 0x5eed;
-    run_result res[M_COUNT][16];
-    int nrows = 0;
-    for (int n = 1; n <= max_samples; n *= 2, nrows++) {
-        q.samples = (uint32_t)n;
-        run_result row[M_COUNT];
-        if (measure_all(s, es, &q, ref, vis, row) != 0)
-            return -1;
-        for (int m = 0; m < M_COUNT; m++) {
-            res[m][nrows] = row[m];
-            const run_result *r = &res[m][nrows];
-            fprintf(bo->csv, "%s,%s,%s,%d,%.6g,%.6g,%llu,%llu,%zu\n", name, lname,
-                    method_name[m], n, r->seconds, r->rmse,
-                    (unsigned long long)r->rays, (unsigned long long)r->decided, q.n);
-        }
-        const run_result *e = &res[M_EMBREE][nrows], *k = &res[M_KD_RAYS][nrows],
-                         *c = &res[M_KD_CONE][nrows];
-        const double ratio = e->seconds / c->seconds;
-        printf("%8d %12.5f %10.5f %9.2f %12.5f %10.5f %9.2f %12.5f %10.5f %8.1f%% "
-               "%8.2fx %7.2fx\n",
-               n, e->seconds, e->rmse, q.n * n / e->seconds * 1e-6, k->seconds,
-               k->rmse, q.n * n / k->seconds * 1e-6, c->seconds, c->rmse,
-               100.0 * c->decided / q.n, ratio, e->seconds / k->seconds);
-        if (n >= 4) {
-            bo->worst_ratio = fmin(bo->worst_ratio, ratio);
-            bo->best_ratio = fmax(bo->best_ratio, ratio);
-        }
-    }
-    for (int m = 0; m < M_COUNT; m++) {
-        fprintf(bo->dat, "seconds %s\n", method_name[m]);
-        for (int j = 0; j < nrows; j++)
-            fprintf(bo->dat, "%.6g %.6g\n", res[m][j].seconds, res[m][j].rmse);
-        fprintf(bo->dat, "\n\n");
-    }
-    bo->blocks++;
-    size_t used = strlen(bo->titles);
-    snprintf(bo->titles + used, sizeof bo->titles - used, "%s%s_%s_light",
-             used ? " " : "", name, lname);
-    free(ref);
-    free(vis);
+    fprintf(g_out.csv,
+            "scene,light,method,samples,seconds,rmse,rays,cones_decided,points\n");
     return 0;
 }
 
-/* ---- scenes ----------------------------------------------------------------- */
+/* ---- one scene, one light ------------------------------------------------------ */
 
-static int bench_scene(const char *path, int res, int max_samples, bench_out *bo) {
-    kdr_gltf_scene g;
-    char err[256];
-    if (kdr_gltf_load(path, &g, err, sizeof err) != 0) {
-        fprintf(stderr, "bench_cone: %s\n", err);
-        return -1;
-    }
-    kdr_build_opts opts;
-    kdr_scene *s = NULL;
-    kdr_build_opts_default(&opts);
-    oracle *o = oracle_create(g.tris, g.ntris, NULL);
-    if (!o || kdr_scene_build(g.tris, g.ntris, &opts, NULL, NULL, &s) != KDR_OK) {
-        fprintf(stderr, "bench_cone: cannot build %s\n", path);
-        return -1;
-    }
-    const char *base = strrchr(path, '/');
-    char name[128];
-    snprintf(name, sizeof name, "%s", base ? base + 1 : path);
-    char *dot = strrchr(name, '.');
-    if (dot)
-        *dot = '\0';
-    printf("\n== %s: %zu triangles\n", name, g.ntris);
+static double rmse(const float *v, const float *ref, size_t n) {
+    double se = 0.0;
+    for (size_t i = 0; i < n; i++)
+        se += ((double)v[i] - ref[i]) * ((double)v[i] - ref[i]);
+    return sqrt(se / (double)n);
+}
+
+typedef struct row_out {
+    double ms, rmse;
+} row_out;
+
+/* One sample count: every method, interleaved. Fills out[0..2] = kd_cone,
+ * kd_rays, best Embree. */
+static int one_count(const bench_scene *s, const kdr_shadow_query *q, const float *ref,
+                     const char *work, const bench_opts *o, row_out out[3],
+                     uint64_t *decided) {
+    rival_api apis[RIVAL_MAX_APIS + 1];
+    const size_t napi = rival_apis(RIVAL_WORK_SHADOW, apis);
+    /* a last, untraced job times the Embree side's sample generation */
+    const size_t nr = napi + (o->quick ? 0 : 1), nm = 2 + nr;
+    apis[napi] = apis[napi - 1];
+    float *vis[2 + RIVAL_MAX_APIS + 1];
+    kd_shadow ks[2] = {{s->kd, q, KDR_SHADOW_CONE, NULL, NULL, 0},
+                       {s->kd, q, KDR_SHADOW_RAYS, NULL, NULL, 0}};
+    rival_shadow_job rj[RIVAL_MAX_APIS + 1];
+    bench_method m[2 + RIVAL_MAX_APIS + 1];
     int rc = 0;
-    for (int large = 0; large < 2 && rc == 0; large++) {
-        point_set ps;
-        camera_points(s, res, &ps);
-        rc = bench_config(name, s, oracle_rtc_scene(o), &ps, large, max_samples, bo);
-        free(ps.p);
-        free(ps.n);
+    memset(rj, 0, sizeof rj);
+    for (size_t i = 0; i < nm; i++)
+        rc |= !(vis[i] = malloc(q->n * sizeof(float)));
+    for (int i = 0; i < 2 && !rc; i++) {
+        ks[i].vis = vis[i];
+        m[i] =
+            (bench_method){i ? "kd_rays" : "kd_cone", 0, NULL, kd_shadow_run, &ks[i], 0};
     }
-    kdr_scene_free(s);
-    oracle_free(o);
-    kdr_gltf_free(&g);
+    for (size_t i = 0; i < nr && !rc; i++) {
+        rc |= rival_shadow_job_init(&rj[i], s->emb, apis[i], s->kd, q, vis[2 + i]);
+        m[2 + i] = rival_shadow_job_method(&rj[i]);
+        if (i == napi) {
+            rj[i].trace = 0;
+            snprintf(rj[i].name, sizeof rj[i].name, "raygen_only_shadow");
+        }
+    }
+    if (!rc) {
+        bench_measure(m, nm, o->repeat, o->quick ? CONE_QUICK_MIN_MS : CONE_MIN_MS);
+        kdr_shadow_stats st = {0};
+        ks[0].stats = &st;
+        if (!isnan(m[0].best_ms))
+            kd_shadow_run(&ks[0]); /* untimed: how many cones were decided */
+        *decided = st.cones_decided;
+        rc = ks[0].rc || ks[1].rc;
+    }
+    /* the strongest Embree API that ran (best == nm: none did) */
+    size_t best = nm;
+    for (size_t i = 2; i < 2 + napi && !rc; i++) {
+        rc |= rj[i - 2].failed;
+        if (!isnan(m[i].best_ms) && (best == nm || m[i].best_ms < m[best].best_ms))
+            best = i;
+    }
+    const size_t samples = q->n * q->samples;
+    const int have_rays = !isnan(m[1].best_ms); /* kd_rays: the reference answers */
+    for (size_t i = 0; i < nm && !rc; i++) {
+        if (isnan(m[i].best_ms))
+            continue; /* left out by --method */
+        bench_summary_add(s, work, m[i].name, samples, m[i].best_ms, -1);
+        if (i == 0 && have_rays && memcmp(vis[0], vis[1], q->n * sizeof(float)))
+            bench_fail("%s %s: kd_cone and kd_rays answers differ", s->name, work);
+        double diff = 0.0;
+        for (size_t p = 0; have_rays && i >= 2 && i < 2 + napi && p < q->n; p++)
+            diff += fabs((double)vis[i][p] - vis[1][p]) * q->samples;
+        if (diff > SAMPLE_TOLERANCE * (double)samples)
+            bench_fail("%s %s: %s disagrees with kd on %.0f of %zu samples", s->name,
+                       work, m[i].name, diff, samples);
+    }
+    if (!rc) {
+        const size_t pick[3] = {0, 1, best};
+        for (int k = 0; k < 3; k++)
+            out[k] = pick[k] < nm && !isnan(m[pick[k]].best_ms)
+                         ? (row_out){m[pick[k]].best_ms,
+                                     ref ? rmse(vis[pick[k]], ref, q->n) : NAN}
+                         : (row_out){NAN, NAN};
+        printf("%8u %10.3f %10.3f %10.3f %-30s %8.2fx %8.2fx %9.5f %8.1f%%\n", q->samples,
+               out[0].ms, out[1].ms, out[2].ms, best < nm ? m[best].name + 7 : "-",
+               out[2].ms / out[0].ms, out[2].ms / out[1].ms, out[0].rmse,
+               100.0 * (double)*decided / (double)q->n);
+        if (nr > napi && !isnan(m[nm - 1].best_ms))
+            printf("%8s Embree's sample generation alone: %.3f ms\n", "",
+                   m[nm - 1].best_ms);
+    }
+    for (size_t i = 0; i < nm; i++)
+        free(vis[i]);
+    for (size_t i = 0; i < nr; i++)
+        rival_shadow_job_free(&rj[i]);
+    return rc ? -1 : 0;
+}
+
+static int one_light(const bench_scene *s, const rival *robust, point_set *ps, int large,
+                     const bench_opts *o) {
+    const char *lname = large ? "large" : "small";
+    kdr_sphere_light li;
+    light_for(s->kd, large, &li);
+    points_outside(ps, &li);
+    kdr_shadow_query q = {.n = ps->count, .points = ps->p, .normals = ps->n,
+                          .lights = &li, .nlights = 1, .seed = 0x5eed,
+                          .epsilon = CONE_EPSILON};
+    float *ref = robust ? malloc(q.n * sizeof *ref) : NULL;
+    printf("\n%s, %s light: %zu points", s->name, lname, q.n);
+    if (ref) {
+        rival_shadow_job rj;
+        rival_api apis[RIVAL_MAX_APIS]; /* the widest coherent packets */
+        const rival_api api = apis[rival_apis(RIVAL_WORK_SHADOW, apis) - 1];
+        q.samples = (uint32_t)o->ref_samples;
+        q.seed = 0xfeedbeef; /* independent of the measured estimates */
+        const double t0 = bench_cpu_ms();
+        if (rival_shadow_job_init(&rj, robust, api, s->kd, &q, ref) ||
+            rival_shadow_job_once(&rj)) {
+            rival_shadow_job_free(&rj);
+            free(ref);
+            return -1;
+        }
+        rival_shadow_job_free(&rj);
+        size_t lit = 0, dark = 0;
+        for (size_t i = 0; i < q.n; i++)
+            lit += ref[i] == 1.0f, dark += ref[i] == 0.0f;
+        printf(", lit %.1f%%, umbra %.1f%%, penumbra %.1f%% (reference: %d spp, robust "
+               "Embree, %.1f s)",
+               100.0 * lit / q.n, 100.0 * dark / q.n, 100.0 * (q.n - lit - dark) / q.n,
+               o->ref_samples, (bench_cpu_ms() - t0) / 1e3);
+        q.seed = 0x5eed;
+    }
+    printf("\n%8s %10s %10s %10s %-30s %9s %9s %9s %9s\n", "samples", "cone ms",
+           "kd rays ms", "Embree ms", "strongest Embree API", "x Embree", "rays/Emb",
+           "rmse", "decided");
+    row_out res[BENCH_MAX_SAMPLES][3];
+    int rc = 0, nrows = 0;
+    for (int k = 0; k < o->nsamples && !rc; k++, nrows++) {
+        char work[64];
+        uint64_t decided = 0;
+        q.samples = o->samples[k];
+        snprintf(work, sizeof work, "shadow_%s_%uspp", lname, q.samples);
+        rc = one_count(s, &q, ref, work, o, res[k], &decided);
+        if (!rc && q.samples >= 4) {
+            g_out.lo = fmin(g_out.lo, res[k][2].ms / res[k][0].ms);
+            g_out.hi = fmax(g_out.hi, res[k][2].ms / res[k][0].ms);
+        }
+        static const char *const mname[3] = {"kd_cone", "kd_rays", "embree_best"};
+        for (int m = 0; m < 3 && !rc && g_out.csv; m++)
+            fprintf(g_out.csv, "%s,%s,%s,%u,%.6g,%.6g,%zu,%llu,%zu\n", s->name, lname,
+                    mname[m], q.samples, res[k][m].ms / 1e3, res[k][m].rmse,
+                    q.n * q.samples, (unsigned long long)(m ? 0 : decided), q.n);
+    }
+    if (!rc && g_out.dat && ref) {
+        static const char *const series[3] = {"kd_cone", "kd_rays", "embree_best_API"};
+        for (int m = 2; m >= 0; m--) { /* plot_cone.gp: Embree, kd rays, cone */
+            fprintf(g_out.dat, "seconds %s\n", series[m]);
+            for (int j = 0; j < nrows; j++)
+                fprintf(g_out.dat, "%.6g %.6g\n", res[j][m].ms / 1e3, res[j][m].rmse);
+            fprintf(g_out.dat, "\n\n");
+        }
+        const size_t used = strlen(g_out.titles);
+        snprintf(g_out.titles + used, sizeof g_out.titles - used, "%s%s_%s_light",
+                 used ? " " : "", s->name, lname);
+        g_out.blocks++;
+    }
+    free(ref);
     return rc;
 }
 
-/* The default scene and the ladder's 2CylinderEngine (or the assimp copy). */
-static int default_scenes(const char **paths, char *engine, size_t len) {
-    int n = 0;
-#ifdef KDRAY_DEFAULT_SCENE
-    FILE *f = fopen(KDRAY_DEFAULT_SCENE, "rb");
-    if (f) {
-        fclose(f);
-        paths[n++] = KDRAY_DEFAULT_SCENE;
+static int cone_run(const bench_scene *s, const bench_opts *o) {
+    if (open_out(o))
+        return -1;
+    rival *robust =
+        o->ref_samples ? rival_create(s->tris, s->ntris, 1, RIVAL_QUALITY) : NULL;
+    if (o->ref_samples && !robust)
+        return -1;
+    printf("\n== %s: %zu triangles, cone shadows from %dx%d camera hits\n", s->name,
+           s->ntris, o->res, o->res);
+    int rc = 0;
+    for (int large = 0; large < 2 && !rc; large++) {
+        point_set ps;
+        rc = camera_points(s->kd, o->res, &ps) || one_light(s, robust, &ps, large, o);
+        free(ps.p);
+        free(ps.n);
     }
-#endif
-    snprintf(engine, len, "%s", BENCH_FALLBACK_ENGINE);
-    ladder_entry *lad = NULL;
-    char err[256];
-    const char *dir = ladder_default_dir();
-    const int nl = dir ? ladder_read(dir, &lad, err, sizeof err) : -1;
-    for (int j = 0; j < nl; j++) {
-        if (strcmp(lad[j].name, BENCH_LADDER_SCENE) == 0)
-            snprintf(engine, len, "%s", lad[j].path);
-    }
-    free(lad);
-    paths[n++] = engine;
-    return n;
+    rival_free(robust);
+    fflush(stdout);
+    return rc;
 }
 
-static int write_plot(const char *prefix, const bench_out *bo) {
+static void cone_finish(const bench_opts *o) {
+    if (g_out.hi > 0)
+        printf("\n== cone: kd_cone against the strongest Embree API at equal samples "
+               "(= equal rays, equal RMSE), 4 spp and up: %.2fx .. %.2fx\n",
+               g_out.lo, g_out.hi);
+    if (!g_out.csv)
+        return;
+    fclose(g_out.csv);
+    fclose(g_out.dat);
+    g_out.csv = g_out.dat = NULL;
     char cmd[2048];
     snprintf(cmd, sizeof cmd,
              "gnuplot -e \"datafile='%s.dat'; outfile='%s.png'; nblocks=%d; "
              "titles='%s'\" %s",
-             prefix, prefix, bo->blocks, bo->titles, KDRAY_CONE_PLOT);
-    return system(cmd);
+             o->out_prefix, o->out_prefix, g_out.blocks, g_out.titles, KDRAY_CONE_PLOT);
+    if (g_out.blocks && system(cmd) == 0)
+        printf("wrote %s.csv, %s.dat, %s.png\n", o->out_prefix, o->out_prefix,
+               o->out_prefix);
+    else
+        printf("wrote %s.csv, %s.dat (no PNG: %s)\n", o->out_prefix, o->out_prefix,
+               g_out.blocks ? "gnuplot failed" : "no reference, no RMSE");
 }
 
-int main(int argc, char **argv) {
-    int res = BENCH_RES, max_samples = BENCH_MAX_SAMPLES;
-    const char *prefix = "bench_cone";
-    const char *paths[16];
-    char engine[1024];
-    int np = 0;
-    for (int a = 1; a < argc; a++) {
-        if (!strcmp(argv[a], "--res") && a + 1 < argc)
-            res = atoi(argv[++a]);
-        else if (!strcmp(argv[a], "--max-samples") && a + 1 < argc)
-            max_samples = atoi(argv[++a]);
-        else if (!strcmp(argv[a], "--out") && a + 1 < argc)
-            prefix = argv[++a];
-        else if (!strcmp(argv[a], "--methods") && a + 1 < argc)
-            method_mask = atoi(argv[++a]);
-        else if (!strcmp(argv[a], "--ref-samples") && a + 1 < argc)
-            ref_samples = atoi(argv[++a]);
-        else if (np < 16)
-            paths[np++] = argv[a];
-    }
-    if (res < 4 || max_samples < 1 || max_samples > 4096 || ref_samples < 1 ||
-        ref_samples > 4096) {
-        fprintf(stderr, "usage: %s [--res N] [--max-samples N] [--out PREFIX] "
-                        "[scene.glb ...]\n", argv[0]);
-        return 2;
-    }
-    if (np == 0)
-        np = default_scenes(paths, engine, sizeof engine);
-    char file[1100];
-    bench_out bo = {.worst_ratio = INFINITY, .best_ratio = 0.0};
-    snprintf(file, sizeof file, "%s.csv", prefix);
-    bo.csv = fopen(file, "w");
-    snprintf(file, sizeof file, "%s.dat", prefix);
-    bo.dat = fopen(file, "w");
-    if (!bo.csv || !bo.dat) {
-        fprintf(stderr, "bench_cone: cannot write %s.*\n", prefix);
-        return 1;
-    }
-    fprintf(bo.csv, "scene,light,method,samples,seconds,rmse,rays,cones_decided,points\n");
-    const double t0 = now_s();
-    int rc = 0;
-    for (int j = 0; j < np && rc == 0; j++)
-        rc = bench_scene(paths[j], res, max_samples, &bo);
-    fclose(bo.csv);
-    fclose(bo.dat);
-    if (rc != 0)
-        return 1;
-    printf("\ncone vs Embree per-ray at equal samples (= equal rays, equal RMSE), "
-           "4..%d spp: %.2fx .. %.2fx; total %.1f s\n",
-           max_samples, bo.worst_ratio, bo.best_ratio, now_s() - t0);
-    if (write_plot(prefix, &bo) == 0)
-        printf("wrote %s.csv, %s.dat, %s.png\n", prefix, prefix, prefix);
-    else
-        printf("wrote %s.csv, %s.dat (gnuplot failed: no PNG)\n", prefix, prefix);
-    return 0;
-}
+const bench_section bench_cone_section = {"cone", cone_run, cone_finish};

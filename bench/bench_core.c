@@ -1,130 +1,92 @@
 /*
- * bench_core.c — kdray_bench: the core benchmark (issue 2). For every
- * ladder scene, in the same run and on one core: the kd-tree build against
- * Embree's BVH builds (RTC_BUILD_QUALITY_HIGH and the default MEDIUM), and
- * single-ray tracing of the same rays with kdr_intersect1 / kdr_occluded1
- * against rtcIntersect1 / rtcOccluded1 (on the HIGH-quality BVH, default
- * scene flags: Embree's fast path, not the robust mode the tests use).
- * Ray sets: camera rays, random incoherent rays, AO hemisphere rays (any).
- *
- * Times are process CPU time (bench_cpu_ms): both sides run on one thread,
- * and on a shared machine wall time would mostly measure the neighbours.
- * Prints one table row per scene and, with --csv, long-format rows. Other
- * sections can be added to the table in main() or, better, live in their
- * own program built on bench.h.
+ * bench_core.c — the "core" section (kdray_bench): the kd-tree build
+ * against Embree's BVH builds (HIGH quality, the one the rival traces, and
+ * the default MEDIUM), memory per triangle, and kdray's single-ray walk
+ * (kdr_intersect1 / kdr_occluded1) against every rival API on camera,
+ * random and AO any-hit rays. At the end, one table of kd against the
+ * strongest Embree API per workload, read back from the summary.
  */
 #include <stdio.h>
 #include <stdlib.h>
 
 #include "bench.h"
-#include "oracle.h"
+#include "rival.h"
 
-#define SEED 7u
-#define AO_PER_POINT 16
+static const char *const core_workloads[] = {"camera", "random", "ao_any"};
+#define NWORK (sizeof core_workloads / sizeof *core_workloads)
 
-static void print_header(void) {
-    printf("%-10s %9s | %9s %9s %9s %6s | %6s %6s | %21s | %21s | %21s\n",
-           "scene", "tris", "build kd", "emb HQ", "emb MED", "kd/HQ", "B/tri",
-           "embB/t", "camera Mray/s kd emb x", "random Mray/s kd emb x",
-           "AO any Mray/s kd emb x");
-    printf("%-10s %9s | %9s %9s %9s %6s | %6s %6s | %21s | %21s | %21s\n", "",
-           "", "ms", "ms", "ms", "", "kd", "HQ", "", "", "");
-}
+/* Scenes in run order with the numbers only this section knows. */
+#define MAX_SCENES 32
+static struct {
+    char name[64];
+    size_t tris;
+    double kd_bpt, emb_bpt;
+} g_scenes[MAX_SCENES];
+static int g_nscenes;
 
-static oracle *embree_build(const bench_scene *s, enum RTCBuildQuality q) {
-    oracle_opts o;
-    oracle_opts_default(&o);
-    o.robust = 0;
-    o.quality = q;
-    o.device_config = BENCH_EMBREE_CONFIG;
-    return oracle_create(s->tris, s->ntris, &o);
-}
-
-typedef struct speed {
-    double kd, emb;
-    size_t hit_diff;
-} speed;
-
-static speed trace_both(const bench_scene *s, RTCScene sc, const kdr_ray *rays,
-                        size_t n, int any, int repeat) {
-    size_t hk, he;
-    speed v;
-    v.kd = bench_kd_mrays(s->kd, rays, n, any, repeat, &hk);
-    v.emb = bench_embree_mrays(sc, rays, n, any, repeat, &he);
-    /* Embree's fast (non-robust) mode leaks a few rays through shared
-     * edges; more than 0.1% would make the speeds incomparable */
-    v.hit_diff = hk > he ? hk - he : he - hk;
-    if (v.hit_diff * 1000 > n)
-        fprintf(stderr, "%s: hit counts differ: kd %zu embree %zu of %zu\n",
-                s->name, hk, he, n);
-    return v;
-}
-
-static void csv_speed(bench_csv *csv, const bench_scene *s, const char *set,
-                      speed v) {
-    char m[64];
-    snprintf(m, sizeof m, "%s_mrays_kd", set);
-    bench_csv_row(csv, "core", s, m, v.kd);
-    snprintf(m, sizeof m, "%s_mrays_embree", set);
-    bench_csv_row(csv, "core", s, m, v.emb);
-    snprintf(m, sizeof m, "%s_ratio", set);
-    bench_csv_row(csv, "core", s, m, v.emb > 0 ? v.kd / v.emb : 0);
-}
-
-static int core_section(const bench_scene *s, const bench_opts *opts,
-                        bench_csv *csv) {
-    static int header;
-    if (!header++)
-        print_header();
-    oracle *hq = embree_build(s, RTC_BUILD_QUALITY_HIGH);
-    oracle *med = embree_build(s, RTC_BUILD_QUALITY_MEDIUM);
-    kdr_ray *rays = malloc(opts->rays * sizeof *rays);
-    if (!hq || !med || !rays) {
-        oracle_free(hq);
-        oracle_free(med);
-        free(rays);
-        return -1;
-    }
+static int core_run(const bench_scene *s, const bench_opts *o) {
+    rival *med =
+        o->quick ? NULL : rival_create(s->tris, s->ntris, 0, RTC_BUILD_QUALITY_MEDIUM);
+    if (med)
+        bench_summary_add(s, "build", "embree_build_medium", 0, rival_build_ms(med), -1);
+    rival_free(med);
     kdr_tree_stats st;
     kdr_scene_tree_stats(s->kd, &st);
     const double ntri = s->ntris ? (double)s->ntris : 1.0;
-    const double kd_bpt = (double)st.bytes / ntri;
-    const double emb_bpt = (double)oracle_bytes(hq) / ntri;
-    const double hq_ms = oracle_build_cpu_ms(hq);
-    const double med_ms = oracle_build_cpu_ms(med);
-    oracle_free(med);
-
-    kdr_camera cam;
-    RTCScene sc = oracle_rtc_scene(hq);
-    const size_t ncam = bench_camera_rays(s->kd, opts->rays, &cam, rays);
-    const speed cs = trace_both(s, sc, rays, ncam, 0, opts->repeat);
-    bench_random_rays(s->kd, SEED, opts->rays, rays);
-    const speed rs = trace_both(s, sc, rays, opts->rays, 0, opts->repeat);
-    bench_ao_rays(s->kd, SEED, opts->rays, AO_PER_POINT, rays);
-    const speed as = trace_both(s, sc, rays, opts->rays, 1, opts->repeat);
-    oracle_free(hq);
-    free(rays);
-
-    printf("%-10s %9zu | %9.1f %9.1f %9.1f %6.2f | %6.1f %6.1f | %6.2f %6.2f %6.2f "
-           "| %6.2f %6.2f %6.2f | %6.2f %6.2f %6.2f\n",
-           s->name, s->ntris, s->kd_build_ms, hq_ms, med_ms,
-           hq_ms > 0 ? s->kd_build_ms / hq_ms : 0, kd_bpt, emb_bpt, cs.kd,
-           cs.emb, cs.kd / cs.emb, rs.kd, rs.emb, rs.kd / rs.emb, as.kd,
-           as.emb, as.kd / as.emb);
-    fflush(stdout);
-    bench_csv_row(csv, "core", s, "build_ms_kd", s->kd_build_ms);
-    bench_csv_row(csv, "core", s, "build_ms_embree_hq", hq_ms);
-    bench_csv_row(csv, "core", s, "build_ms_embree_medium", med_ms);
-    bench_csv_row(csv, "core", s, "build_ratio_kd_hq", s->kd_build_ms / hq_ms);
-    bench_csv_row(csv, "core", s, "bytes_per_tri_kd", kd_bpt);
-    bench_csv_row(csv, "core", s, "bytes_per_tri_embree_hq", emb_bpt);
-    csv_speed(csv, s, "camera", cs);
-    csv_speed(csv, s, "random", rs);
-    csv_speed(csv, s, "ao_any", as);
+    if (g_nscenes < MAX_SCENES) {
+        snprintf(g_scenes[g_nscenes].name, sizeof g_scenes[0].name, "%s", s->name);
+        g_scenes[g_nscenes].tris = s->ntris;
+        g_scenes[g_nscenes].kd_bpt = (double)st.bytes / ntri;
+        g_scenes[g_nscenes++].emb_bpt = (double)rival_bytes(s->emb) / ntri;
+    }
+    printf("\n== %s: %zu triangles; build CPU ms: kd %.1f, Embree HIGH %.1f\n", s->name,
+           s->ntris, s->kd_build_ms, rival_build_ms(s->emb));
+    static const bench_kd single[] = {BENCH_KD_SINGLE};
+    for (size_t k = 0; k < NWORK; k++) {
+        bench_workload w;
+        if (bench_workload_make(&w, s->kd, core_workloads[k], o->rays) != 0)
+            return -1;
+        const int rc = bench_run_workload(s, &w, single, 1, o);
+        bench_workload_free(&w);
+        if (rc)
+            return -1;
+    }
     return 0;
 }
 
-int main(int argc, char **argv) {
-    static const bench_section sections[] = {{"core", core_section}};
-    return bench_main(argc, argv, sections, sizeof sections / sizeof *sections);
+/* "0.27 rtcIntersect16_coherent": kd speed / the strongest Embree API's. */
+static void print_vs(const char *scene, const char *work) {
+    double best = 0.0;
+    const char *api = bench_summary_rival(scene, work, &best);
+    const double kd = bench_summary_ms(scene, work, "kd_single");
+    if (!api || kd <= 0) {
+        printf(" | %28s", "-");
+        return;
+    }
+    printf(" | %5.2f %-22s", best / kd, api + 7 /* drop "embree_" */);
 }
+
+static void core_finish(const bench_opts *o) {
+    (void)o;
+    printf("\n== kd build and single rays against Embree's strongest API per workload "
+           "(x = kd speed / Embree speed)\n");
+    printf("%-10s %9s | %9s %9s %9s %6s | %6s %6s", "scene", "tris", "kd ms", "HIGH ms",
+           "MED ms", "kd/HI", "B/tri", "Emb");
+    for (size_t k = 0; k < NWORK; k++)
+        printf(" | %-28s", core_workloads[k]);
+    printf("\n");
+    for (int i = 0; i < g_nscenes; i++) {
+        const char *n = g_scenes[i].name;
+        const double kd = bench_summary_ms(n, "build", "kd_build");
+        const double hi = bench_summary_ms(n, "build", "embree_build_high");
+        const double med = bench_summary_ms(n, "build", "embree_build_medium");
+        printf("%-10s %9zu | %9.1f %9.1f %9.1f %6.2f | %6.1f %6.1f", n, g_scenes[i].tris,
+               kd, hi, med, hi > 0 ? kd / hi : 0.0, g_scenes[i].kd_bpt,
+               g_scenes[i].emb_bpt);
+        for (size_t k = 0; k < NWORK; k++)
+            print_vs(n, core_workloads[k]);
+        printf("\n");
+    }
+}
+
+const bench_section bench_core_section = {"core", core_run, core_finish};

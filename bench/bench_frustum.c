@@ -1,346 +1,241 @@
 /*
- * bench_frustum.c — single-threaded throughput of full-frame primary rays:
- * per-ray kd traversal, 4-wide omni-directional bundles (shared origin,
- * pixels in 2x2 blocks), single-frustum and four-frustum traversal (ray
- * groups of 4x2 with AVX2, else 2x2), and
- * Embree 3 rtcIntersect1 / rtcIntersect8 (coherent context, 4x2 pixel
- * packets), all on the same camera rays in the same run. Prints Mrays/s,
- * nodes visited per ray (kd), a tile-size sweep of both frustum modes, and
- * the ratios the task asks for (4-frustum / single-frustum, 4-frustum /
- * Embree rtcIntersect1), as geometric means over the cameras.
- *
- * Times are the calling thread's CPU time (CLOCK_THREAD_CPUTIME_ID), so
- * other processes sharing the cores do not skew the ratios.
- *
- * Embree's scene is built like the test oracle's (RTC_SCENE_FLAG_ROBUST,
- * high quality) and, for the record, also without ROBUST; FTZ/DAZ off for
- * both sides.
- *
- * Usage: kdray_bench_frustum [bench.h flags: --dir, --rays N (pixels per
- *   frame, default 1000000 → 1000x1000), --only SCENE, --repeat R, --csv]
- *   over the scene ladder (bench.h).
+ * bench_frustum.c — the "frustum" section (kdray_bench_frustum): one image
+ * of primary rays per camera (three cameras per scene: front and diagonal
+ * views from outside, a sideways view from inside; --frame N pixels a
+ * side, default 1000), answered
+ *   - by kdr_frustum_trace as the daemon calls it: four-frustum (MULTI4)
+ *     and single-frustum traversal at tile 8, and its per-pixel reference
+ *     walk (RAYS); all three generate the camera rays themselves;
+ *   - by every rival API for camera rays, generating the very same rays
+ *     inside the timed call too (rival_camera_job), so both sides time
+ *     "camera in, t/prim/u/v image out".
+ * A diagnostic row times the Embree side's ray generation and write-out
+ * alone (raygen_only). Without --quick a tile sweep (4..64) of both
+ * frustum modes follows. The finish prints geometric means over all
+ * cameras, including 4-frustum / 1-frustum and against the strongest
+ * Embree API per camera.
  */
-#define _POSIX_C_SOURCE 200809L
-#include <embree3/rtcore.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "bench.h"
-#include "kdray.h"
-#include "oracle.h"
+#include "rival.h"
 
-/* Workload tuning, in one place. */
 #define DEFAULT_TILE 8
-
-static int g_repeat = BENCH_DEFAULT_REPEAT; /* best of; set from bench.h --repeat */
 #define NCAMS 3
-
-static double now_s(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
-
-typedef struct frame {
-    const kdr_scene *s;
-    const kdr_camera *cam;
-    size_t n;
-    float *t, *u, *v, *dirs;
-    int32_t *prim;
-} frame;
-
-typedef struct result {
-    double mrays;
-    double nodes_per_ray;
-    double tris_per_ray;
-    double hit_checksum; /* sum of prims + 1, to compare methods */
-} result;
-
-static double checksum(const frame *f) {
-    double c = 0.0;
-    for (size_t i = 0; i < f->n; i++)
-        c += f->prim[i] + 1;
-    return c;
-}
-
-/* ---- kd methods ------------------------------------------------------------- */
-
-static result run_frustum(frame *f, uint32_t tile, kdr_frustum_mode mode) {
-    kdr_hits out = {f->t, f->prim, f->u, f->v, NULL};
-    result r = {0, 0, 0, 0};
-    double best = 1e30;
-    for (int rep = 0; rep < g_repeat; rep++) {
-        kdr_trav_stats st = {0};
-        const double t0 = now_s();
-        kdr_frustum_trace(f->s, f->cam, tile, 0, kdr_frustum_tile_count(f->cam, tile),
-                          KDR_CLOSEST, mode, &out, &st);
-        const double dt = now_s() - t0;
-        if (dt < best)
-            best = dt;
-        r.nodes_per_ray = (double)st.nodes_visited / (double)f->n;
-        r.tris_per_ray = (double)st.tri_tests / (double)f->n;
-    }
-    r.mrays = (double)f->n / best * 1e-6;
-    r.hit_checksum = checksum(f);
-    return r;
-}
-
-/* Directions in 2x2 pixel blocks (row-major blocks), so each bundle of 4 is
- * a compact screen square; results land in block order (checksum only). */
-static void block_dirs(frame *f, uint32_t bw, uint32_t bh) {
-    size_t k = 0;
-    for (uint32_t by = 0; by < f->cam->height; by += bh)
-        for (uint32_t bx = 0; bx < f->cam->width; bx += bw)
-            for (uint32_t j = 0; j < bw * bh; j++) {
-                kdr_ray ray;
-                kdr_camera_ray(f->cam, bx + j % bw, by + j / bw, &ray);
-                memcpy(&f->dirs[3 * k++], ray.dir, sizeof ray.dir);
-            }
-}
-
-static result run_bundle(frame *f, kdr_trav_mode mode) {
-    const float tmin = 0.0f, tmax = INFINITY;
-    const kdr_ray_batch b = {f->n, f->cam->eye, 0, f->dirs, &tmin, 0, &tmax, 0};
-    kdr_hits out = {f->t, f->prim, f->u, f->v, NULL};
-    result r = {0, 0, 0, 0};
-    double best = 1e30;
-    for (int rep = 0; rep < g_repeat; rep++) {
-        kdr_trav_stats st = {0};
-        const double t0 = now_s();
-        kdr_trace_batch(f->s, &b, 0, f->n, KDR_CLOSEST, mode, &out, &st);
-        const double dt = now_s() - t0;
-        if (dt < best)
-            best = dt;
-        r.nodes_per_ray = (double)st.nodes_visited / (double)f->n;
-        r.tris_per_ray = (double)st.tri_tests / (double)f->n;
-    }
-    r.mrays = (double)f->n / best * 1e-6;
-    r.hit_checksum = checksum(f);
-    return r;
-}
-
-/* ---- Embree ----------------------------------------------------------------- */
-
-static result run_embree1(frame *f, RTCScene scene) {
-    struct RTCIntersectContext ctx;
-    result r = {0, 0, 0, 0};
-    double best = 1e30;
-    for (int rep = 0; rep < g_repeat; rep++) {
-        const double t0 = now_s();
-        rtcInitIntersectContext(&ctx);
-        ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-        for (size_t i = 0; i < f->n; i++) {
-            struct RTCRayHit rh;
-            const float *d = &f->dirs[3 * i];
-            rh.ray = (struct RTCRay){f->cam->eye[0], f->cam->eye[1], f->cam->eye[2], 0.0f,
-                                     d[0], d[1], d[2], 0.0f, INFINITY, (unsigned)-1,
-                                     (unsigned)i, 0};
-            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-            rtcIntersect1(scene, &ctx, &rh);
-            f->prim[i] = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : (int32_t)rh.hit.primID;
-        }
-        const double dt = now_s() - t0;
-        if (dt < best)
-            best = dt;
-    }
-    r.mrays = (double)f->n / best * 1e-6;
-    r.hit_checksum = checksum(f);
-    return r;
-}
-
-/* Packets of 8 = 4x2 pixel blocks (dirs must be in that order). */
-static result run_embree8(frame *f, RTCScene scene) {
-    struct RTCIntersectContext ctx;
-    _Alignas(32) struct RTCRayHit8 rh;
-    _Alignas(32) int valid[8];
-    result r = {0, 0, 0, 0};
-    double best = 1e30;
-    for (int j = 0; j < 8; j++)
-        valid[j] = -1;
-    for (int rep = 0; rep < g_repeat; rep++) {
-        const double t0 = now_s();
-        rtcInitIntersectContext(&ctx);
-        ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-        for (size_t i = 0; i < f->n; i += 8) {
-            for (int j = 0; j < 8; j++) {
-                const float *d = &f->dirs[3 * (i + (size_t)j)];
-                rh.ray.org_x[j] = f->cam->eye[0];
-                rh.ray.org_y[j] = f->cam->eye[1];
-                rh.ray.org_z[j] = f->cam->eye[2];
-                rh.ray.dir_x[j] = d[0];
-                rh.ray.dir_y[j] = d[1];
-                rh.ray.dir_z[j] = d[2];
-                rh.ray.tnear[j] = 0.0f;
-                rh.ray.tfar[j] = INFINITY;
-                rh.ray.mask[j] = (unsigned)-1;
-                rh.ray.flags[j] = 0;
-                rh.ray.time[j] = 0.0f;
-                rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
-            }
-            rtcIntersect8(valid, scene, &ctx, &rh);
-            for (int j = 0; j < 8; j++)
-                f->prim[i + (size_t)j] = rh.hit.geomID[j] == RTC_INVALID_GEOMETRY_ID
-                                             ? -1 : (int32_t)rh.hit.primID[j];
-        }
-        const double dt = now_s() - t0;
-        if (dt < best)
-            best = dt;
-    }
-    r.mrays = (double)f->n / best * 1e-6;
-    r.hit_checksum = checksum(f);
-    return r;
-}
-
-/* ---- cameras and scenes ----------------------------------------------------- */
+#define QUICK_CAM 1 /* the diagonal view */
+#define NSWEEP 5    /* tiles 4, 8, 16, 32, 64 */
+#define HIT_TOLERANCE 0.001
 
 /* Camera k: 0 = front view from outside, 1 = diagonal from outside, 2 =
- * inside the box near its centre. */
-static void make_camera(const kdr_bounds *b, int k, uint32_t size, kdr_camera *cam) {
-    float c[3], ext[3];
-    for (int a = 0; a < 3; a++) {
-        c[a] = 0.5f * (b->min[a] + b->max[a]);
-        ext[a] = b->max[a] - b->min[a];
-    }
-    const float diag = sqrtf(ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]);
-    static const float off[NCAMS][3] = {{0.0f, 0.1f, 1.1f}, {0.8f, 0.6f, 0.7f}, {0.05f, 0.02f, 0.1f}};
+ * inside the box near its centre, looking sideways. */
+static void make_camera(const kdr_scene *s, int k, uint32_t size, kdr_camera *cam) {
+    kdr_bounds b;
+    kdr_scene_bounds(s, &b);
+    const float diag = kdr_scene_diagonal(s);
+    static const float off[NCAMS][3] = {{0.0f, 0.1f, 1.1f}, {0.8f, 0.6f, 0.7f},
+                                        {0.05f, 0.02f, 0.1f}};
     memset(cam, 0, sizeof *cam);
     for (int a = 0; a < 3; a++) {
-        cam->eye[a] = c[a] + off[k][a] * diag;
-        cam->target[a] = c[a];
+        const float c = 0.5f * (b.min[a] + b.max[a]);
+        cam->eye[a] = c + off[k][a] * diag;
+        cam->target[a] = c;
     }
     if (k == 2)
-        cam->target[0] += diag; /* look sideways from inside */
+        cam->target[0] += diag;
     cam->up[1] = 1.0f;
     cam->fov_y_deg = k == 2 ? 70.0f : 45.0f;
     cam->width = cam->height = size;
 }
 
-typedef struct method {
-    const char *name;
-    double sum_log, sum_nodes;
-} method;
+typedef struct kd_frame {
+    const kdr_scene *kd;
+    const kdr_camera *cam;
+    uint32_t tile;
+    kdr_frustum_mode mode;
+    kdr_hits out;
+    kdr_trav_stats *stats;
+} kd_frame;
 
-enum { M_RAYS, M_BUNDLE4, M_FR1, M_FR4, M_EMB1, M_EMB8, M_EMB1_FAST, M_COUNT };
+static void kd_frame_run(void *ctx) {
+    kd_frame *f = ctx;
+    kdr_frustum_trace(f->kd, f->cam, f->tile, 0, kdr_frustum_tile_count(f->cam, f->tile),
+                      KDR_CLOSEST, f->mode, &f->out, f->stats);
+}
 
-/* tile sweep 4..64: sums of log Mrays/s, [tile][single, multi4] */
-#define NSWEEP 5
-static double g_sweep[NSWEEP][2];
-static method g_m[M_COUNT] = {{"kd per ray", 0, 0},           {"kd bundle4 (2x2)", 0, 0},
-                              {"kd 1-frustum", 0, 0},         {"kd 4-frustum", 0, 0},
-                              {"embree rtcIntersect1", 0, 0}, {"embree rtcIntersect8", 0, 0},
-                              {"embree 1 (not robust)", 0, 0}};
-static int g_ncams;
+static int alloc_hits(kdr_hits *h, size_t n) {
+    h->t = malloc(n * sizeof(float)), h->u = malloc(n * sizeof(float));
+    h->v = malloc(n * sizeof(float)), h->prim = malloc(n * sizeof(int32_t));
+    h->hit = NULL;
+    return h->t && h->u && h->v && h->prim ? 0 : -1;
+}
 
-static const char *const g_metric[M_COUNT] = {"rays", "bundle4", "frustum1", "frustum4",
-                                              "embree1", "embree8", "embree1_fast"};
+static void free_hits(kdr_hits *h) { free(h->t), free(h->u), free(h->v), free(h->prim); }
 
-/* One ladder scene: square frames of about opts->rays pixels. */
-static int frustum_section(const bench_scene *sc, const bench_opts *opts,
-                           bench_csv *csv) {
-    const kdr_scene *s = sc->kd;
-    const uint32_t size = (uint32_t)sqrt((double)opts->rays) & ~7u;
-    method *m = g_m;
-    oracle_opts oo;
-    kdr_bounds b;
-    g_repeat = opts->repeat;
-    if (size < 8)
-        return 1;
-    oracle_opts_default(&oo);
-    oo.device_config = BENCH_EMBREE_CONFIG;
-    oracle *emb = oracle_create(sc->tris, sc->ntris, &oo);
-    oo.robust = 0;
-    oracle *emb_fast = oracle_create(sc->tris, sc->ntris, &oo);
-    if (!emb || !emb_fast) {
-        oracle_free(emb);
-        oracle_free(emb_fast);
-        return 1;
+static size_t count_hits(const kdr_hits *h, size_t n) {
+    size_t c = 0;
+    for (size_t i = 0; i < n; i++)
+        c += h->prim[i] >= 0;
+    return c;
+}
+
+static const char *const kd_names[3] = {"kd_frustum4", "kd_frustum1", "kd_rays"};
+static const kdr_frustum_mode kd_modes[3] = {KDR_FRUSTUM_MULTI4, KDR_FRUSTUM_SINGLE,
+                                             KDR_FRUSTUM_RAYS};
+
+/* Tile sweep: both frustum modes at each tile, interleaved. */
+static void sweep(const bench_scene *s, kd_frame *f, const char *work, int repeat) {
+    printf("  tile sweep (Mrays/s, 1-frustum / 4-frustum):");
+    const size_t n = (size_t)f[0].cam->width * f[0].cam->height;
+    for (int t = 0; t < NSWEEP; t++) {
+        kd_frame fr[2] = {f[1], f[0]};
+        fr[0].tile = fr[1].tile = 4u << t;
+        bench_method m[2] = {{"kd_frustum1", 0, NULL, kd_frame_run, &fr[0], 0},
+                             {"kd_frustum4", 0, NULL, kd_frame_run, &fr[1], 0}};
+        bench_measure(m, 2, repeat, 0.0);
+        char w[96];
+        snprintf(w, sizeof w, "sweep_%s_tile%u", work + 8 /* "camK" */, 4u << t);
+        for (int k = 0; k < 2; k++)
+            bench_summary_add(s, w, m[k].name, n, m[k].best_ms, -1);
+        printf("  %u: %.1f/%.1f", 4u << t, (double)n / (m[0].best_ms * 1e3),
+               (double)n / (m[1].best_ms * 1e3));
     }
-    kdr_scene_bounds(s, &b);
-    printf("\n== %s: %zu triangles, %ux%u, tile %d unless noted\n", sc->name, sc->ntris,
-           size, size, DEFAULT_TILE);
-    frame f = {.s = s, .n = (size_t)size * size};
-    f.t = malloc(f.n * sizeof *f.t);
-    f.u = malloc(f.n * sizeof *f.u);
-    f.v = malloc(f.n * sizeof *f.v);
-    f.prim = malloc(f.n * sizeof *f.prim);
-    f.dirs = malloc(3 * f.n * sizeof *f.dirs);
-    for (int k = 0; k < NCAMS; k++) {
-        kdr_camera cam;
-        result r[M_COUNT];
-        make_camera(&b, k, size, &cam);
-        f.cam = &cam;
-        r[M_RAYS] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_RAYS);
-        r[M_FR1] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_SINGLE);
-        r[M_FR4] = run_frustum(&f, DEFAULT_TILE, KDR_FRUSTUM_MULTI4);
-        block_dirs(&f, 2, 2);
-        r[M_BUNDLE4] = run_bundle(&f, KDR_TRAV_BUNDLE4);
-        block_dirs(&f, 4, 2);
-        r[M_EMB1] = run_embree1(&f, oracle_rtc_scene(emb));
-        r[M_EMB1_FAST] = run_embree1(&f, oracle_rtc_scene(emb_fast));
-        r[M_EMB8] = run_embree8(&f, oracle_rtc_scene(emb));
-        printf("camera %d (eye %.3g %.3g %.3g):\n", k, cam.eye[0], cam.eye[1], cam.eye[2]);
-        for (int j = 0; j < M_COUNT; j++) {
-            printf("  %-26s %7.2f Mrays/s", m[j].name, r[j].mrays);
-            if (j <= M_FR4)
-                printf("  %6.1f nodes/ray %6.1f tris/ray", r[j].nodes_per_ray,
-                       r[j].tris_per_ray);
-            printf("  (hits checksum %.0f)\n", r[j].hit_checksum);
-            m[j].sum_log += log(r[j].mrays);
-            m[j].sum_nodes += r[j].nodes_per_ray;
-            char metric[64];
-            snprintf(metric, sizeof metric, "cam%d_%s_mrays", k, g_metric[j]);
-            bench_csv_row(csv, "frustum", sc, metric, r[j].mrays);
+    printf("\n");
+}
+
+static int one_camera(const bench_scene *s, const kdr_camera *cam, int k,
+                      const bench_opts *o) {
+    const size_t n = (size_t)cam->width * cam->height;
+    rival_api apis[RIVAL_MAX_APIS];
+    const size_t napi = rival_apis(RIVAL_WORK_CAMERA, apis);
+    kd_frame kf[3];
+    rival_camera_job rj[RIVAL_MAX_APIS + 1];
+    kdr_hits hits[3 + RIVAL_MAX_APIS + 1];
+    bench_method m[3 + RIVAL_MAX_APIS + 1];
+    size_t nm = 0;
+    int rc = 0;
+    for (int i = 0; i < 3; i++, nm++) {
+        rc |= alloc_hits(&hits[nm], n);
+        kf[i] = (kd_frame){s->kd, cam, DEFAULT_TILE, kd_modes[i], hits[nm], NULL};
+        m[nm] = (bench_method){kd_names[i], 0, NULL, kd_frame_run, &kf[i], 0};
+    }
+    const size_t nr = napi + (o->quick ? 0 : 1);
+    for (size_t i = 0; i < nr; i++, nm++) {
+        rc |= alloc_hits(&hits[nm], n);
+        rival_api a = i < napi ? apis[i] : apis[napi - 1];
+        rc |= rival_camera_job_init(&rj[i], s->emb, a, cam, hits[nm]);
+        m[nm] = rival_camera_job_method(&rj[i]);
+        if (i == napi) { /* the same packets, generated and written out, not traced */
+            rj[i].trace = 0;
+            snprintf(rj[i].name, sizeof rj[i].name, "raygen_only_%s",
+                     a.width == 1 ? "1" : "packets");
+            m[nm].name = rj[i].name;
         }
-        printf("  4-frustum / 1-frustum %.2fx, 4-frustum / embree1 %.2fx, / embree8 %.2fx\n",
-               r[M_FR4].mrays / r[M_FR1].mrays, r[M_FR4].mrays / r[M_EMB1].mrays,
-               r[M_FR4].mrays / r[M_EMB8].mrays);
-        printf("  tile sweep (Mrays/s, 1-frustum / 4-frustum):");
-        for (int ti = 0; ti < NSWEEP; ti++) {
-            const uint32_t tile = 4u << ti;
-            result a = run_frustum(&f, tile, KDR_FRUSTUM_SINGLE);
-            result c = run_frustum(&f, tile, KDR_FRUSTUM_MULTI4);
-            printf("  %u: %.1f/%.1f", tile, a.mrays, c.mrays);
-            g_sweep[ti][0] += log(a.mrays);
-            g_sweep[ti][1] += log(c.mrays);
+    }
+    if (rc == 0)
+        bench_measure(m, nm, o->repeat, 0.0);
+    char work[32];
+    snprintf(work, sizeof work, "frustum_cam%d", k);
+    printf("camera %d (eye %.3g %.3g %.3g), %ux%u:\n", k, cam->eye[0], cam->eye[1],
+           cam->eye[2], cam->width, cam->height);
+    const size_t ref = isnan(m[2].best_ms) ? 0 : count_hits(&hits[2], n); /* kd_rays */
+    double best = INFINITY;
+    for (size_t i = 3; i < 3 + napi; i++)
+        best = fmin(best, m[i].best_ms);
+    for (size_t i = 0; rc == 0 && i < nm; i++) {
+        double npr = -1.0;
+        if (isnan(m[i].best_ms))
+            continue; /* left out by --method */
+        if (i < 3 && !o->quick) {
+            kdr_trav_stats st = {0};
+            kf[i].stats = &st;
+            kd_frame_run(&kf[i]);
+            kf[i].stats = NULL;
+            npr = (double)st.nodes_visited / (double)n;
         }
+        const int traced = i < 3 + napi;
+        const size_t h = traced ? count_hits(&hits[i], n) : 0;
+        printf("  %-32s %8.2f Mrays/s %9.2f ms  x best Embree %5.2f", m[i].name,
+               (double)n / (m[i].best_ms * 1e3), m[i].best_ms, best / m[i].best_ms);
+        if (traced)
+            printf("  hits %8zu", h);
+        if (npr >= 0)
+            printf("  %6.1f nodes/ray", npr);
         printf("\n");
-        ++g_ncams;
+        bench_summary_add(s, work, m[i].name, n, m[i].best_ms, npr);
+        const size_t diff = h > ref ? h - ref : ref - h;
+        if (ref && traced && (double)diff > HIT_TOLERANCE * (double)n)
+            bench_fail("%s %s: %s hits %zu, kd_rays %zu", s->name, work, m[i].name, h,
+                       ref);
     }
-    free(f.t);
-    free(f.u);
-    free(f.v);
-    free(f.prim);
-    free(f.dirs);
-    oracle_free(emb);
-    oracle_free(emb_fast);
+    if (rc == 0 && !o->quick && !bench_method_filtered())
+        sweep(s, kf, work, o->repeat);
+    for (size_t i = 0; i < nm; i++)
+        free_hits(&hits[i]);
+    for (size_t i = 0; i < nr; i++)
+        rival_camera_job_free(&rj[i]);
+    fflush(stdout);
+    return rc ? -1 : 0;
+}
+
+static int frustum_run(const bench_scene *s, const bench_opts *o) {
+    const uint32_t size = (o->quick && o->frame > 512 ? 512 : o->frame) & ~7u;
+    printf("\n== %s: %zu triangles, frustum images %ux%u, tile %d\n", s->name, s->ntris,
+           size, size, DEFAULT_TILE);
+    for (int k = 0; k < NCAMS; k++) {
+        if (o->quick && k != QUICK_CAM)
+            continue;
+        kdr_camera cam;
+        make_camera(s->kd, k, size, &cam);
+        if (one_camera(s, &cam, k, o))
+            return -1;
+    }
     return 0;
 }
 
-int main(int argc, char **argv) {
-    static const bench_section sections[] = {{"frustum", frustum_section}};
-    const int rc = bench_main(argc, argv, sections, 1);
-    const method *m = g_m;
-    const int ncams = g_ncams;
-    if (ncams == 0)
-        return rc ? rc : 1;
-    printf("\n== geometric means over %d cameras\n", ncams);
-    for (int j = 0; j < M_COUNT; j++)
-        printf("  %-26s %7.2f Mrays/s\n", m[j].name, exp(m[j].sum_log / ncams));
-    printf("  4-frustum / 1-frustum: %.2fx (target >= 1.3)\n",
-           exp((m[M_FR4].sum_log - m[M_FR1].sum_log) / ncams));
-    printf("  4-frustum / embree rtcIntersect1: %.2fx (target >= 2)\n",
-           exp((m[M_FR4].sum_log - m[M_EMB1].sum_log) / ncams));
-    printf("  4-frustum / embree rtcIntersect8: %.2fx\n",
-           exp((m[M_FR4].sum_log - m[M_EMB8].sum_log) / ncams));
-    printf("  tile sweep, 4-frustum / 1-frustum at the same tile:");
-    for (int ti = 0; ti < NSWEEP; ti++)
-        printf("  %u: %.2fx", 4u << ti, exp((g_sweep[ti][1] - g_sweep[ti][0]) / ncams));
-    printf("\n  same rays per traversal, 4-frustum tile T / 1-frustum tile 2T:");
-    for (int ti = 0; ti + 1 < NSWEEP; ti++)
-        printf("  %u: %.2fx", 4u << ti, exp((g_sweep[ti][1] - g_sweep[ti + 1][0]) / ncams));
-    printf("\n");
-    return rc;
+/* One geometric-mean line, or nothing when the method did not run. */
+static void mean_line(const char *name) {
+    const double g = bench_summary_geomean("frustum_cam", name, 1);
+    if (g > 0)
+        printf("  %-32s x best Embree %.2f\n", name, g);
 }
+
+static void frustum_finish(const bench_opts *o) {
+    rival_api apis[RIVAL_MAX_APIS];
+    const size_t napi = rival_apis(RIVAL_WORK_CAMERA, apis);
+    printf("\n== frustum: geometric means over every camera of every scene\n");
+    for (int i = 0; i < 3; i++)
+        mean_line(kd_names[i]);
+    for (size_t i = 0; i < napi; i++) {
+        char name[64];
+        rival_api_name(NULL, apis[i], KDR_CLOSEST, name, sizeof name);
+        mean_line(name);
+    }
+    /* ratio of two methods' times over the same workloads: exp(mean log) */
+    const double f4 = bench_summary_geomean("frustum_cam", "kd_frustum4", 0);
+    const double f1 = bench_summary_geomean("frustum_cam", "kd_frustum1", 0);
+    if (f4 > 0 && f1 > 0)
+        printf("  4-frustum / 1-frustum at tile %d: %.2fx\n", DEFAULT_TILE, f1 / f4);
+    if (o->quick || bench_method_filtered())
+        return;
+    printf("  tile sweep, 4-frustum / 1-frustum at the same tile:");
+    for (int t = 0; t < NSWEEP; t++) {
+        char w[48];
+        double a = 0, b = 0;
+        int cams = 0;
+        /* geometric mean over cameras: sum logs of per-camera ratios */
+        for (int k = 0; k < NCAMS; k++) {
+            snprintf(w, sizeof w, "sweep_cam%d_tile%u", k, 4u << t);
+            const double g1 = bench_summary_geomean(w, "kd_frustum1", 0);
+            const double g4 = bench_summary_geomean(w, "kd_frustum4", 0);
+            if (g1 > 0 && g4 > 0)
+                a += log(g1), b += log(g4), cams++;
+        }
+        printf("  %u: %.2fx", 4u << t, cams ? exp((a - b) / cams) : 0.0);
+    }
+    printf("\n");
+}
+
+const bench_section bench_frustum_section = {"frustum", frustum_run, frustum_finish};

@@ -4,8 +4,8 @@ in-process rate, measured in the same run. Not a test; bounded to < 1 min.
 
     bench_service.py KDRAYD KDRAY_TRACE [--scene PATH] [--seconds S]
 
-For bundle batches of 1, 1K and 64K rays, sent and answered in JSON and in
-base64, wrk (with a Lua script that POSTs the body) drives the daemon over
+For bundle batches of 1, 1K and 64K rays, sent and answered in JSON, in
+base64 and in CBOR (application/cbor, float32 typed arrays), wrk (with a Lua script that POSTs the body) drives the daemon over
 loopback for S seconds; the same request file is answered in-process by
 kdray-trace with the daemon's traversal modes and thread count (the mean
 rate of several runs: on a shared, loaded machine the best run would
@@ -35,6 +35,7 @@ import random
 import re
 import shutil
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -50,7 +51,7 @@ SERVER_CHUNK_RAYS = 4096  # server/query.c CHUNK_RAYS: rays per pool job
 LATENCY_REQUESTS = 400
 WRK_LUA = """
 wrk.method = "POST"
-wrk.headers["Content-Type"] = "application/json"
+wrk.headers["Content-Type"] = os.getenv("KDRAY_CT") or "application/json"
 local f = assert(io.open(os.getenv("KDRAY_BODY"), "rb"))
 wrk.body = f:read("*a")
 f:close()
@@ -127,8 +128,36 @@ def request_body(origin, dirs, enc):
     return json.dumps(p).encode()
 
 
+def _cbor_head(major, n):
+    if n < 24:
+        return bytes([major << 5 | n])
+    for code, size in ((24, 1), (25, 2), (26, 4), (27, 8)):
+        if n < 1 << (8 * size):
+            return bytes([major << 5 | code]) + n.to_bytes(size, "big")
+    raise ValueError(n)
+
+
+def cbor_request_body(origin, dirs):
+    """{"origins": 85(...), "directions": 85(...)} by hand (this script runs
+    without python3-cbor2), with a padding member so that the directions'
+    float32 bytes start at a multiple of 4 and kdrayd reads them in place
+    (the origins' do already)."""
+    def text(t):
+        return _cbor_head(3, len(t)) + t.encode()
+
+    def typed(vals):
+        data = struct.pack("<%df" % len(vals), *vals)
+        return b"\xd8\x55" + _cbor_head(2, len(data)) + data
+    head = b"\xa3" + text("origins") + typed(origin)
+    rest = text("directions") + typed(dirs)
+    payload_at = len(head) + len(text("_pad")) + 1 + len(rest) - 4 * len(dirs)
+    pad = (4 - payload_at % 4) % 4
+    return head + text("_pad") + text("x" * pad) + rest
+
+
 def wrk_rate(url, body_path, lua_path, seconds, conns, latency=False):
-    env = dict(os.environ, KDRAY_BODY=body_path)
+    ctype = "application/cbor" if body_path.endswith(".cbor") else "application/json"
+    env = dict(os.environ, KDRAY_BODY=body_path, KDRAY_CT=ctype)
     args = ["wrk", "-t", str(min(conns, 2)), "-c", str(conns), "-d", "%ds" % max(1, round(seconds)),
             "-s", lua_path, url]
     if latency:
@@ -321,16 +350,21 @@ def throughput_table(args, url, scene, tmp):
     one_ray_body = None
     for n in BATCHES:
         origin, dirs = rays(scene["bounds"], n, seed=n)
-        for enc in ("json", "base64"):
-            body = request_body(origin, dirs, enc)
-            path = os.path.join(tmp, "req-%d-%s.json" % (n, enc))
+        for enc in ("json", "base64", "cbor"):
+            if enc == "cbor":  # the same rays; kdray-trace reads the JSON form
+                body = cbor_request_body(origin, dirs)
+                path = os.path.join(tmp, "req-%d.cbor" % n)
+                core_path = os.path.join(tmp, "req-%d-base64.json" % n)
+            else:
+                body = request_body(origin, dirs, enc)
+                path = core_path = os.path.join(tmp, "req-%d-%s.json" % (n, enc))
             with open(path, "wb") as f:
                 f.write(body)
             if n == 1 and enc == "json":
                 one_ray_body = (body, path)
             conns = 4 if n < 65536 else 2
             rps, _ = wrk_rate(endpoint, path, lua, args.seconds, conns)
-            core = core_rate(args.trace, args.scene, path, args.threads, n)
+            core = core_rate(args.trace, args.scene, core_path, args.threads, n)
             print("%-8d %-7s %10.1f %12.1f %14.3e %14.3e %7.3f" % (
                 n, enc, len(body) / 1024, rps, rps * n, core, rps * n / core),
                 flush=True)

@@ -1,14 +1,17 @@
 #!/usr/bin/env python3
-"""plot_all.py OUTDIR — PNG plots of the CSV files bench/run-all writes.
+"""plot_all.py OUTDIR — PNG plots of the summary CSVs bench/run-all writes
+(scene,triangles,workload,method,rays,ms,mrays,nodes_per_ray,rival,vs_rival).
 
-core.png:    kd / Embree per scene (build time against the HQ build,
-             camera, random and AO ray throughput);
-bundle.png:  8-wide bundles against single-ray kd and Embree rtcIntersect1,
-             per scene and ray kind;
-frustum.png: primary-ray throughput per scene (mean of its cameras) for
-             each method.
-The cone plot (cone.png) is written by kdray_bench_cone itself. Standard
-library only; needs gnuplot (Debian gnuplot-nox).
+core.png:    per scene, kdray's speed over Embree's: the kd build over the
+             high-quality BVH build, and single rays over the strongest
+             Embree API for camera, random and AO any-hit rays;
+bundle.png:  8-wide bundles (the daemon's AUTO here) over single-ray kd and
+             over the strongest Embree API, per scene and ray kind;
+frustum.png: primary-ray throughput per scene (mean over its cameras) of
+             kd's per-pixel walk, 1- and 4-frustum, Embree rtcIntersect1 and
+             the strongest Embree API of each camera.
+The cone plot (cone_rmse.png) is written by kdray_bench_cone itself.
+Standard library only; needs gnuplot (Debian gnuplot-nox).
 """
 import csv
 import os
@@ -18,26 +21,31 @@ from collections import OrderedDict
 
 
 def load(path):
-    """{scene: {metric: value}} in file order."""
+    """{scene: {(workload, method): row}} in file order."""
     out = OrderedDict()
     with open(path, newline="") as f:
         for row in csv.DictReader(f):
-            out.setdefault(row["scene"], {})[row["metric"]] = float(row["value"])
+            out.setdefault(row["scene"], {})[(row["workload"], row["method"])] = row
     return out
+
+
+def value(rows, workload, method, field):
+    r = rows.get((workload, method))
+    return float(r[field]) if r and r[field] else None
 
 
 def write_dat(path, scenes, columns):
     """One row per scene: name, then each column's value (or NaN)."""
     with open(path, "w") as f:
         f.write("scene " + " ".join(c for c, _ in columns) + "\n")
-        for name, m in scenes.items():
-            vals = [fn(m) for _, fn in columns]
+        for name, rows in scenes.items():
+            vals = [fn(rows) for _, fn in columns]
             f.write(name + " " + " ".join("%.6g" % v if v is not None else "NaN"
                                           for v in vals) + "\n")
 
 
-def mean(m, keys):
-    vals = [m[k] for k in keys if k in m]
+def mean(vals):
+    vals = [v for v in vals if v is not None]
     return sum(vals) / len(vals) if vals else None
 
 
@@ -63,49 +71,69 @@ def bars(png, dat, title, ylabel, ncols, logscale=False, hline=None):
     subprocess.run(["gnuplot"], input=script.encode(), check=True)
 
 
+def core_plot(out, s):
+    def build(rows):
+        kd = value(rows, "build", "kd_build", "ms")
+        hi = value(rows, "build", "embree_build_high", "ms")
+        return hi / kd if kd and hi else None
+
+    cols = [("build_(Embree_HIGH/kd)", build)]
+    for w in ("camera", "random", "ao_any"):
+        cols.append((w, lambda rows, w=w: value(rows, w, "kd_single", "vs_rival")))
+    dat = os.path.join(out, "core.dat")
+    write_dat(dat, s, cols)
+    bars(os.path.join(out, "core.png"), dat,
+         "kd against the strongest Embree API per workload (above 1: kd faster)",
+         "kd speed / Embree speed", len(cols), logscale=True, hline=1)
+
+
+def bundle_plot(out, s):
+    cols = []
+    for w in ("camera", "ao_any", "ao_closest", "random"):
+        cols.append(("%s_/single" % w, lambda rows, w=w: (
+            value(rows, w, "kd_single", "ms") / value(rows, w, "kd_bundle8", "ms")
+            if value(rows, w, "kd_bundle8", "ms") else None)))
+    for w in ("camera", "ao_any", "ao_closest", "random"):
+        cols.append(("%s_/Embree" % w,
+                     lambda rows, w=w: value(rows, w, "kd_bundle8", "vs_rival")))
+    dat = os.path.join(out, "bundle.dat")
+    write_dat(dat, s, cols)
+    bars(os.path.join(out, "bundle.png"), dat,
+         "8-wide bundles over single-ray kd and over the strongest Embree API",
+         "speed-up", len(cols), logscale=True, hline=1)
+
+
+def frustum_plot(out, s):
+    def cams(rows):
+        return sorted({w for w, _ in rows if w.startswith("frustum_cam")})
+
+    def rate(method):
+        return lambda rows: mean([value(rows, w, method, "mrays") for w in cams(rows)])
+
+    def best(rows):
+        return mean([value(rows, w, rows[(w, "kd_rays")]["rival"], "mrays")
+                     for w in cams(rows) if (w, "kd_rays") in rows])
+
+    cols = [("kd_per_ray", rate("kd_rays")), ("kd_1-frustum", rate("kd_frustum1")),
+            ("kd_4-frustum", rate("kd_frustum4")),
+            ("Embree_rtcIntersect1", rate("embree_rtcIntersect1")),
+            ("Embree_strongest_API", best)]
+    dat = os.path.join(out, "frustum.dat")
+    write_dat(dat, s, cols)
+    bars(os.path.join(out, "frustum.png"), dat,
+         "primary rays, camera in, image out (mean over the cameras of each scene)",
+         "Mrays/s", len(cols))
+
+
 def main():
     out = sys.argv[1] if len(sys.argv) > 1 else "build/bench-results"
     made = []
-    if os.path.exists(os.path.join(out, "core.csv")):
-        s = load(os.path.join(out, "core.csv"))
-        dat = os.path.join(out, "core.dat")
-        cols = [("build_(Embree_HQ/kd)", lambda m: m["build_ms_embree_hq"] / m["build_ms_kd"]
-                 if m.get("build_ms_kd") else None),
-                ("camera", lambda m: m.get("camera_ratio")),
-                ("random", lambda m: m.get("random_ratio")),
-                ("AO_any", lambda m: m.get("ao_any_ratio"))]
-        write_dat(dat, s, cols)
-        bars(os.path.join(out, "core.png"), dat,
-             "single-ray kd against Embree (above 1: kd faster)", "kd / Embree",
-             len(cols), logscale=True, hline=1)
-        made.append("core.png")
-    if os.path.exists(os.path.join(out, "bundle.csv")):
-        s = load(os.path.join(out, "bundle.csv"))
-        dat = os.path.join(out, "bundle.dat")
-        cols = []
-        for kind in ("camera", "ao_any", "ao_closest", "random"):
-            cols.append(("%s_/single" % kind,
-                         lambda m, k=kind: m.get("%s_auto_over_single" % k)))
-        cols.append(("camera_/Embree1", lambda m: m.get("camera_auto_over_embree1")))
-        write_dat(dat, s, cols)
-        bars(os.path.join(out, "bundle.png"), dat,
-             "8-wide omni-directional bundles against single-ray kd and Embree rtcIntersect1",
-             "speed-up", len(cols), hline=1)
-        made.append("bundle.png")
-    if os.path.exists(os.path.join(out, "frustum.csv")):
-        s = load(os.path.join(out, "frustum.csv"))
-        dat = os.path.join(out, "frustum.dat")
-        methods = [("kd_per_ray", "rays"), ("kd_bundle4", "bundle4"),
-                   ("kd_1-frustum", "frustum1"), ("kd_4-frustum", "frustum4"),
-                   ("Embree_1", "embree1"), ("Embree_8", "embree8")]
-        cols = [(label, lambda m, k=key: mean(m, ["cam%d_%s_mrays" % (c, k)
-                                                  for c in range(8)]))
-                for label, key in methods]
-        write_dat(dat, s, cols)
-        bars(os.path.join(out, "frustum.png"), dat,
-             "1000x1000 primary rays, tile 8 (mean over the cameras of each scene)",
-             "Mrays/s", len(cols))
-        made.append("frustum.png")
+    for name, fn in (("core", core_plot), ("bundle", bundle_plot),
+                     ("frustum", frustum_plot)):
+        path = os.path.join(out, name + ".csv")
+        if os.path.exists(path):
+            fn(out, load(path))
+            made.append(name + ".png")
     print("plot_all: wrote " + ", ".join(made) if made else "plot_all: no CSV found")
 
 

@@ -9,7 +9,8 @@ URL=${1:-http://127.0.0.1:8080}
 SCENE=${2:-default}
 J='Content-Type: application/json'
 TMP=$(mktemp)
-trap 'rm -f "$TMP"' EXIT
+BODY=$(mktemp)
+trap 'rm -f "$TMP" "$BODY"' EXIT
 say() { printf '\n== %s\n' "$*"; }
 # show CURL-ARGS...: the request must succeed; prints the answer's start.
 show() { curl -fsS -o "$TMP" "$@"; head -c 600 "$TMP"; echo; }
@@ -58,6 +59,36 @@ show -H "$J" "$URL/v1/scenes/$SCENE/frustum" -d '{
   "camera": {"eye": [0, 0, 10], "target": [0, 0, 0], "up": [0, 1, 0],
              "fov_y_deg": 60, "width": 16, "height": 8},
   "tile": 4, "query": "closest", "encoding": "base64"}'
+
+say "bundle, only the hit distances (\"fields\")"
+curl -fsS -H "$J" "$URL/v1/scenes/$SCENE/bundle" -d '{
+  "origins": [0, 0, 10], "directions": [0, 0, -1,  0.1, 0.1, -1], "fields": ["t"]}'
+
+# A binary (CBOR, application/cbor) body from a file: the map
+# {"origins": 85(h'...'), "directions": 85(h'...')} with float32 typed arrays
+# (RFC 8746 tag 85, little-endian): origin (0,0,10), directions (0,0,-1) and
+# (0.1,0.1,-1). The answer is CBOR too (typed arrays for t, prim, u, v);
+# here its first bytes: a5 = a map of 5, 65 "count", 02 = 2, 61 "t", d8 55...
+say "bundle, CBOR body from a file, CBOR answer"
+printf '\xa2\x67origins\xd8\x55\x4c%b%b%b' \
+  '\x00\x00\x00\x00' '\x00\x00\x00\x00' '\x00\x00\x20\x41' > "$BODY"
+printf '\x6adirections\xd8\x55\x58\x18%b%b%b%b%b%b' \
+  '\x00\x00\x00\x00' '\x00\x00\x00\x00' '\x00\x00\x80\xbf' \
+  '\xcd\xcc\xcc\x3d' '\xcd\xcc\xcc\x3d' '\x00\x00\x80\xbf' >> "$BODY"
+code=$(curl -fsS -o "$TMP" -w '%{http_code} %{content_type}' \
+  -H 'Content-Type: application/cbor' --data-binary @"$BODY" \
+  "$URL/v1/scenes/$SCENE/bundle")
+echo "$code, $(wc -c < "$TMP") bytes:"
+od -An -tx1 "$TMP" | head -n 3
+case "$code" in
+  "200 application/cbor") ;;
+  *) echo "curl-examples: expected 200 application/cbor, got $code" >&2; exit 1 ;;
+esac
+
+say "the same CBOR body, answered in JSON (Accept)"
+curl -fsS -H 'Content-Type: application/cbor' -H 'Accept: application/json' \
+  --data-binary @"$BODY" "$URL/v1/scenes/$SCENE/bundle"
+echo
 
 say "an error: a direction that is not a number is 400 problem+json"
 code=$(curl -sS -o "$TMP" -w '%{http_code} %{content_type}' -H "$J" \

@@ -1,17 +1,24 @@
 #!/usr/bin/env python3
-"""kdray_client.py - a dependency-free client for the kdray HTTP API.
+"""kdray_client.py - a client for the kdray HTTP API.
 
-Only the standard library (urllib, struct, base64, json) is used, so the
-file can be copied anywhere next to a running kdrayd. As a module:
+In its default JSON mode only the standard library (urllib, struct, base64,
+json) is used, so the file can be copied anywhere next to a running kdrayd.
+Its binary mode (Client(url, binary=True), --binary) sends and receives
+application/cbor with float arrays as RFC 8746 typed arrays (raw
+little-endian float32, no text conversion at all); it needs Debian's
+python3-cbor2 (apt-get install python3-cbor2; run /usr/bin/python3 if
+another Python comes first on PATH). As a module:
 
     from kdray_client import Client
     c = Client("http://127.0.0.1:8080")
     r = c.bundle("default", origins=[0, 0, 0], directions=[0, 0, -1, 1, 0, 0])
     print(r["t"], r["prim"])
+    b = Client("http://127.0.0.1:8080", binary=True)
+    r = b.bundle("default", [0, 0, 0], [0, 0, -1], fields=["t"])
 
 Answers come back with every array decoded to a Python list, whatever the
 wire encoding was. HTTP errors raise KdrayError carrying the status and the
-problem+json body.
+problem+json body (errors are problem+json in binary mode too).
 
 As a command (see --help):
 
@@ -20,9 +27,11 @@ As a command (see --help):
     kdray_client.py shadow --point 0,0,0 --light 10,10,10,1 --samples 64
     kdray_client.py frustum --eye 0,0,5 --target 0,0,0 --width 320 --height 240 \\
         --pgm depth.pgm
+    kdray_client.py --binary bundle --random 100000 --fields t
 """
 
 import argparse
+import array
 import base64
 import json
 import math
@@ -34,6 +43,10 @@ import urllib.request
 
 DEFAULT_URL = "http://127.0.0.1:8080"
 DEFAULT_TIMEOUT_S = 120.0
+CBOR = "application/cbor"
+JSON = "application/json"
+# RFC 8746 typed-array tags: element type and the array typecode holding it
+TYPED_ARRAYS = {85: "f", 78: "i", 64: "B"}  # float32 LE, int32 LE, uint8
 
 
 class KdrayError(Exception):
@@ -76,16 +89,93 @@ def decode_answer(answer):
 
 
 def _floats(values, send):
+    if send == "cbor":
+        return _f32_array(values)
     values = [float(x) for x in values]
     return f32_b64(values) if send == "base64" else values
 
 
-class Client:
-    """One kdrayd; every method is one HTTP request (thread-safe)."""
+# ---- binary mode (CBOR) --------------------------------------------------------
 
-    def __init__(self, url=DEFAULT_URL, timeout=DEFAULT_TIMEOUT_S):
+def _cbor2():
+    try:
+        import cbor2  # noqa: PLC0415 (only binary mode needs it)
+    except ImportError as err:
+        raise RuntimeError("binary mode needs python3-cbor2 (Debian: apt-get install "
+                           "python3-cbor2; run /usr/bin/python3)") from err
+    return cbor2
+
+
+def _f32_array(values):
+    """values as an array('f') of little-endian float32."""
+    a = array.array("f", (float(x) for x in values))
+    if sys.byteorder != "little":
+        a.byteswap()
+    return a
+
+
+def _typed(a):
+    """array('f') -> the CBOR item: tag 85 over its little-endian bytes."""
+    return _cbor2().CBORTag(85, a.tobytes())
+
+
+def cbor_body(payload):
+    """A request map as CBOR bytes. array('f') values become float32 typed
+    arrays (tag 85) whose bytes start at a multiple of 4 from the body's
+    start, so kdrayd reads them in place; that takes a padding member
+    ("_pad0", "_pad1", ...: unknown members are ignored) before an array
+    that would otherwise be misaligned."""
+    cbor2 = _cbor2()
+    members = []  # encoded (key, value) pairs
+    offset = 1    # the map head (fewer than 24 members)
+    for key, value in payload.items():
+        k = cbor2.dumps(key)
+        if isinstance(value, array.array):
+            v = cbor2.dumps(_typed(value))
+            start = offset + len(k) + len(v) - len(value) * value.itemsize
+            if start % 4:
+                pad_key = cbor2.dumps("_pad%d" % len(members))
+                # pad member: key, then a text head (1 byte) and n characters
+                n = (4 - (start + len(pad_key) + 1) % 4) % 4
+                pad = pad_key + cbor2.dumps("x" * n)
+                members.append(pad)
+                offset += len(pad)
+        else:
+            v = cbor2.dumps(value)
+        members.append(k + v)
+        offset += len(k) + len(v)
+    if len(members) >= 24:
+        raise ValueError("cbor_body: too many members")
+    return bytes([0xA0 + len(members)]) + b"".join(members)
+
+
+def _typed_hook(decoder, tag):
+    """cbor2 tag hook: RFC 8746 typed arrays to lists of numbers."""
+    code = TYPED_ARRAYS.get(tag.tag)
+    if code is None or not isinstance(tag.value, bytes):
+        return tag
+    a = array.array(code)
+    a.frombytes(tag.value)
+    if sys.byteorder != "little" and code != "B":
+        a.byteswap()
+    return a.tolist()
+
+
+def decode_cbor(data):
+    """A CBOR answer as a dict with typed arrays decoded to lists."""
+    return _cbor2().loads(data, tag_hook=_typed_hook)
+
+
+class Client:
+    """One kdrayd; every method is one HTTP request (thread-safe). binary:
+    query bodies and answers in CBOR instead of JSON."""
+
+    def __init__(self, url=DEFAULT_URL, timeout=DEFAULT_TIMEOUT_S, binary=False):
         self.url = url.rstrip("/")
         self.timeout = timeout
+        self.binary = binary
+        if binary:
+            _cbor2()  # fail now, not at the first query
 
     def request(self, method, path, body=None, content_type="application/json",
                 headers=None):
@@ -104,16 +194,30 @@ class Client:
                 return err.code, dict(err.headers.items()), err.read()
 
     def call(self, method, path, payload=None):
-        """JSON in, JSON out; raises KdrayError on an error status."""
-        body = None if payload is None else json.dumps(payload).encode("utf-8")
-        status, _, data = self.request(method, path, body)
+        """JSON in, JSON out (CBOR both ways for queries in binary mode);
+        raises KdrayError on an error status."""
+        ctype, headers = JSON, None
+        if payload is None:
+            body = None
+        elif self.binary:
+            body, ctype, headers = cbor_body(payload), CBOR, {"Accept": CBOR}
+        else:
+            body = json.dumps(payload).encode("utf-8")
+        status, hdrs, data = self.request(method, path, body, ctype, headers)
+        answer_type = {k.lower(): v for k, v in hdrs.items()}.get("content-type", "")
         try:
-            parsed = json.loads(data) if data else None
+            if answer_type.startswith(CBOR):
+                parsed = decode_cbor(data)
+            else:
+                parsed = json.loads(data) if data else None
         except ValueError:
             parsed = data.decode("utf-8", "replace")
         if status >= 400:
             raise KdrayError(status, parsed)
         return parsed
+
+    def _send(self, send):
+        return "cbor" if self.binary else send
 
     def health(self):
         return self.call("GET", "/v1/health")
@@ -131,9 +235,11 @@ class Client:
         return self.call("GET", "/v1/scenes/" + name)
 
     def bundle(self, scene, origins, directions, tmin=None, tmax=None,
-               query="closest", encoding="json", send="json"):
+               query="closest", encoding="json", send="json", fields=None):
         """Traces rays; origins is 3 floats (shared) or 3*N; send picks the
-        request's float encoding, encoding the answer's."""
+        request's float encoding, encoding the answer's (JSON mode); fields
+        lists the answer arrays wanted (t, prim, u, v, hit)."""
+        send = self._send(send)
         payload = {"origins": _floats(origins, send),
                    "directions": _floats(directions, send),
                    "query": query, "encoding": encoding}
@@ -141,6 +247,8 @@ class Client:
             if value is not None:
                 payload[key] = (value if isinstance(value, (int, float))
                                 else _floats(value, send))
+        if fields is not None:
+            payload["fields"] = list(fields)
         path = "/v1/scenes/%s/bundle" % scene
         return decode_answer(self.call("POST", path, payload))
 
@@ -148,6 +256,7 @@ class Client:
                seed=None, epsilon=None, stats=False, encoding="json", send="json"):
         """Cone-shadow visibility; lights are (x, y, z, radius) tuples or
         {"center": ..., "radius": ...} dicts."""
+        send = self._send(send)
         payload = {"points": _floats(points, send), "encoding": encoding,
                    "lights": [l if isinstance(l, dict) else
                               {"center": list(l[:3]), "radius": l[3]}
@@ -164,11 +273,14 @@ class Client:
         return decode_answer(self.call("POST", path, payload))
 
     def frustum(self, scene, eye, target, width, height, up=(0, 1, 0),
-                fov_y_deg=60.0, tile=8, query="closest", encoding="base64"):
+                fov_y_deg=60.0, tile=8, query="closest", encoding="base64",
+                fields=None):
         camera = {"eye": list(eye), "target": list(target), "up": list(up),
                   "fov_y_deg": fov_y_deg, "width": width, "height": height}
         payload = {"camera": camera, "tile": tile, "query": query,
                    "encoding": encoding}
+        if fields is not None:
+            payload["fields"] = list(fields)
         path = "/v1/scenes/%s/frustum" % scene
         return decode_answer(self.call("POST", path, payload))
 
@@ -219,7 +331,8 @@ def _cmd_bundle(client, args):
         raise SystemExit("bundle: give --dir x,y,z and/or --random N")
     return client.bundle(args.scene, args.origin, dirs, tmin=args.tmin,
                          tmax=args.tmax, query="any" if args.any else "closest",
-                         encoding=args.encoding, send=args.send)
+                         encoding=args.encoding, send=args.send,
+                         fields=args.fields.split(",") if args.fields else None)
 
 
 def _cmd_shadow(client, args):
@@ -229,9 +342,12 @@ def _cmd_shadow(client, args):
 
 
 def _cmd_frustum(client, args):
+    fields = args.fields.split(",") if args.fields else None
+    if args.pgm and fields and "t" not in fields:
+        fields.append("t")
     answer = client.frustum(args.scene, args.eye, args.target, args.width,
                             args.height, up=args.up, fov_y_deg=args.fov,
-                            tile=args.tile, encoding=args.encoding)
+                            tile=args.tile, encoding=args.encoding, fields=fields)
     if args.pgm:
         write_pgm(args.pgm, answer["t"], args.width, args.height)
         print("wrote %s" % args.pgm, file=sys.stderr)
@@ -242,6 +358,8 @@ def _parser():
     p = argparse.ArgumentParser(description="kdray HTTP client")
     p.add_argument("--url", default=DEFAULT_URL)
     p.add_argument("--full", action="store_true", help="print whole arrays")
+    p.add_argument("--binary", action="store_true",
+                   help="queries in CBOR (application/cbor; needs python3-cbor2)")
     sub = p.add_subparsers(dest="cmd", required=True)
     for name in ("health", "metrics", "scenes"):
         sub.add_parser(name)
@@ -267,6 +385,8 @@ def _parser():
     f.add_argument("--height", type=int, default=240)
     f.add_argument("--tile", type=int, default=8)
     f.add_argument("--pgm", help="write a PGM depth image")
+    for q in (b, f):
+        q.add_argument("--fields", help="answer arrays, e.g. t,prim (default: all)")
     for q in (b, s, f):
         q.add_argument("--scene", default="default")
         q.add_argument("--seed", type=int, default=1)
@@ -276,7 +396,11 @@ def _parser():
 
 def main(argv=None):
     args = _parser().parse_args(argv)
-    client = Client(args.url)
+    try:
+        client = Client(args.url, binary=args.binary)
+    except RuntimeError as err:
+        print("kdray_client: %s" % err, file=sys.stderr)
+        return 2
     try:
         if args.cmd == "metrics":
             sys.stdout.write(client.metrics())

@@ -571,6 +571,10 @@ int kdr_scene_build(const float *tris, size_t ntris, const kdr_build_opts *opts,
           (unsigned long long)s->stats.empty_leaves,
           (unsigned long long)s->stats.max_depth, s->stats.refs_per_leaf,
           s->stats.sah_cost, (double)s->stats.bytes / 1e6);
+    if ((err = kd_layout(s)) != KDR_OK) {
+        kdr_scene_free(s);
+        return err;
+    }
 #ifndef NDEBUG
     if (s->nodes) {
         size_t reached = check_subtree(s, 0, s->bounds, 0);

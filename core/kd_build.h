@@ -78,6 +78,11 @@ typedef struct kd_frag {
 
 #define KD_LINK UINT32_MAX
 
+/* Fragments and the stitched arrays hold the build's interior format,
+ * bits = (above_child << 2) | axis, until kd_layout() (kd_layout.c)
+ * rewrites it into the traversal format of kd_internal.h. */
+static inline uint32_t kd_build_above(const kd_node *n) { return n->bits >> 2; }
+
 typedef struct kd_pool kd_pool;
 
 /* One worker's view of the build: the shared inputs (read-only), its own

@@ -306,7 +306,7 @@ static void walk(stitcher *st, const kd_frag *f, size_t i, kdr_bounds box,
     lb.max[k] = rb.min[k] = n->u.split;
     walk(st, f, i + 1, lb, depth + 1);
     st->nodes[at].bits = ((uint32_t)st->nn << 2) | (uint32_t)k;
-    walk(st, f, kd_above(n), rb, depth + 1);
+    walk(st, f, kd_build_above(n), rb, depth + 1);
 }
 
 int kd_stitch(kd_frag **frags, size_t nfrags, const kdr_build_opts *o,

@@ -7,40 +7,28 @@
  */
 #include "kd_cone.h"
 #include "kd_internal.h"
-#include "simd.h"
 
-#define KB_W 4
-#define VF f4
-#define V(op) f4_##op
-#define KB(x) kc4_##x
-#define KB_FN static inline
+#define KD_W 4
+#include "simd_width.h"
 #include "kd_cone_packet.h"
-#undef KB_W
-#undef VF
-#undef V
-#undef KB
-#undef KB_FN
-
-#define KB_W 8
-#define VF f8
-#define V(op) f8_##op
-#define KB(x) kc8_##x
-#define KB_FN KD_AVX2 static inline
+#undef KD_W
+#define KD_W 8
+#include "simd_width.h"
 #include "kd_cone_packet.h"
 
 KD_AVX2 static int list8(const kdr_scene *scene, const kdr_ray *const *lanes,
                          int n, const uint32_t *cands, size_t ncand,
                          uint32_t *blocker) {
-    kc8_packet pk;
-    kc8_packet_init(&pk, lanes, n);
-    return pk.all & ~kc8_packet_tris(&pk, scene, cands, ncand, pk.all, blocker);
+    kc_packet8 pk;
+    kc_packet_init8(&pk, lanes, n);
+    return pk.all & ~kc_packet_tris8(&pk, scene, cands, ncand, pk.all, blocker);
 }
 
 static int list4(const kdr_scene *scene, const kdr_ray *const *lanes, int n,
                  const uint32_t *cands, size_t ncand, uint32_t *blocker) {
-    kc4_packet pk;
-    kc4_packet_init(&pk, lanes, n);
-    return pk.all & ~kc4_packet_tris(&pk, scene, cands, ncand, pk.all, blocker);
+    kc_packet4 pk;
+    kc_packet_init4(&pk, lanes, n);
+    return pk.all & ~kc_packet_tris4(&pk, scene, cands, ncand, pk.all, blocker);
 }
 
 int kd_cone_packet_blocked(const kdr_scene *scene, const kdr_ray *const *lanes,
@@ -57,7 +45,7 @@ int kd_cone_packet_blocked(const kdr_scene *scene, const kdr_ray *const *lanes,
 KD_AVX2 static int walk8(const kdr_scene *scene, const kd_cone *c,
                          const kdr_ray *const *lanes, int n, uint64_t max_nodes,
                          uint32_t *blocker, uint64_t *visited, int *open) {
-    return kc8_packet_walk(scene, c, lanes, n, max_nodes, blocker, visited, open);
+    return kc_packet_walk8(scene, c, lanes, n, max_nodes, blocker, visited, open);
 }
 
 int kd_cone_packet_walk(const kdr_scene *scene, const kd_cone *c,
@@ -66,5 +54,5 @@ int kd_cone_packet_walk(const kdr_scene *scene, const kd_cone *c,
                         int wide) {
     if (wide)
         return walk8(scene, c, lanes, n, max_nodes, blocker, visited, open);
-    return kc4_packet_walk(scene, c, lanes, n, max_nodes, blocker, visited, open);
+    return kc_packet_walk4(scene, c, lanes, n, max_nodes, blocker, visited, open);
 }

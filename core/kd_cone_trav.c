@@ -219,8 +219,11 @@ static const kd_node *cone_descend(kd_cone_walk *w, kd_cone_item it) {
         const float split = node->u.split;
         kd_cone_item b = {(uint32_t)(node - nodes) + 1, 0, 0};
         kd_cone_item a = {kd_above(node), 0, 0};
-        const int below = cone_side(c, k, split, 1, it.tn, it.tf, &b.tn, &b.tf);
-        const int above = cone_side(c, k, split, 0, it.tn, it.tf, &a.tn, &a.tf);
+        /* an empty child (kd_layout's flags) holds nothing to reach */
+        const int below = !kd_below_empty(node) &&
+                          cone_side(c, k, split, 1, it.tn, it.tf, &b.tn, &b.tf);
+        const int above = !kd_above_empty(node) &&
+                          cone_side(c, k, split, 0, it.tn, it.tf, &a.tn, &a.tf);
         const int below_first = c->apex[k] <= split;
         if (below && above) {
             w->stack[w->top++] = below_first ? a : b;

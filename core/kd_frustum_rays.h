@@ -19,30 +19,10 @@ static inline int kf_popcount(int bits) {
            (int)((0x4332322132212110ull >> (4 * ((bits >> 4) & 15))) & 15);
 }
 
-/* a == b on int32 lanes carried in float vectors */
-KF_FN VF kf_ieq(VF a, VF b) {
-#if KB_W == 8
-    return _mm256_castsi256_ps(
-        _mm256_cmpeq_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)));
-#else
-    return _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_castps_si128(a), _mm_castps_si128(b)));
-#endif
-}
-
-/* a < b on int32 lanes carried in float vectors */
-KF_FN VF kf_ilt(VF a, VF b) {
-#if KB_W == 8
-    return _mm256_castsi256_ps(
-        _mm256_cmpgt_epi32(_mm256_castps_si256(b), _mm256_castps_si256(a)));
-#else
-    return _mm_castsi128_ps(_mm_cmplt_epi32(_mm_castps_si128(a), _mm_castps_si128(b)));
-#endif
-}
-
 /* The shear of kd_ray_precompute for a whole group at once, when its rays
  * share the dominant axis and its sign (nearly always in a small block):
  * the same divisions, so the same bits. Returns 0 when lanes disagree. */
-KF_FN int kf_pre_uniform(const kf_ctx *c, kf_group *g, const VF d[3]) {
+KD_TARGET static int kf_pre_uniform(const kf_ctx *c, kf_group *g, const VF d[3]) {
     const VF sign = V(set1)(-0.0f), zero = V(set1)(0.0f);
     const VF ax = V(andnot)(sign, d[0]), ay = V(andnot)(sign, d[1]),
              az = V(andnot)(sign, d[2]);
@@ -61,7 +41,7 @@ KF_FN int kf_pre_uniform(const kf_ctx *c, kf_group *g, const VF d[3]) {
         kx = ky;
         ky = tmp;
     }
-    KB(tri_pre) *p = &g->pre;
+    KD_WN(kd_nray_pre) *p = &g->pre;
     p->ox = V(set1)(c->b->eye[kx]);
     p->oy = V(set1)(c->b->eye[ky]);
     p->oz = V(set1)(c->b->eye[kz]);
@@ -82,28 +62,28 @@ KF_FN int kf_pre_uniform(const kf_ctx *c, kf_group *g, const VF d[3]) {
 }
 
 /* Per-lane scalar precomputation, for blocks whose rays shear differently. */
-KF_FN void kf_pre_mixed(const kf_ctx *c, kf_group *g, const VF d[3]) {
-    _Alignas(32) float dd[3][KB_W];
-    kd_ray_pre pre[KB_W];
+KD_TARGET static void kf_pre_mixed(const kf_ctx *c, kf_group *g, const VF d[3]) {
+    _Alignas(32) float dd[3][KD_W];
+    kd_ray_pre pre[KD_W];
     for (int a = 0; a < 3; a++)
         V(store)(dd[a], d[a]);
-    for (int j = 0; j < KB_W; j++) {
+    for (int j = 0; j < KD_W; j++) {
         const float dir[3] = {dd[0][j], dd[1][j], dd[2][j]};
         kd_ray_precompute(c->b->eye, dir, &pre[j]);
     }
-    KB(tri_pre_init)(&g->pre, pre, KF_FULL, 0);
+    KD_WN(kd_nray_pre_init)(&g->pre, pre, KF_FULL, 0);
 }
 
 /* Fills group g with the KF_BW x 2 block at (x, y), clipped to [.., x1) x
  * [.., y1): clipped-off lanes repeat a pixel of the block (so the block
  * still shears uniformly) but are never live nor written. Widens the
  * tile's direction interval. */
-KF_FN void kf_group_init(kf_ctx *c, kf_group *g, uint32_t x, uint32_t y,
+KD_TARGET static void kf_group_init(kf_ctx *c, kf_group *g, uint32_t x, uint32_t y,
                          uint32_t x1, uint32_t y1, VF dmin[3], VF dmax[3]) {
-    _Alignas(32) float sxa[KB_W], sya[KB_W];
+    _Alignas(32) float sxa[KD_W], sya[KD_W];
     const size_t W = c->cam->width;
     if (x + KF_BW <= x1 && y + 2 <= y1) { /* whole block: no clipping */
-        for (int j = 0; j < KB_W; j++) {
+        for (int j = 0; j < KD_W; j++) {
             const uint32_t px = x + (uint32_t)(j % KF_BW), py = y + (uint32_t)(j / KF_BW);
             sxa[j] = c->sx_tab[px];
             sya[j] = c->sy_tab[py];
@@ -112,7 +92,7 @@ KF_FN void kf_group_init(kf_ctx *c, kf_group *g, uint32_t x, uint32_t y,
         g->live = KF_FULL;
     } else {
         g->live = 0;
-        for (int j = 0; j < KB_W; j++) {
+        for (int j = 0; j < KD_W; j++) {
             const uint32_t px = x + (uint32_t)(j % KF_BW), py = y + (uint32_t)(j / KF_BW);
             const int in = px < x1 && py < y1;
             const uint32_t cx = px < x1 ? px : x1 - 1, cy = py < y1 ? py : y1 - 1;
@@ -156,7 +136,7 @@ static void kf_rel_box(const kf_ctx *c, const float lo[3], const float hi[3],
 
 /* Slab test of a group's rays against a relative box, over t >= 0: the
  * lanes whose ray may meet it, with their entry and exit distances. */
-KF_FN int kf_group_box(const kf_group *g, const float rlo[3],
+KD_TARGET static int kf_group_box(const kf_group *g, const float rlo[3],
                        const float rhi[3], VF *tnear, VF *tfar) {
     VF tn = V(set1)(0.0f), tf = V(set1)(INFINITY);
     for (int a = 0; a < 3; a++) {
@@ -172,52 +152,52 @@ KF_FN int kf_group_box(const kf_group *g, const float rlo[3],
 }
 
 /* kd_term_bound of four t values, same operations. */
-KF_FN VF kf_termv(VF t) {
+KD_TARGET static VF kf_termv(VF t) {
     const VF abs_t = V(andnot)(V(set1)(-0.0f), t);
     return V(add)(V(add)(t, V(mul)(abs_t, V(set1)(0x1p-18f))), V(set1)(FLT_MIN));
 }
 
-KF_FN void kf_group_update_term(kf_ctx *c, kf_group *g) {
-    _Alignas(32) float tb[KB_W];
+KD_TARGET static void kf_group_update_term(kf_ctx *c, kf_group *g) {
+    _Alignas(32) float tb[KD_W];
     float m = -INFINITY;
     if (c->q == KDR_ANY) {
         g->term = g->live ? INFINITY : -INFINITY;
         return;
     }
     V(store)(tb, kf_termv(V(load)(g->t)));
-    for (int j = 0; j < KB_W; j++)
+    for (int j = 0; j < KD_W; j++)
         if ((g->live >> j) & 1)
             m = kf_maxf(m, tb[j]);
     g->term = m;
 }
 
-KF_FN void kf_tile_update_term(kf_ctx *c, kf_tile *ft) {
+KD_TARGET static void kf_tile_update_term(kf_ctx *c, kf_tile *ft) {
     float m = -INFINITY;
     for (size_t k = 0; k < ft->ng; k++)
         m = kf_maxf(m, c->groups[ft->g0 + k].term);
     ft->term = m;
 }
 
-KF_FN float kf_hmin(VF v) {
-    _Alignas(32) float x[KB_W];
+KD_TARGET static float kf_hmin(VF v) {
+    _Alignas(32) float x[KD_W];
     V(store)(x, v);
     float m = x[0];
-    for (int j = 1; j < KB_W; j++)
+    for (int j = 1; j < KD_W; j++)
         m = kf_minf(m, x[j]);
     return m;
 }
-KF_FN float kf_hmax(VF v) {
-    _Alignas(32) float x[KB_W];
+KD_TARGET static float kf_hmax(VF v) {
+    _Alignas(32) float x[KD_W];
     V(store)(x, v);
     float m = x[0];
-    for (int j = 1; j < KB_W; j++)
+    for (int j = 1; j < KD_W; j++)
         m = kf_maxf(m, x[j]);
     return m;
 }
 
 /* Builds tile k's groups in lane l; clips its rays to the root box (rays
  * that miss it stop searching: every triangle lies inside). */
-KF_FN void kf_tile_init(kf_ctx *c, int l, size_t k) {
+KD_TARGET static void kf_tile_init(kf_ctx *c, int l, size_t k) {
     kf_tile *ft = &c->ft[l];
     const uint32_t T = c->tile, W = c->cam->width, H = c->cam->height;
     const size_t tiles_x = ((size_t)W + T - 1) / T;
@@ -257,39 +237,29 @@ KF_FN void kf_tile_init(kf_ctx *c, int l, size_t k) {
 
 /* ---- output ----------------------------------------------------------------- */
 
-/* Stores the two rows of a whole block: lanes [0, KF_BW) at dst + p0,
- * lanes [KF_BW, KB_W) at dst + p1. */
-KF_FN void kf_store_rows(float *dst, int32_t p0, int32_t p1, VF v) {
-#if KB_W == 8
-    _mm_storeu_ps(dst + p0, _mm256_castps256_ps128(v));
-    _mm_storeu_ps(dst + p1, _mm256_extractf128_ps(v, 1));
-#else
-    _mm_storel_pi((__m64 *)(void *)(dst + p0), v);
-    _mm_storeh_pi((__m64 *)(void *)(dst + p1), v);
-#endif
-}
-
 /* Closest-hit results of a whole block, a vector at a time. */
-KF_FN void kf_write_block(const kf_group *g, kdr_hits *out) {
+KD_TARGET static void kf_write_block(const kf_group *g, kdr_hits *out) {
     const VF prim = V(load)((const float *)g->prim);
-    const VF nohit = kf_ieq(prim, V(seti)(KF_NO_PRIM));
+    const VF nohit = V(ieq)(prim, V(seti)(KF_NO_PRIM));
     const int32_t p0 = g->pix[0], p1 = g->pix[KF_BW];
-    kf_store_rows(out->t, p0, p1, V(sel)(nohit, V(set1)(-1.0f), V(load)(g->t)));
-    kf_store_rows((float *)out->prim, p0, p1, V(sel)(nohit, V(seti)(-1), prim));
-    kf_store_rows(out->u, p0, p1, V(andnot)(nohit, V(load)(g->u)));
-    kf_store_rows(out->v, p0, p1, V(andnot)(nohit, V(load)(g->v)));
+    float *prims = (float *)out->prim;
+    V(store_halves)(out->t + p0, out->t + p1,
+                    V(sel)(nohit, V(set1)(-1.0f), V(load)(g->t)));
+    V(store_halves)(prims + p0, prims + p1, V(sel)(nohit, V(seti)(-1), prim));
+    V(store_halves)(out->u + p0, out->u + p1, V(andnot)(nohit, V(load)(g->u)));
+    V(store_halves)(out->v + p0, out->v + p1, V(andnot)(nohit, V(load)(g->v)));
 }
 
-KF_FN void kf_write(const kf_ctx *c, kdr_hits *out) {
+KD_TARGET static void kf_write(const kf_ctx *c, kdr_hits *out) {
     for (int l = 0; l < c->nlanes; l++) {
         const kf_tile *ft = &c->ft[l];
         for (size_t k = 0; k < ft->ng; k++) {
             const kf_group *g = &c->groups[ft->g0 + k];
-            if (c->q == KDR_CLOSEST && g->pix[KB_W - 1] >= 0) { /* whole block */
+            if (c->q == KDR_CLOSEST && g->pix[KD_W - 1] >= 0) { /* whole block */
                 kf_write_block(g, out);
                 continue;
             }
-            for (int j = 0; j < KB_W; j++) {
+            for (int j = 0; j < KD_W; j++) {
                 const int32_t i = g->pix[j];
                 const int hit = g->prim[j] != KF_NO_PRIM;
                 if (i < 0)

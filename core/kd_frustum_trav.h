@@ -23,15 +23,15 @@
  *
  * A lane stops when t_near exceeds the largest kd_term_bound(best_t) of its
  * still-searching rays (any-hit: when all have hit). At a leaf, the rays
- * of the lanes that reached it are tested in groups of KB_W (2x2 pixel
+ * of the lanes that reached it are tested in groups of KD_W (2x2 pixel
  * blocks with SSE, 4x2 with AVX2): first against the leaf's box (absolute
  * padding KF_ABS_PAD), then against its triangles with the SIMD watertight
- * test of kd_tri_simd.h, bit-identical to kd_tri.h.
+ * test of kd_tri_nray.h, bit-identical to kd_tri.h.
  *
  * This is a template, instantiated once per group width by
- * kd_frustum_trav4.c (SSE2) and kd_frustum_trav8.c (AVX2); it expects the
- * lane layer macros of kd_tri_simd.h (KB_W, VF, V, KB, KB_FN) plus KF_FN
- * (qualifiers of every function here) and KF_ENTRY (the exported name).
+ * kd_frustum_trav4.c (SSE2) and kd_frustum_trav8.c (AVX2) with the
+ * convention of simd_width.h; the entry point is kd_frustum_trace_tiles4 /
+ * kd_frustum_trace_tiles8 (kd_frustum.h).
  * The four frusta themselves always ride in SSE lanes (f4). The ray
  * groups' set-up and output live in kd_frustum_rays.h, included below.
  */
@@ -41,12 +41,12 @@
 
 #include "kd_frustum.h"
 #include "kd_internal.h"
-#include "kd_tri_simd.h"
+#include "kd_tri_nray.h"
 
 /* all lanes of a group */
-#define KF_FULL ((1 << KB_W) - 1)
+#define KF_FULL ((1 << KD_W) - 1)
 /* a group is a KF_BW x 2 pixel block */
-#define KF_BW (KB_W / 2)
+#define KF_BW (KD_W / 2)
 
 /* Relative padding of split-plane distances: rounding in split - eye and
  * in the division is below 2^-22; this is far above and still negligible. */
@@ -66,11 +66,11 @@ static inline float kf_maxf(float a, float b) { return b > a ? b : a; }
 
 /* The rays of a KF_BW x 2 pixel block and their best hits. */
 typedef struct kf_group {
-    KB(tri_pre) pre;
-    _Alignas(32) float inv[3][KB_W]; /* 1 / dir, for box tests */
-    _Alignas(32) float t[KB_W], u[KB_W], v[KB_W];
-    _Alignas(32) int32_t prim[KB_W];
-    int32_t pix[KB_W];            /* output index; -1 for padding lanes */
+    KD_WN(kd_nray_pre) pre;
+    _Alignas(32) float inv[3][KD_W]; /* 1 / dir, for box tests */
+    _Alignas(32) float t[KD_W], u[KD_W], v[KD_W];
+    _Alignas(32) int32_t prim[KD_W];
+    int32_t pix[KD_W];            /* output index; -1 for padding lanes */
     int live;                     /* lanes still searching (bit mask) */
     float term;                   /* max kd_term_bound(t) over live lanes */
 } kf_group;
@@ -120,16 +120,16 @@ typedef struct kf_tri_rel {
     VF r[3][3];
 } kf_tri_rel;
 
-KF_FN void kf_tri_rel_init(const kf_ctx *c, const float *tri, kf_tri_rel *tr) {
+KD_TARGET static void kf_tri_rel_init(const kf_ctx *c, const float *tri, kf_tri_rel *tr) {
     for (int k = 0; k < 3; k++)
         for (int a = 0; a < 3; a++)
             tr->r[k][a] = V(set1)(tri[3 * k + a] - c->b->eye[a]);
 }
 
-/* KB(tri_test) for a uniformly shearing group of rays from the eye, over
+/* kd_nray_test for a uniformly shearing group of rays from the eye, over
  * [0, +inf]: the same operations from the shear on. */
-KF_FN VF kf_tri_test_eye(const KB(tri_pre) *p, const kf_tri_rel *tr, VF act,
-                         VF *t_out, VF *u_out, VF *v_out) {
+KD_TARGET static VF kf_tri_test_eye(const KD_WN(kd_nray_pre) *p, const kf_tri_rel *tr,
+                                    VF act, VF *t_out, VF *u_out, VF *v_out) {
     const VF Ax = tr->r[0][p->kx], Ay = tr->r[0][p->ky], Az0 = tr->r[0][p->kz];
     const VF Bx = tr->r[1][p->kx], By = tr->r[1][p->ky], Bz0 = tr->r[1][p->kz];
     const VF Cx = tr->r[2][p->kx], Cy = tr->r[2][p->ky], Cz0 = tr->r[2][p->kz];
@@ -143,7 +143,7 @@ KF_FN VF kf_tri_test_eye(const KB(tri_pre) *p, const kf_tri_rel *tr, VF act,
     const VF z = V(or)(V(or)(V(eq)(U, zero), V(eq)(Vv, zero)), V(eq)(W, zero));
     const int zl = V(bits)(V(and)(z, act));
     if (zl)
-        KB(tri_exact)(zl, ax, ay, bx, by, cx, cy, &U, &Vv, &W);
+        KD_WN(kd_nray_exact)(zl, ax, ay, bx, by, cx, cy, &U, &Vv, &W);
     const VF neg = V(or)(V(or)(V(lt)(U, zero), V(lt)(Vv, zero)), V(lt)(W, zero));
     const VF pos = V(or)(V(or)(V(gt)(U, zero), V(gt)(Vv, zero)), V(gt)(W, zero));
     const VF det = V(add)(V(add)(U, Vv), W);
@@ -161,14 +161,15 @@ KF_FN VF kf_tri_test_eye(const KB(tri_pre) *p, const kf_tri_rel *tr, VF act,
 }
 
 /* Tests triangle prim against the selected lanes of group g. */
-KF_FN void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim,
+KD_TARGET static void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim,
                        const kf_tri_rel *tr) {
     const float *tri = c->s->tris + 9 * (size_t)prim;
     VF t = V(set1)(0.0f), u = t, v = t; /* set by the test on a hit */
-    const VF hit = g->pre.uniform
-                       ? kf_tri_test_eye(&g->pre, tr, V(bitmask)(*bits), &t, &u, &v)
-                       : KB(tri_test)(&g->pre, tri, V(bitmask)(*bits), V(set1)(0.0f),
-                                      V(set1)(INFINITY), &t, &u, &v);
+    const VF hit =
+        g->pre.uniform
+            ? kf_tri_test_eye(&g->pre, tr, V(bitmask)(*bits), &t, &u, &v)
+            : KD_WN(kd_nray_test)(&g->pre, tri, V(bitmask)(*bits), V(set1)(0.0f),
+                                  V(set1)(INFINITY), &t, &u, &v);
     c->tri_tests += (uint64_t)kf_popcount(*bits);
     if (!V(bits)(hit))
         return;
@@ -182,7 +183,7 @@ KF_FN void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim,
         return;
     }
     const VF better = V(and)(hit, V(or)(V(lt)(t, best_t),
-                                        V(and)(V(eq)(t, best_t), kf_ilt(pv, best_p))));
+                                        V(and)(V(eq)(t, best_t), V(ilt)(pv, best_p))));
     if (!V(bits)(better))
         return;
     V(store)(g->t, V(sel)(better, t, best_t));
@@ -193,8 +194,8 @@ KF_FN void kf_test_tri(kf_ctx *c, kf_group *g, int *bits, int32_t prim,
 
 /* Selects the groups of lane l whose rays may still meet box [rlo, rhi]
  * before their termination bound. */
-KF_FN size_t kf_select(kf_ctx *c, const kf_tile *ft, float tn, const float rlo[3],
-                        const float rhi[3], size_t nsel) {
+KD_TARGET static size_t kf_select(kf_ctx *c, const kf_tile *ft, float tn,
+                                  const float rlo[3], const float rhi[3], size_t nsel) {
     for (size_t k = 0; k < ft->ng; k++) {
         kf_group *g = &c->groups[ft->g0 + k];
         if (!g->live || g->term < tn)
@@ -212,7 +213,7 @@ KF_FN size_t kf_select(kf_ctx *c, const kf_tile *ft, float tn, const float rlo[3
 }
 
 /* Intersects the rays of the lanes in `lanes` that may meet leaf n. */
-KF_FN void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const float tn[4],
+KD_TARGET static void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const float tn[4],
                     const float lo[3], const float hi[3]) {
     const uint32_t cnt = kd_count(n);
     float rlo[3], rhi[3];
@@ -226,12 +227,15 @@ KF_FN void kf_leaf(kf_ctx *c, const kd_node *n, int lanes, const float tn[4],
     if (nsel == 0)
         return;
     const uint32_t *refs = c->s->refs + n->u.first;
+    if (c->s->prefetch_leaves) /* every row in flight at once (kd_tune.h) */
+        kd_prefetch_tris(c->s, refs, cnt);
     for (uint32_t r = 0; r < cnt; r++) {
         kf_tri_rel tr;
         kf_tri_rel_init(c, c->s->tris + 9 * (size_t)refs[r], &tr);
         for (size_t k = 0; k < nsel; k++)
             if (c->selbits[k])
-                kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r], &tr);
+                kf_test_tri(c, &c->groups[c->sel[k]], &c->selbits[k], (int32_t)refs[r],
+                            &tr);
     }
     /* a lane's bound can only fall when a group holding it fell */
     int dirty = 0;
@@ -273,7 +277,7 @@ static f4 kf_lane_terms(const kf_ctx *c) {
 }
 
 /* Walks the tree with the lanes' frusta, front to back from the eye. */
-KF_FN void kf_traverse(kf_ctx *c) {
+KD_TARGET static void kf_traverse(kf_ctx *c) {
     const kd_node *nodes = c->s->nodes;
     _Alignas(16) float tn0[4], tf0[4], rmin[3][4], rmax[3][4];
     kf_entry stack[KD_MAX_DEPTH + 2];
@@ -291,7 +295,7 @@ KF_FN void kf_traverse(kf_ctx *c) {
     memcpy(cur.lo, c->s->root.min, sizeof cur.lo);
     memcpy(cur.hi, c->s->root.max, sizeof cur.hi);
     f4 term = kf_lane_terms(c);
-    __m128i steps = _mm_setzero_si128();
+    f4 steps = f4_seti(0); /* node steps per lane (f4_count) */
     for (;;) {
         const f4 act = kf_active(cur.tn, cur.tf, term);
         if (!f4_bits(act)) {
@@ -300,7 +304,7 @@ KF_FN void kf_traverse(kf_ctx *c) {
             cur = stack[--sp];
             continue;
         }
-        steps = _mm_sub_epi32(steps, _mm_castps_si128(act));
+        steps = f4_count(steps, act);
         const kd_node *n = &nodes[cur.node];
         if (kd_is_leaf(n)) {
             _Alignas(16) float tn[4];
@@ -313,12 +317,17 @@ KF_FN void kf_traverse(kf_ctx *c) {
         const int axis = kd_axis(n);
         const float split = n->u.split, dist = split - c->b->eye[axis];
         const uint32_t below = cur.node + 1, above = kd_above(n);
+        const int below_empty = kd_below_empty(n), above_empty = kd_above_empty(n);
         if (dist == 0.0f) { /* eye on the plane: both children, whole */
-            stack[sp] = cur;
-            stack[sp].node = above;
-            stack[sp++].lo[axis] = split;
+            if (!above_empty) {
+                stack[sp] = cur;
+                stack[sp].node = above;
+                stack[sp++].lo[axis] = split;
+            }
             cur.node = below;
             cur.hi[axis] = split;
+            if (below_empty)
+                cur.tn = f4_set1(INFINITY); /* pop */
             continue;
         }
         f4 lo, hi;
@@ -326,8 +335,11 @@ KF_FN void kf_traverse(kf_ctx *c) {
             kf_cross(dist, f4_load(rmax[axis]), f4_load(rmin[axis]), &lo, &hi);
         else
             kf_cross(dist, f4_load(rmin[axis]), f4_load(rmax[axis]), &lo, &hi);
-        const f4 fm = f4_and(act, f4_le(cur.tn, hi));
-        const f4 bm = f4_and(act, f4_le(lo, cur.tf));
+        /* an empty child (kd_layout's flags) needs no visit */
+        const int front_empty = dist > 0.0f ? below_empty : above_empty;
+        const int back_empty = dist > 0.0f ? above_empty : below_empty;
+        const f4 fm = front_empty ? f4_seti(0) : f4_and(act, f4_le(cur.tn, hi));
+        const f4 bm = back_empty ? f4_seti(0) : f4_and(act, f4_le(lo, cur.tf));
         kf_entry back = cur;
         back.node = dist > 0.0f ? above : below;
         back.tn = f4_sel(bm, f4_max(cur.tn, lo), f4_set1(INFINITY));
@@ -350,7 +362,7 @@ KF_FN void kf_traverse(kf_ctx *c) {
             cur.lo[axis] = split;
     }
     _Alignas(16) int32_t st[4];
-    _mm_store_si128((__m128i *)st, steps);
+    f4_store((float *)st, steps);
     for (int l = 0; l < c->nlanes; l++)
         c->lane_steps[l] += (uint64_t)st[l] * c->ft[l].nrays;
 }
@@ -396,7 +408,7 @@ static float kf_pad(const kdr_scene *s, const kd_camera_basis *b) {
     return m * KF_ABS_PAD + FLT_MIN;
 }
 
-KF_FN_EXPORT int KF_ENTRY(const kdr_scene *s, const kdr_camera *cam,
+KD_TARGET int KD_WN(kd_frustum_trace_tiles)(const kdr_scene *s, const kdr_camera *cam,
                           const kd_camera_basis *b, uint32_t tile, size_t first,
                           size_t count, kdr_query q, int lanes, kdr_hits *out,
                           kdr_trav_stats *stats) {

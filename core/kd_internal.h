@@ -4,13 +4,20 @@
  * the kd_build*.c files and the kd_traverse_*.c files; not part of the
  * public API.
  *
- * Node layout (8 bytes, as in pbrt-v3 / Wald's thesis):
- *   interior: u.split = split position, bits = (above_child << 2) | axis,
+ * Node layout (8 bytes, as in pbrt-v3 / Wald's thesis), as every traversal
+ * sees it after kd_layout() (core/kd_layout.c):
+ *   interior: u.split = split position,
+ *             bits = (above_child << 4) | (above_empty << 3) |
+ *                    (below_empty << 2) | axis,
  *             axis in 0..2; the below child is always the next node
- *             (depth-first order), the above child is nodes[above_child].
+ *             (depth-first order), the above child is nodes[above_child];
+ *             *_empty flags a child that is a leaf without references, so
+ *             a walk can skip it without loading it.
  *   leaf:     u.first = index of its first reference in scene->refs,
  *             bits = (count << 2) | 3; refs[first .. first+count) are
  *             triangle numbers (prims).
+ * The build (kd_build.c) writes interior bits as (above_child << 2) | axis;
+ * kd_layout() rewrites them once the tree is complete.
  * A triangle lying exactly in a split plane goes to one side only; a
  * triangle touching the plane from one side is referenced on that side.
  * Zero-area triangles are never inserted.
@@ -37,8 +44,13 @@ typedef struct kd_node {
 
 static inline int kd_is_leaf(const kd_node *n) { return (n->bits & 3u) == KD_LEAF; }
 static inline int kd_axis(const kd_node *n) { return (int)(n->bits & 3u); }
-static inline uint32_t kd_above(const kd_node *n) { return n->bits >> 2; }
+static inline uint32_t kd_above(const kd_node *n) { return n->bits >> 4; }
+static inline int kd_below_empty(const kd_node *n) { return (int)(n->bits >> 2) & 1; }
+static inline int kd_above_empty(const kd_node *n) { return (int)(n->bits >> 3) & 1; }
 static inline uint32_t kd_count(const kd_node *n) { return n->bits >> 2; }
+
+/* Interior nodes keep 28 bits for the above child's index. */
+#define KD_LAYOUT_MAX_NODES ((size_t)1 << 28)
 
 /* Hard depth limit of the build; traversal stacks are this deep. */
 #define KD_MAX_DEPTH 64
@@ -54,8 +66,24 @@ struct kdr_scene {
     kdr_bounds root;      /* bounds padded outward by a few ulps: the box
                              traversals clip rays against */
     float diagonal;
+    float root_mag;       /* largest |coordinate| of root (kd_layout) */
+    int prefetch_leaves;  /* scene larger than a core's caches: walks
+                             request a leaf's triangles before testing them
+                             (kd_layout, KD_PREFETCH_MIN_BYTES) */
     kdr_tree_stats stats;
 };
+
+/* Requests the rows of triangles refs[0..count) (two lines may hold a
+ * 36-byte row); walks call it at a leaf when scene->prefetch_leaves. Kept
+ * out of line so that leaf loops of small scenes keep their shape. */
+__attribute__((noinline)) void kd_prefetch_tris(const kdr_scene *s,
+                                                const uint32_t *refs,
+                                                uint32_t count);
+
+/* The post-build pass: rewrites the built tree into the traversal layout
+ * above (core/kd_layout.c). KDR_ERANGE when the tree has KD_LAYOUT_MAX_NODES
+ * nodes or more. */
+int kd_layout(kdr_scene *s);
 
 /*
  * Termination bound: a subtree entered at distance t_near can be skipped

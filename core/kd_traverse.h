@@ -74,7 +74,10 @@ static inline int kd_ray_valid(const float org[3], const float dir[3],
 }
 
 /*
- * Clips [tmin, tmax] to the scene's padded root box grown by slack. An axis
+ * Clips [tmin, tmax] to the scene's padded root box grown by slack. This is
+ * the scalar definition; the single walk (setup() in kd_traverse_single.c)
+ * and the bundles (kb_clip) compute it three or more lanes at a time with
+ * the same operations. An axis
  * with a zero direction component constrains nothing when the origin is
  * inside the (grown) slab and rejects the ray otherwise (no 0 * inf).
  * Returns 0 when the ray misses.
@@ -105,15 +108,6 @@ static inline int kd_clip_root_slack(const struct kdr_scene *s,
     *tnear = tn;
     *tfar = tf;
     return tn <= tf;
-}
-
-/* The same, computing the ray's slack itself. */
-static inline int kd_clip_root(const struct kdr_scene *s, const float org[3],
-                               const float dir[3], const float inv_dir[3],
-                               float tmin, float tmax, float *tnear,
-                               float *tfar) {
-    return kd_clip_root_slack(s, org, dir, inv_dir, kd_ray_slack(s, org), tmin,
-                              tmax, tnear, tfar);
 }
 
 /*

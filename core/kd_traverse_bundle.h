@@ -3,9 +3,10 @@
  * of Tsakok, Bishop and Kennings), written once for any lane count.
  *
  * The first part declares the per-width entry points that kd_batch.c
- * dispatches to. The second part is a template: kd_traverse_bundle4.c and
- * kd_traverse_bundle8.c define KB_W, VF, V(op), KB(x) and KB_FN (see
- * kd_tri_simd.h) and include this file once more to instantiate it.
+ * dispatches to. The second part is a template (the convention of
+ * simd_width.h): kd_traverse_bundle4.c and kd_traverse_bundle8.c define
+ * KD_W, include simd_width.h and this file once more to instantiate it
+ * (kb_run4, kb_run8, ...).
  *
  * The paper's two changes to packet traversal are what let rays of any
  * direction signs share a bundle:
@@ -19,7 +20,7 @@
  * intervals of the single-ray walk (front [t_near, min(t_hi, t_far)], back
  * [max(t_lo, t_near), t_far]; moving away, the front keeps [t_near, t_far]
  * and the back only reaches t_hi): same leaves, same triangle tests, same
- * answer. See KB(spans) for the rule in one place.
+ * answer. See kb_spans for the rule in one place.
  * A lane whose origin is ON the plane (split - org == 0) has no side of its
  * own: its front is the child its direction leaves (the single walk's near
  * child). A lane lying in the plane (direction component +-0) gets
@@ -29,10 +30,10 @@
  * Origins: lanes may have different origins. When every lane has the same
  * origin (a camera, hemisphere rays from a surface point) and it is off the
  * plane, one scalar distance decides front and back for the whole bundle:
- * the paper's listing (KB(step_shared)). Otherwise every lane computes its
+ * the paper's listing (kb_step_shared). Otherwise every lane computes its
  * below/above intervals from its own origin side, so each lane's intervals
  * stay exact; the bundle enters first the child that is front for most
- * active lanes and stacks the other (KB(step_general)). Lanes whose origins
+ * active lanes and stacks the other (kb_step_general). Lanes whose origins
  * lie on different sides of a plane therefore never need a split bundle;
  * the minority lanes see their back child first, which costs pruning but
  * not correctness.
@@ -88,32 +89,32 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
 
 #endif /* KD_TRAVERSE_BUNDLE_DECL */
 
-#ifdef KB_W
+#ifdef KD_W
 #include <string.h>
 
-#include "kd_tri_simd.h"
+#include "kd_tri_nray.h"
 
 /* One bundle: the lanes' rays in SoA and their best hits. */
-typedef struct KB(bundle) {
-    _Alignas(32) float org[3][KB_W], dir[3][KB_W], tmin[KB_W];
-    _Alignas(32) float best_t[KB_W], best_u[KB_W], best_v[KB_W];
-    _Alignas(32) int32_t best_prim[KB_W];
+typedef struct KD_WN(kb_bundle) {
+    _Alignas(32) float org[3][KD_W], dir[3][KD_W], tmin[KD_W];
+    _Alignas(32) float best_t[KD_W], best_u[KD_W], best_v[KD_W];
+    _Alignas(32) int32_t best_prim[KD_W];
     float scene_mag;  /* largest root-box coordinate magnitude */
     int lanes;        /* lanes traced by the bundle */
     int hit;          /* any-hit: lanes that hit */
     uint64_t steps;   /* node steps of the bundle */
     uint64_t lane_steps;
     uint64_t tri_tests;
-} KB(bundle);
+} KD_WN(kb_bundle);
 
-typedef struct KB(entry) {
+typedef struct KD_WN(kb_entry) {
     VF t_near, t_far;
     uint32_t node;
-} KB(entry);
+} KD_WN(kb_entry);
 
 /* Live traversal state of one bundle. */
-typedef struct KB(state) {
-    KB(tri_pre) tp;
+typedef struct KD_WN(kb_state) {
+    KD_WN(kd_nray_pre) tp;
     VF org[3], inv_dir[3], tmin;
     VF ss[3];  /* the ray's slack signed like inv_dir (kd_signed_slack) */
     VF sgn[3]; /* lanes with inv_dir < 0 (sign bit): above is near */
@@ -124,10 +125,10 @@ typedef struct KB(state) {
     VF lane_steps, tri_tests; /* per-lane counters (V(count)) */
     VF limit;  /* kd_term_bound(best_t) on live lanes, -inf elsewhere */
     int any;
-} KB(state);
+} KD_WN(kb_state);
 
 /* kd_term_bound, per lane, exactly as the scalar inline computes it. */
-KB_FN void KB(update_limit)(KB(state) *st) {
+KD_FN void KD_WN(kb_update_limit)(KD_WN(kb_state) *st) {
     const VF absmask = V(seti)(0x7fffffff);
     VF slack = V(mul)(V(and)(st->best_t, absmask), V(set1)(0x1p-18f));
     VF bound = V(add)(V(add)(st->best_t, slack), V(set1)(FLT_MIN));
@@ -135,31 +136,35 @@ KB_FN void KB(update_limit)(KB(state) *st) {
 }
 
 /* Lanes of an interval that still need visiting. */
-KB_FN VF KB(active)(const KB(state) *st, VF t_near, VF t_far) {
+KD_FN VF KD_WN(kb_active)(const KD_WN(kb_state) *st, VF t_near, VF t_far) {
     return V(and)(V(le)(t_near, t_far), V(le)(t_near, st->limit));
 }
 
 /* Smallest-prim tie rule for lanes whose hit t equals best_t exactly. */
-KB_FN VF KB(ties)(const KB(state) *st, VF eq, int32_t prim) {
-    _Alignas(32) int32_t best[KB_W];
+KD_FN VF KD_WN(kb_ties)(const KD_WN(kb_state) *st, VF eq, int32_t prim) {
+    _Alignas(32) int32_t best[KD_W];
     V(store)((float *)best, st->best_prim);
     int bits = V(bits)(eq), win = 0;
-    for (int j = 0; j < KB_W; j++)
+    for (int j = 0; j < KD_W; j++)
         if (((bits >> j) & 1) && (uint32_t)prim < (uint32_t)best[j])
             win |= 1 << j;
     return V(bitmask)(win);
 }
 
 /* Tests the leaf's triangles against the active lanes. */
-KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st,
+KD_FN void KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) *st,
                     VF act) {
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
+    /* request every triangle of the leaf at once: the tests then find
+     * their rows arriving in parallel instead of one miss after another */
+    if (s->prefetch_leaves)
+        kd_prefetch_tris(s, refs, cnt);
     for (uint32_t r = 0; r < cnt; r++) {
         const int32_t prim = (int32_t)refs[r];
         VF t, Vv, W, det;
         st->tri_tests = V(count)(st->tri_tests, act);
-        VF hit = KB(tri_test_raw)(&st->tp, s->tris + 9 * (size_t)prim, act,
+        VF hit = KD_WN(kd_nray_test_raw)(&st->tp, s->tris + 9 * (size_t)prim, act,
                                   st->tmin, st->best_t, &t, &Vv, &W, &det);
         if (!V(bits)(hit))
             continue;
@@ -173,32 +178,32 @@ KB_FN void KB(leaf)(const kdr_scene *s, const kd_node *n, KB(state) *st,
         VF better = V(lt)(t, st->best_t);
         VF eq = V(and)(hit, V(eq)(t, st->best_t));
         if (V(bits)(eq))
-            better = V(or)(better, KB(ties)(st, eq, prim));
+            better = V(or)(better, KD_WN(kb_ties)(st, eq, prim));
         better = V(and)(better, hit);
         st->best_t = V(sel)(better, t, st->best_t);
         st->best_u = V(sel)(better, V(div)(Vv, det), st->best_u);
         st->best_v = V(sel)(better, V(div)(W, det), st->best_v);
         st->best_prim = V(sel)(better, V(seti)(prim), st->best_prim);
     }
-    KB(update_limit)(st);
+    KD_WN(kb_update_limit)(st);
 }
 
 /* Where a bundle is: a node, the lanes' interval there, the active lanes. */
-typedef struct KB(cursor) {
+typedef struct KD_WN(kb_cursor) {
     VF t_near, t_far, act;
     uint32_t node;
-} KB(cursor);
+} KD_WN(kb_cursor);
 
-KB_FN void KB(push)(KB(entry) *stack, int *sp, uint32_t node, VF t_near,
+KD_FN void KD_WN(kb_push)(KD_WN(kb_entry) *stack, int *sp, uint32_t node, VF t_near,
                     VF t_far) {
-    KB(entry) *e = &stack[(*sp)++];
+    KD_WN(kb_entry) *e = &stack[(*sp)++];
     e->node = node, e->t_near = t_near, e->t_far = t_far;
 }
 
 /* A child's interval per lane: [t_near, t_far]. */
-typedef struct KB(span) {
+typedef struct KD_WN(kb_span) {
     VF t_near, t_far;
-} KB(span);
+} KD_WN(kb_span);
 
 /*
  * The front and back intervals of every lane at a split plane. t_lo and
@@ -212,8 +217,8 @@ typedef struct KB(span) {
  * does. min/max take t_lo/t_hi first: a NaN (a lane in the plane) yields the
  * lane's own t_far / t_near, i.e. both children over the whole interval.
  */
-KB_FN void KB(spans)(VF t_lo, VF t_hi, VF away, VF t_near, VF t_far,
-                     KB(span) *f, KB(span) *b) {
+KD_FN void KD_WN(kb_spans)(VF t_lo, VF t_hi, VF away, VF t_near, VF t_far,
+                     KD_WN(kb_span) *f, KD_WN(kb_span) *b) {
     const VF inf = V(set1)(INFINITY);
     f->t_near = t_near;
     f->t_far = V(min)(V(sel)(away, inf, t_hi), t_far);
@@ -227,22 +232,25 @@ KB_FN void KB(spans)(VF t_lo, VF t_hi, VF away, VF t_near, VF t_far,
  * child. A lane moves away from the plane when its direction points from
  * the plane to the origin's side.
  */
-KB_FN int KB(step_shared)(const KB(state) *st, const kd_node *n, float a,
-                          KB(cursor) *c, KB(entry) *stack, int *sp) {
+KD_FN int KD_WN(kb_step_shared)(const KD_WN(kb_state) *st, const kd_node *n, float a,
+                          KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp) {
     const int axis = kd_axis(n);
     const VF av = V(set1)(a), inv = st->inv_dir[axis];
     const VF t_lo = V(mul)(V(sub)(av, st->ss[axis]), inv);
     const VF t_hi = V(mul)(V(add)(av, st->ss[axis]), inv);
     const VF away = a < 0.0f ? V(andnot)(st->sgn[axis], V(seti)(-1)) : st->sgn[axis];
-    KB(span) f, b;
-    KB(spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
+    KD_WN(kb_span) f, b;
+    KD_WN(kb_spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
     const VF f_act = V(and)(c->act, V(le)(f.t_near, f.t_far));
-    const VF b_act = V(and)(c->act, KB(active)(st, b.t_near, b.t_far));
+    const VF b_act = V(and)(c->act, KD_WN(kb_active)(st, b.t_near, b.t_far));
     const uint32_t front = a < 0.0f ? kd_above(n) : c->node + 1;
     const uint32_t back = a < 0.0f ? c->node + 1 : kd_above(n);
-    const int fb = V(bits)(f_act), bb = V(bits)(b_act);
+    /* an empty child (kd_layout's flags) needs no visit */
+    const int f_empty = a < 0.0f ? kd_above_empty(n) : kd_below_empty(n);
+    const int b_empty = a < 0.0f ? kd_below_empty(n) : kd_above_empty(n);
+    const int fb = f_empty ? 0 : V(bits)(f_act), bb = b_empty ? 0 : V(bits)(b_act);
     if (fb && bb)
-        KB(push)(stack, sp, back, b.t_near, b.t_far);
+        KD_WN(kb_push)(stack, sp, back, b.t_near, b.t_far);
     if (fb) {
         c->node = front, c->t_far = f.t_far, c->act = f_act;
         return 1;
@@ -261,8 +269,8 @@ KB_FN int KB(step_shared)(const KB(state) *st, const kd_node *n, float a,
  * single walk's near child). The child that is front for most active lanes
  * is entered first.
  */
-KB_FN int KB(step_general)(const KB(state) *st, const kd_node *n,
-                           KB(cursor) *c, KB(entry) *stack, int *sp) {
+KD_FN int KD_WN(kb_step_general)(const KD_WN(kb_state) *st, const kd_node *n,
+                           KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp) {
     const int axis = kd_axis(n);
     const VF zero = V(set1)(0.0f), inv = st->inv_dir[axis];
     const VF a = V(sub)(V(set1)(n->u.split), st->org[axis]);
@@ -271,15 +279,17 @@ KB_FN int KB(step_general)(const KB(state) *st, const kd_node *n,
     const VF on_plane = V(eq)(a, zero), below = V(lt)(a, zero);
     const VF away = V(andnot)(on_plane, V(xor)(below, st->sgn[axis]));
     const VF above_front = V(or)(below, V(and)(on_plane, st->sgn[axis]));
-    KB(span) f, b;
-    KB(spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
-    const KB(span) lo = {V(sel)(above_front, b.t_near, f.t_near),
+    KD_WN(kb_span) f, b;
+    KD_WN(kb_spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
+    const KD_WN(kb_span) lo = {V(sel)(above_front, b.t_near, f.t_near),
                          V(sel)(above_front, b.t_far, f.t_far)};
-    const KB(span) hi = {V(sel)(above_front, f.t_near, b.t_near),
+    const KD_WN(kb_span) hi = {V(sel)(above_front, f.t_near, b.t_near),
                          V(sel)(above_front, f.t_far, b.t_far)};
-    const VF lo_act = V(and)(c->act, KB(active)(st, lo.t_near, lo.t_far));
-    const VF hi_act = V(and)(c->act, KB(active)(st, hi.t_near, hi.t_far));
-    const int lb = V(bits)(lo_act), hb = V(bits)(hi_act);
+    const VF lo_act = V(and)(c->act, KD_WN(kb_active)(st, lo.t_near, lo.t_far));
+    const VF hi_act = V(and)(c->act, KD_WN(kb_active)(st, hi.t_near, hi.t_far));
+    /* an empty child (kd_layout's flags) needs no visit */
+    const int lb = kd_below_empty(n) ? 0 : V(bits)(lo_act);
+    const int hb = kd_above_empty(n) ? 0 : V(bits)(hi_act);
     if (!lb && !hb)
         return 0;
     int go_above = !lb;
@@ -287,9 +297,9 @@ KB_FN int KB(step_general)(const KB(state) *st, const kd_node *n,
         const int votes = kd_lane_count(V(bits)(V(and)(c->act, above_front)));
         go_above = 2 * votes > kd_lane_count(V(bits)(c->act));
         if (go_above)
-            KB(push)(stack, sp, c->node + 1, lo.t_near, lo.t_far);
+            KD_WN(kb_push)(stack, sp, c->node + 1, lo.t_near, lo.t_far);
         else
-            KB(push)(stack, sp, kd_above(n), hi.t_near, hi.t_far);
+            KD_WN(kb_push)(stack, sp, kd_above(n), hi.t_near, hi.t_far);
     }
     c->node = go_above ? kd_above(n) : c->node + 1;
     c->t_near = go_above ? hi.t_near : lo.t_near;
@@ -299,11 +309,11 @@ KB_FN int KB(step_general)(const KB(state) *st, const kd_node *n,
 }
 
 /* The node loop: from the root interval to an empty stack. */
-KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
-                    KB(bundle) *b) {
-    KB(entry) stack[KD_MAX_DEPTH + 1];
+KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF t_far,
+                    KD_WN(kb_bundle) *b) {
+    KD_WN(kb_entry) stack[KD_MAX_DEPTH + 1];
     int sp = 0;
-    KB(cursor) c = {t_near, t_far, KB(active)(st, t_near, t_far), 0};
+    KD_WN(kb_cursor) c = {t_near, t_far, KD_WN(kb_active)(st, t_near, t_far), 0};
     uint64_t steps = 0;
     for (;;) {
         const kd_node *n = &s->nodes[c.node];
@@ -311,11 +321,11 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
         st->lane_steps = V(count)(st->lane_steps, c.act);
         if (!kd_is_leaf(n)) {
             const float a = n->u.split - st->sorg[kd_axis(n)];
-            if (st->shared && a != 0.0f ? KB(step_shared)(st, n, a, &c, stack, &sp)
-                                           : KB(step_general)(st, n, &c, stack, &sp))
+            if (st->shared && a != 0.0f ? KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp)
+                                        : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
                 continue;
         } else {
-            KB(leaf)(s, n, st, c.act);
+            KD_WN(kb_leaf)(s, n, st, c.act);
         }
         /* pop the nearest entry that still has an active lane */
         for (;;) {
@@ -323,8 +333,8 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
                 b->steps = steps;
                 return;
             }
-            const KB(entry) *e = &stack[--sp];
-            c.act = KB(active)(st, e->t_near, e->t_far);
+            const KD_WN(kb_entry) *e = &stack[--sp];
+            c.act = KD_WN(kb_active)(st, e->t_near, e->t_far);
             if (V(bits)(c.act)) {
                 c.node = e->node, c.t_near = e->t_near, c.t_far = e->t_far;
                 break;
@@ -336,9 +346,9 @@ KB_FN void KB(walk)(const kdr_scene *s, KB(state) *st, VF t_near, VF t_far,
 /* Copies the rays ids[0..n) into the bundle's lanes (SoA). Lanes that
  * must be traced alone are returned in *alone; they and unused lanes hold
  * a harmless ray. */
-KB_FN void KB(gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
-                      KB(bundle) *b, int *alone) {
-    for (int j = 0; j < KB_W; j++) {
+KD_FN void KD_WN(kb_gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
+                      KD_WN(kb_bundle) *b, int *alone) {
+    for (int j = 0; j < KD_W; j++) {
         const size_t i = ids[j < n ? j : 0];
         const float *o = rb->org + rb->org_stride * i, *d = rb->dir + 3 * i;
         for (int k = 0; k < 3; k++) {
@@ -369,7 +379,7 @@ KB_FN void KB(gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
     const int used = (1 << n) - 1, good = V(bits)(V(and)(ok, nonzero)) & used;
     b->lanes = good;
     *alone = used & ~good;
-    for (int j = 0; j < KB_W; j++) /* a harmless ray where none is traced */
+    for (int j = 0; j < KD_W; j++) /* a harmless ray where none is traced */
         if (!((good >> j) & 1)) {
             for (int k = 0; k < 3; k++)
                 b->org[k][j] = 0.0f, b->dir[k][j] = 1.0f;
@@ -378,7 +388,7 @@ KB_FN void KB(gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
 }
 
 /* kd_ray_slack's scene part (a max, so its order does not matter). */
-static inline float KB(scene_mag)(const kdr_scene *s) {
+static inline float KD_WN(kb_scene_mag)(const kdr_scene *s) {
     float m = 0.0f;
     for (int k = 0; k < 3; k++) {
         const float a = -s->root.min[k], c = s->root.max[k];
@@ -393,7 +403,7 @@ static inline float KB(scene_mag)(const kdr_scene *s) {
  * once (the same float operations and comparisons, so the same bits). Lanes
  * that miss the root box leave b->lanes; the others get their interval.
  */
-KB_FN void KB(clip)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
+KD_FN void KD_WN(kb_clip)(const kdr_scene *s, KD_WN(kb_bundle) *b, KD_WN(kb_state) *st,
                     const VF dir[3], VF *t_near, VF *t_far) {
     const VF absm = V(seti)(0x7fffffff), zero = V(set1)(0.0f);
     VF m = V(set1)(b->scene_mag);
@@ -423,7 +433,7 @@ KB_FN void KB(clip)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
 }
 
 /* Vector set-up of the traversal state from the gathered lanes. */
-KB_FN void KB(setup)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
+KD_FN void KD_WN(kb_setup)(const kdr_scene *s, KD_WN(kb_bundle) *b, KD_WN(kb_state) *st,
                      VF *t_near, VF *t_far) {
     VF dir[3];
     for (int k = 0; k < 3; k++) {
@@ -432,10 +442,10 @@ KB_FN void KB(setup)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
         st->inv_dir[k] = V(div)(V(set1)(1.0f), dir[k]);
     }
     st->tmin = V(load)(b->tmin);
-    KB(clip)(s, b, st, dir, t_near, t_far);
+    KD_WN(kb_clip)(s, b, st, dir, t_near, t_far);
     if (!b->lanes)
         return;
-    KB(tri_pre_setup)(&st->tp, st->org, dir, b->lanes);
+    KD_WN(kd_nray_setup)(&st->tp, st->org, dir, b->lanes);
     const int ref = __builtin_ctz((unsigned)b->lanes);
     st->shared = 1;
     for (int k = 0; k < 3; k++) {
@@ -446,14 +456,14 @@ KB_FN void KB(setup)(const kdr_scene *s, KB(bundle) *b, KB(state) *st,
 }
 
 /* Traces the gathered lanes of a bundle. */
-KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
-    KB(state) st;
+KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any) {
+    KD_WN(kb_state) st;
     VF t_near, t_far;
     b->hit = 0;
     b->steps = b->lane_steps = b->tri_tests = 0;
     if (!b->lanes)
         return;
-    KB(setup)(s, b, &st, &t_near, &t_far);
+    KD_WN(kb_setup)(s, b, &st, &t_near, &t_far);
     if (!b->lanes)
         return;
     st.best_t = V(load)(b->best_t);
@@ -462,8 +472,8 @@ KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
     st.live = V(bitmask)(b->lanes);
     st.lane_steps = st.tri_tests = V(seti)(0);
     st.any = any;
-    KB(update_limit)(&st);
-    KB(walk)(s, &st, t_near, t_far, b);
+    KD_WN(kb_update_limit)(&st);
+    KD_WN(kb_walk)(s, &st, t_near, t_far, b);
     b->lane_steps = V(count_sum)(st.lane_steps);
     b->tri_tests = V(count_sum)(st.tri_tests);
     V(store)(b->best_t, st.best_t);
@@ -474,7 +484,7 @@ KB_FN void KB(trace)(const kdr_scene *s, KB(bundle) *b, int any) {
 }
 
 /* Writes the results of rays [base, base+n) except the `alone` lanes. */
-KB_FN void KB(store)(const KB(bundle) *b, const size_t *ids, int n, int alone,
+KD_FN void KD_WN(kb_store)(const KD_WN(kb_bundle) *b, const size_t *ids, int n, int alone,
                      kdr_query q, kdr_hits *out) {
     for (int j = 0; j < n; j++) {
         const size_t i = ids[j];
@@ -492,7 +502,7 @@ KB_FN void KB(store)(const KB(bundle) *b, const size_t *ids, int n, int alone,
     }
 }
 
-KB_FN void KB(stats_add)(kdr_trav_stats *stats, const KB(bundle) *b, int n,
+KD_FN void KD_WN(kb_stats_add)(kdr_trav_stats *stats, const KD_WN(kb_bundle) *b, int n,
                          int alone) {
     if (!stats)
         return;
@@ -502,31 +512,31 @@ KB_FN void KB(stats_add)(kdr_trav_stats *stats, const KB(bundle) *b, int n,
 }
 
 /* Traces rays ids[0..m) one by one: one fallback per bundle-sized group. */
-KB_FN void KB(alone)(const kdr_scene *s, const kdr_ray_batch *rb,
+KD_FN void KD_WN(kb_alone)(const kdr_scene *s, const kdr_ray_batch *rb,
                      const size_t *ids, int m, kdr_query q, kdr_hits *out,
                      kdr_trav_stats *stats) {
     for (int i = 0; i < m; i++)
         kd_batch_single(s, rb, ids[i], q, out, stats);
     if (stats)
-        stats->fallbacks += (uint64_t)((m + KB_W - 1) / KB_W);
+        stats->fallbacks += (uint64_t)((m + KD_W - 1) / KD_W);
 }
 
-/* Traces one chunk of rays (ids) in bundles of KB_W. Returns 1 when the
+/* Traces one chunk of rays (ids) in bundles of KD_W. Returns 1 when the
  * bundles so far (at least KB_PROBE of them) turned out incoherent; the
  * rest of the chunk then went alone. */
-KB_FN int KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
+KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
                     const size_t *ids, int m, kdr_query q, int flags,
                     kdr_hits *out, kdr_trav_stats *stats) {
-    KB(bundle) b;
+    KD_WN(kb_bundle) b;
     double used = 0.0, offered = 0.0; /* lane steps: taken / possible */
-    b.scene_mag = KB(scene_mag)(s);
-    for (int g = 0, k = 1; g < m; g += KB_W, k++) {
-        const int n = m - g < KB_W ? m - g : KB_W;
+    b.scene_mag = KD_WN(kb_scene_mag)(s);
+    for (int g = 0, k = 1; g < m; g += KD_W, k++) {
+        const int n = m - g < KD_W ? m - g : KD_W;
         int alone;
-        KB(gather)(rb, ids + g, n, &b, &alone);
-        KB(trace)(s, &b, q == KDR_ANY);
-        KB(store)(&b, ids + g, n, alone, q, out);
-        KB(stats_add)(stats, &b, n, alone);
+        KD_WN(kb_gather)(rb, ids + g, n, &b, &alone);
+        KD_WN(kb_trace)(s, &b, q == KDR_ANY);
+        KD_WN(kb_store)(&b, ids + g, n, alone, q, out);
+        KD_WN(kb_stats_add)(stats, &b, n, alone);
         for (int j = 0; j < n; j++)
             if ((alone >> j) & 1)
                 kd_batch_single(s, rb, ids[g + j], q, out, stats);
@@ -535,7 +545,7 @@ KB_FN int KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
         used += (double)b.lane_steps;
         offered += (double)b.steps * kd_lane_count(b.lanes);
         if ((flags & KB_FALLBACK) && k >= KB_PROBE && used < KB_OCC_MIN * offered) {
-            KB(alone)(s, rb, ids + g + n, m - g - n, q, out, stats);
+            KD_WN(kb_alone)(s, rb, ids + g + n, m - g - n, q, out, stats);
             return 1;
         }
     }
@@ -543,8 +553,8 @@ KB_FN int KB(chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
 }
 
 /* The batch driver: chunks of KB_CHUNK rays, regrouped by direction, then
- * bundles of KB_W; incoherent stretches ray by ray (see KB_OCC_MIN). */
-KB_FN void KB(run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
+ * bundles of KD_W; incoherent stretches ray by ray (see KB_OCC_MIN). */
+KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
                    size_t count, kdr_query q, int flags, kdr_hits *out,
                    kdr_trav_stats *stats) {
     size_t ids[KB_CHUNK];
@@ -555,12 +565,12 @@ KB_FN void KB(run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
         if (skip > 0) {
             skip--;
             kd_batch_order(rb, base, (size_t)m, 0, ids);
-            KB(alone)(s, rb, ids, m, q, out, stats);
+            KD_WN(kb_alone)(s, rb, ids, m, q, out, stats);
             continue;
         }
         kd_batch_order(rb, base, (size_t)m, (flags & KB_SORT) != 0, ids);
-        if (KB(chunk)(s, rb, ids, m, q, flags, out, stats))
+        if (KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats))
             skip = KB_FALLBACK_CHUNKS;
     }
 }
-#endif /* KB_W */
+#endif /* KD_W */

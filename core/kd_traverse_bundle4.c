@@ -3,17 +3,13 @@
  * omni-directional bundle traversal in kd_traverse_bundle.h.
  */
 #include "kd_traverse_bundle.h"
-#include "simd.h"
 
-#define KB_W 4
-#define VF f4
-#define V(op) f4_##op
-#define KB(x) kb4_##x
-#define KB_FN static inline
+#define KD_W 4
+#include "simd_width.h"
 #include "kd_traverse_bundle.h"
 
 void kd_bundle4_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                       size_t count, kdr_query q, int flags, kdr_hits *out,
                       kdr_trav_stats *stats) {
-    kb4_run(s, b, first, count, q, flags, out, stats);
+    kb_run4(s, b, first, count, q, flags, out, stats);
 }

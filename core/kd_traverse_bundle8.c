@@ -5,18 +5,14 @@
  * kd_bundle8_trace only when the CPU supports AVX2.
  */
 #include "kd_traverse_bundle.h"
-#include "simd.h"
 
-#define KB_W 8
-#define VF f8
-#define V(op) f8_##op
-#define KB(x) kb8_##x
-#define KB_FN KD_AVX2 static inline
+#define KD_W 8
+#include "simd_width.h"
 #include "kd_traverse_bundle.h"
 
 KD_AVX2 void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b,
                               size_t first, size_t count, kdr_query q,
                               int flags, kdr_hits *out,
                               kdr_trav_stats *stats) {
-    kb8_run(s, b, first, count, q, flags, out, stats);
+    kb_run8(s, b, first, count, q, flags, out, stats);
 }

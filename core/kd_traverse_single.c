@@ -21,7 +21,7 @@
 #include "kd_internal.h"
 #include "kd_traverse.h"
 #include "kd_tri.h"
-#include "kd_tri_multi.h"
+#include "kd_tri_ntri.h"
 
 
 typedef struct kd_todo {
@@ -35,7 +35,9 @@ typedef struct walk_out {
     uint64_t nodes, tests;
 } walk_out;
 
-/* Descends from n to a leaf, pushing far children; returns the leaf. */
+/* Descends from n to a non-empty leaf, pushing far children; returns the
+ * leaf, or NULL when the rest of this subtree is empty for the ray (a child
+ * flagged empty is never entered). */
 static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
                                      const float org[3], const float inv[3],
                                      const float ss[3], const unsigned neg[3],
@@ -52,11 +54,23 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
         __builtin_prefetch(above);
         const kd_node *nearc = neg[axis] ? above : below;
         const kd_node *farc = neg[axis] ? below : above;
+        const int near_empty = neg[axis] ? kd_above_empty(n) : kd_below_empty(n);
+        const int far_empty = neg[axis] ? kd_below_empty(n) : kd_above_empty(n);
         if (t_lo > *tf) {
+            if (near_empty)
+                return NULL;
             n = nearc;
         } else if (t_hi < *tn) {
+            if (far_empty)
+                return NULL;
             n = farc;
-        } else { /* both, and also a NaN (ray in the plane) */
+        } else if (far_empty) { /* both, and also a NaN (ray in the plane) */
+            n = nearc;
+            *tf = t_hi < *tf ? t_hi : *tf;
+        } else if (near_empty) {
+            n = farc;
+            *tn = t_lo > *tn ? t_lo : *tn;
+        } else {
             stack[*sp].node = farc;
             stack[*sp].tn = t_lo > *tn ? t_lo : *tn;
             stack[*sp].tf = *tf;
@@ -85,7 +99,7 @@ static inline void keep_hit(walk_out *o, float t, int32_t prim, float u,
  * the start of the group as tmax: a hit the scalar loop would reject with a
  * tighter tmax loses the tie rule anyway, so the best hit is the same. */
 static inline int test_group(const kdr_scene *s, const uint32_t *ref,
-                             uint32_t left, const kd_ray_pre4 *pre4,
+                             uint32_t left, const kd_ntri_pre4 *pre4,
                              float tmin, const int any, walk_out *o) {
     const float *rows[4];
     int32_t prims[4];
@@ -94,7 +108,7 @@ static inline int test_group(const kdr_scene *s, const uint32_t *ref,
         rows[j] = s->tris + 9 * (size_t)prims[j];
     }
     f4 t, V, W, det;
-    const int hits = kd_tri4_intersect(pre4, rows, f4_set1(tmin), f4_set1(o->t),
+    const int hits = kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(o->t),
                                        &t, &V, &W, &det);
     if (!hits)
         return 0;
@@ -118,8 +132,8 @@ static inline int test_group(const kdr_scene *s, const uint32_t *ref,
 KD_AVX2 __attribute__((noinline)) static int
 test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
            const kd_ray_pre *pre, float tmin, const int any, walk_out *o) {
-    kd_ray_pre8 pre8;
-    kd_ray_pre8_init(pre, &pre8);
+    kd_ntri_pre8 pre8;
+    kd_ntri_pre_init8(pre, &pre8);
     const f8 tmin8 = f8_set1(tmin);
     for (uint32_t i = 0; i < count; i += 8) {
         const uint32_t base = i + 8 <= count ? i : count - 8;
@@ -127,7 +141,7 @@ test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
         for (int j = 0; j < 8; j++)
             rows[j] = s->tris + 9 * (size_t)ref[base + j];
         f8 t, V, W, det;
-        const int hits = kd_tri8_intersect(&pre8, rows, tmin8, f8_set1(o->t), &t,
+        const int hits = kd_ntri_test8(&pre8, rows, tmin8, f8_set1(o->t), &t,
                                            &V, &W, &det);
         if (!hits)
             continue;
@@ -151,7 +165,7 @@ test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
  * the tie rule; returns 1 at the first hit when any != 0. Leaves of at least
  * KD_LEAF_SIMD_MIN references go four at a time. */
 static inline int test_leaf(const kdr_scene *s, const kd_node *n,
-                            const kd_ray_pre *pre, const kd_ray_pre4 *pre4,
+                            const kd_ray_pre *pre, const kd_ntri_pre4 *pre4,
                             float tmin, const int any, const int avx2,
                             walk_out *o) {
     const uint32_t *ref = s->refs + n->u.first;
@@ -178,26 +192,65 @@ static inline int test_leaf(const kdr_scene *s, const kd_node *n,
     return 0;
 }
 
+/* The ray's set-up, three axes per SSE operation: validity (kd_ray_valid),
+ * 1 / dir, the signed slack (kd_ray_slack, kd_signed_slack) and the root
+ * clip (kd_clip_root_slack), every lane with the scalar operations, so the
+ * interval is the scalar one bit for bit (max and min of the same non-NaN
+ * values in another order). Lane 3 carries neutral values. Returns 0 when
+ * the ray cannot be traced or misses the root box. */
+static inline int setup(const kdr_scene *s, const kdr_ray *r, float inv[3],
+                        float ss[3], unsigned neg[3], float *tn, float *tf) {
+    /* org[0..2] and dir[0..2], each loaded with the next float of kdr_ray */
+    const f4 org = f4_loadu(r->org), dir = f4_loadu(r->dir);
+    const f4 zero = f4_set1(0.0f);
+    const int finite = f4_bits(f4_eq(f4_sub(org, org), zero)) &
+                       f4_bits(f4_eq(f4_sub(dir, dir), zero)) & 7;
+    const int flat = f4_bits(f4_eq(dir, zero)) | 8;
+    if (finite != 7 || flat == 15 || !(r->tmin <= r->tmax))
+        return 0;
+    const f4 iv = f4_div(f4_set1(1.0f), f4_lane3(dir, 1.0f));
+    const f4 sgn = f4_set1(-0.0f);
+    const float slack =
+        f4_hmax(f4_lane3(f4_max(f4_andnot(sgn, org), f4_set1(s->root_mag)), 0.0f)) *
+        KD_SLACK_REL;
+    const f4 sl = f4_set1(slack);
+    _Alignas(16) float ivv[4], ssv[4];
+    f4_store(ivv, iv);
+    f4_store(ssv, f4_xor(sl, f4_and(iv, sgn)));
+    const int sign = f4_bits(dir);
+    for (int k = 0; k < 3; k++) {
+        inv[k] = ivv[k];
+        ss[k] = ssv[k];
+        neg[k] = (unsigned)(sign >> k) & 1u;
+    }
+    /* the root clip; a flat axis (direction 0) only rejects an origin
+     * outside the grown slab (kdr_bounds: max follows min in memory) */
+    const f4 lo = f4_sub(f4_loadu(s->root.min), sl);
+    const f4 hi = f4_add(f4_loadu(s->root.max), sl);
+    const f4 fl = f4_bitmask(flat);
+    if (f4_bits(f4_and(fl, f4_or(f4_lt(org, lo), f4_gt(org, hi)))) & 7)
+        return 0;
+    const f4 t0 = f4_mul(f4_sub(lo, org), iv), t1 = f4_mul(f4_sub(hi, org), iv);
+    /* entry min(t1, t0) and exit max(t0, t1): the scalar swap's result,
+     * NaN included; flat axes and lane 3 constrain nothing */
+    const f4 ent = f4_sel(fl, f4_set1(-INFINITY), f4_min(t1, t0));
+    const f4 ext = f4_sel(fl, f4_set1(INFINITY), f4_max(t0, t1));
+    *tn = f4_hmax(f4_max(ent, f4_set1(r->tmin)));
+    *tf = f4_hmin(f4_min(ext, f4_set1(r->tmax)));
+    return *tn <= *tf;
+}
+
 /* The walk shared by both queries; any != 0 stops at the first hit. */
 static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
                        walk_out *o) {
     float inv[3], ss[3], tn, tf;
     unsigned neg[3];
-    if (!s || !s->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax))
-        return 0;
-    for (int k = 0; k < 3; k++) {
-        inv[k] = 1.0f / r->dir[k];
-        neg[k] = signbit(r->dir[k]) ? 1u : 0u;
-    }
-    const float slack = kd_ray_slack(s, r->org);
-    kd_signed_slack(slack, inv, ss);
-    if (!kd_clip_root_slack(s, r->org, r->dir, inv, slack, r->tmin, r->tmax, &tn,
-                            &tf))
+    if (!s || !s->nodes || !setup(s, r, inv, ss, neg, &tn, &tf))
         return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
-    kd_ray_pre4 pre4;
-    kd_ray_pre4_init(&pre, &pre4);
+    kd_ntri_pre4 pre4;
+    kd_ntri_pre_init4(&pre, &pre4);
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     const kd_node *nodes = s->nodes;
     kd_todo stack[KD_MAX_DEPTH];
@@ -205,7 +258,7 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     const kd_node *n = nodes;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
-        if (test_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
+        if (n && test_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
             return 1;
         const float bound = kd_term_bound(o->t);
         do {

@@ -199,6 +199,10 @@ typedef struct kdr_shadow_stats {
                                  of a decided cone are not counted */
     uint64_t nodes_visited;   /* cone traversal nodes + ray traversal nodes */
 } kdr_shadow_stats;
+/* The stats are a deterministic function of the scene, the query and the
+ * range [first, first + count) of one call: within a call each light's last
+ * blocker and walk back-off carry from point to point, so splitting the
+ * same points into other ranges changes the stats (never the visibilities). */
 
 typedef enum kdr_shadow_mode {
     KDR_SHADOW_CONE = 0,      /* cone traversal, then samples vs candidates */

@@ -12,7 +12,9 @@
  * NaN d yields t_far.
  *
  * Only plain IEEE operations here (no FMA, no approximate reciprocals), so
- * that SIMD code can reproduce scalar results bit for bit.
+ * that SIMD code can reproduce scalar results bit for bit. Every intrinsic
+ * of core/ lives in this file; code written once for both widths uses the
+ * template convention of simd_width.h (VF, V(op), KD_WN, KD_FN).
  */
 #ifndef KD_SIMD_H
 #define KD_SIMD_H
@@ -28,6 +30,7 @@ typedef __m128 f4;
 
 static inline f4 f4_set1(float x) { return _mm_set1_ps(x); }
 static inline f4 f4_load(const float *p) { return _mm_load_ps(p); }
+static inline f4 f4_loadu(const float *p) { return _mm_loadu_ps(p); }
 static inline void f4_store(float *p, f4 a) { _mm_store_ps(p, a); }
 static inline f4 f4_add(f4 a, f4 b) { return _mm_add_ps(a, b); }
 static inline f4 f4_sub(f4 a, f4 b) { return _mm_sub_ps(a, b); }
@@ -68,6 +71,42 @@ static inline uint64_t f4_count_sum(f4 acc) {
     _Alignas(16) int32_t v[4];
     _mm_store_si128((__m128i *)v, _mm_castps_si128(acc));
     return (uint64_t)v[0] + (uint64_t)v[1] + (uint64_t)v[2] + (uint64_t)v[3];
+}
+
+/* a == b and a < b on int32 lanes carried in float vectors */
+static inline f4 f4_ieq(f4 a, f4 b) {
+    return _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_castps_si128(a), _mm_castps_si128(b)));
+}
+static inline f4 f4_ilt(f4 a, f4 b) {
+    return _mm_castsi128_ps(_mm_cmplt_epi32(_mm_castps_si128(a), _mm_castps_si128(b)));
+}
+/* Lanes [0, 2) to lo[0..1], lanes [2, 4) to hi[0..1] (unaligned). */
+static inline void f4_store_halves(float *lo, float *hi, f4 a) {
+    _mm_storel_pi((__m64 *)(void *)lo, a);
+    _mm_storeh_pi((__m64 *)(void *)hi, a);
+}
+/* Floats off..off+3 of rows r[0..3], transposed: lane j of c[i] is
+ * r[j][off + i] (unaligned rows). */
+static inline void f4_rows4(const float *const r[4], int off, f4 c[4]) {
+    f4 a = _mm_loadu_ps(r[0] + off), b = _mm_loadu_ps(r[1] + off),
+       d = _mm_loadu_ps(r[2] + off), e = _mm_loadu_ps(r[3] + off);
+    _MM_TRANSPOSE4_PS(a, b, d, e);
+    c[0] = a, c[1] = b, c[2] = d, c[3] = e;
+}
+
+/* The largest / smallest lane (no NaN lanes). */
+static inline float f4_hmax(f4 a) {
+    const f4 b = _mm_max_ps(a, _mm_movehl_ps(a, a));
+    return _mm_cvtss_f32(_mm_max_ss(b, _mm_shuffle_ps(b, b, 1)));
+}
+static inline float f4_hmin(f4 a) {
+    const f4 b = _mm_min_ps(a, _mm_movehl_ps(a, a));
+    return _mm_cvtss_f32(_mm_min_ss(b, _mm_shuffle_ps(b, b, 1)));
+}
+/* Lane 3 replaced by x (lanes 0..2 of a ray's 3-vectors, loaded as 4). */
+static inline f4 f4_lane3(f4 a, float x) {
+    const f4 m = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+    return f4_sel(m, a, _mm_set1_ps(x));
 }
 
 /* Number of set bits in a lane mask (<= 8 lanes). A table, because the
@@ -130,6 +169,43 @@ KD_AVX2 static inline f8 f8_loadu(const float *p) { return _mm256_loadu_ps(p); }
 /* Lane j gets v[idx[j]]; idx holds int32 lane indices (0..7) as bits. */
 KD_AVX2 static inline f8 f8_permute(f8 v, f8 idx) {
     return _mm256_permutevar8x32_ps(v, _mm256_castps_si256(idx));
+}
+
+KD_AVX2 static inline f8 f8_ieq(f8 a, f8 b) {
+    return _mm256_castsi256_ps(
+        _mm256_cmpeq_epi32(_mm256_castps_si256(a), _mm256_castps_si256(b)));
+}
+KD_AVX2 static inline f8 f8_ilt(f8 a, f8 b) {
+    return _mm256_castsi256_ps(
+        _mm256_cmpgt_epi32(_mm256_castps_si256(b), _mm256_castps_si256(a)));
+}
+/* Lanes [0, 4) to lo[0..3], lanes [4, 8) to hi[0..3] (unaligned). */
+KD_AVX2 static inline void f8_store_halves(float *lo, float *hi, f8 a) {
+    _mm_storeu_ps(lo, _mm256_castps256_ps128(a));
+    _mm_storeu_ps(hi, _mm256_extractf128_ps(a, 1));
+}
+/* Floats 0..8 of rows r[0..7], transposed: lane j of c[i] is r[j][i]
+ * (unaligned rows of at least 9 floats). */
+KD_AVX2 static inline void f8_rows9(const float *const r[8], f8 c[9]) {
+    f8 v[8], t[8], u[8];
+    for (int j = 0; j < 8; j++)
+        v[j] = _mm256_loadu_ps(r[j]);
+    for (int j = 0; j < 8; j += 2) {
+        t[j] = _mm256_unpacklo_ps(v[j], v[j + 1]);
+        t[j + 1] = _mm256_unpackhi_ps(v[j], v[j + 1]);
+    }
+    for (int h = 0; h < 8; h += 4) { /* rows h..h+3 */
+        u[h + 0] = _mm256_shuffle_ps(t[h], t[h + 2], 0x44);
+        u[h + 1] = _mm256_shuffle_ps(t[h], t[h + 2], 0xEE);
+        u[h + 2] = _mm256_shuffle_ps(t[h + 1], t[h + 3], 0x44);
+        u[h + 3] = _mm256_shuffle_ps(t[h + 1], t[h + 3], 0xEE);
+    }
+    for (int i = 0; i < 4; i++) {
+        c[i] = _mm256_permute2f128_ps(u[i], u[4 + i], 0x20);
+        c[4 + i] = _mm256_permute2f128_ps(u[i], u[4 + i], 0x31);
+    }
+    c[8] = _mm256_setr_ps(r[0][8], r[1][8], r[2][8], r[3][8], r[4][8], r[5][8],
+                          r[6][8], r[7][8]);
 }
 
 #endif /* KD_SIMD_H */

@@ -1,7 +1,8 @@
 /*
- * kdr_fields.c — reading one field of a request: the body itself, float
- * arrays in both contract forms (JSON numbers or {"f32": base64}), numbers,
- * integers and enums. Every failure becomes a 400 whose detail names the
+ * kdr_fields.c — reading one field of a request: the body itself (JSON or
+ * CBOR), float arrays in every form (JSON numbers or {"f32": base64}, CBOR
+ * arrays or float32 typed arrays), numbers, integers, enums and the answer
+ * field list. Every failure becomes a 400 whose detail names the
  * field and, for arrays, the element ("directions[17]: not a finite
  * number"), so the request parsers stay a list of fields.
  */
@@ -32,11 +33,20 @@ static int cjson_doc(const char *body, size_t len, kdr_pf_doc *doc,
     return 0;
 }
 
-int kdr_pf_parse_body(const char *body, size_t len, kdr_pf_doc *doc,
+int kdr_pf_parse_body(kdr_media media, const char *body, size_t len, kdr_pf_doc *doc,
                       kdr_proto_error *err) {
     memset(doc, 0, sizeof *doc);
     if (!body || len == 0)
         return kdr_proto_error_set(err, 400, "body: empty");
+    if (media == KDR_MEDIA_CBOR) {
+        doc->media = KDR_MEDIA_CBOR;
+        const int st = kdr_pf_cbor_doc(body, len, doc, err);
+        if (st)
+            kdr_pf_doc_free(doc);
+        return st;
+    }
+    if (media != KDR_MEDIA_JSON)
+        return kdr_proto_error_set(err, 415, "body: not a media type this server reads");
     int st = kdr_pf_fast_doc(body, len, doc, err);
     if (st == 1) {
         kdr_pf_doc_free(doc);
@@ -54,17 +64,21 @@ void kdr_pf_doc_free(kdr_pf_doc *doc) {
     memset(doc, 0, sizeof *doc);
 }
 
-static int wrong_form(const char *name, kdr_proto_error *err) {
+static int wrong_form(const char *name, int cbor, kdr_proto_error *err) {
+    if (cbor)
+        return kdr_proto_error_set(
+            err, 400, "%s: expected a float32 typed array (tag 85) or an array of numbers",
+            name);
     return kdr_proto_error_set(
         err, 400, "%s: expected an array of numbers or {\"f32\": base64}", name);
 }
 
 /* The base64 string of {"f32": "..."}, or NULL after setting err. */
-static const char *f32_string(const cJSON *item, const char *name,
+static const char *f32_string(const cJSON *item, const char *name, int cbor,
                               kdr_proto_error *err) {
     const cJSON *s = cJSON_GetObjectItemCaseSensitive(item, "f32");
     if (!s) {
-        wrong_form(name, err);
+        wrong_form(name, cbor, err);
         return NULL;
     }
     if (!cJSON_IsString(s) || !s->valuestring) {
@@ -106,8 +120,8 @@ int kdr_pf_count(kdr_pf_field f, const char *name, size_t *count,
         return 0;
     }
     if (!cJSON_IsObject(item))
-        return wrong_form(name, err);
-    const char *s = f32_string(item, name, err);
+        return wrong_form(name, f.cbor, err);
+    const char *s = f32_string(item, name, f.cbor, err);
     if (!s)
         return err->status;
     return b64_count(s, strlen(s), name, count, err);
@@ -149,17 +163,19 @@ static int check_decoded(const float *v, size_t count, const char *name,
     return 0;
 }
 
-/* A numeric array parsed by the fast walk: the same errors as element by
- * element (JSON numbers are never NaN; the earliest problem is named). */
+/* A numeric array converted while the body was walked: the same errors as
+ * element by element, the earliest element at fault named. */
 static int read_fast(const kdr_numarray *a, const char *name, float *dst, size_t count,
                      unsigned flags, kdr_proto_error *err) {
-    if (!(flags & KDR_PF_SATURATE) && (a->first_inf < count || a->first_big < count)) {
-        if (a->first_inf < a->first_big)
-            return kdr_proto_error_set(err, 400, "%s[%zu]: not a finite number", name,
-                                       a->first_inf);
-        return kdr_proto_error_set(err, 400, "%s[%zu]: out of float32 range", name,
-                                   a->first_big);
-    }
+    size_t inf = a->first_inf, big = a->first_big;
+    if (flags & KDR_PF_SATURATE)
+        inf = big = SIZE_MAX;
+    if (a->first_nan < count && a->first_nan < inf && a->first_nan < big)
+        return kdr_proto_error_set(err, 400, "%s[%zu]: not a number", name, a->first_nan);
+    if (inf < count && inf < big)
+        return kdr_proto_error_set(err, 400, "%s[%zu]: not a finite number", name, inf);
+    if (big < count)
+        return kdr_proto_error_set(err, 400, "%s[%zu]: out of float32 range", name, big);
     memcpy(dst, a->v, (count < a->n ? count : a->n) * sizeof *dst);
     return 0;
 }
@@ -182,6 +198,10 @@ static int b64_read(const char *s, size_t n, const char *name, float *dst, size_
 int kdr_pf_read(kdr_pf_field f, const char *name, float *dst, size_t count,
                 unsigned flags, kdr_proto_error *err) {
     const cJSON *item = f.item;
+    if (f.arr && f.arr->raw) {
+        memcpy(dst, f.arr->raw, (count < f.arr->n ? count : f.arr->n) * sizeof *dst);
+        return check_decoded(dst, count, name, flags, err);
+    }
     if (f.arr && f.arr->b64)
         return b64_read(f.arr->b64, f.arr->b64_len, name, dst, count, flags, err);
     if (f.arr)
@@ -193,10 +213,28 @@ int kdr_pf_read(kdr_pf_field f, const char *name, float *dst, size_t count,
                 return err->status;
         return 0;
     }
-    const char *s = f32_string(item, name, err);
+    const char *s = f32_string(item, name, f.cbor, err);
     if (!s)
         return err->status;
     return b64_read(s, strlen(s), name, dst, count, flags, err);
+}
+
+int kdr_pf_view(kdr_pf_field f, const char *name, size_t count, unsigned flags,
+                float **storage, const float **view, kdr_proto_error *err) {
+    *storage = NULL;
+    *view = NULL;
+    if (f.arr && f.arr->raw && (uintptr_t)f.arr->raw % _Alignof(float) == 0 &&
+        count <= f.arr->n) {
+        const float *in_place = (const float *)(const void *)f.arr->raw;
+        if (check_decoded(in_place, count, name, flags, err))
+            return err->status;
+        *view = in_place;
+        return 0;
+    }
+    if (!(*storage = malloc((count ? count : 1) * sizeof(float))))
+        return kdr_proto_error_set(err, 500, "%s: out of memory", name);
+    *view = *storage;
+    return kdr_pf_read(f, name, *storage, count, flags, err);
 }
 
 int kdr_pf_vec3(const cJSON *item, const char *name, float out[3],
@@ -270,4 +308,47 @@ int kdr_pf_too_many(kdr_proto_error *err, uint64_t rays, size_t max_rays,
                     const char *what) {
     return kdr_proto_error_set(err, 413, "batch of %llu %s exceeds the limit of %zu",
                                (unsigned long long)rays, what, max_rays);
+}
+
+/* ---- answer fields ------------------------------------------------------------- */
+
+const kdr_field_info kdr_field_table[KDR_FIELD_COUNT] = {
+    {"t", KDR_FIELD_T, 1},
+    {"prim", KDR_FIELD_PRIM, 1},
+    {"u", KDR_FIELD_U, 1},
+    {"v", KDR_FIELD_V, 1},
+    {"hit", KDR_FIELD_HIT, 0},
+};
+
+int kdr_pf_fields(const cJSON *root, kdr_query query, unsigned *out,
+                  kdr_proto_error *err) {
+    const cJSON *fs = cJSON_GetObjectItemCaseSensitive(root, "fields");
+    *out = query == KDR_ANY ? KDR_FIELDS_ANY : KDR_FIELDS_CLOSEST;
+    if (!fs)
+        return 0;
+    if (!cJSON_IsArray(fs) || !fs->child)
+        return kdr_proto_error_set(err, 400,
+                                   "fields: expected a non-empty array of field names");
+    unsigned bits = 0;
+    size_t i = 0;
+    for (const cJSON *it = fs->child; it; it = it->next, i++) {
+        if (!cJSON_IsString(it) || !it->valuestring)
+            return kdr_proto_error_set(err, 400, "fields[%zu]: expected a field name", i);
+        const kdr_field_info *fi = NULL;
+        for (size_t k = 0; k < KDR_FIELD_COUNT && !fi; k++)
+            if (!strcmp(it->valuestring, kdr_field_table[k].name))
+                fi = &kdr_field_table[k];
+        if (!fi)
+            return kdr_proto_error_set(err, 400,
+                                       "fields[%zu]: unknown field \"%.40s\" (t, prim, u, v, "
+                                       "hit)",
+                                       i, it->valuestring);
+        if (fi->closest_only && query == KDR_ANY)
+            return kdr_proto_error_set(err, 400,
+                                       "fields[%zu]: \"%s\" needs \"query\": \"closest\"", i,
+                                       fi->name);
+        bits |= fi->bit;
+    }
+    *out = bits;
+    return 0;
 }

@@ -1,167 +1,108 @@
 /*
  * kdr_float.c — float32 to the shortest JSON number that reads back as the
- * same float (kdr_format_float). Responses carry millions of floats, so
- * this must be much faster than snprintf("%.9g") and its output shorter.
+ * same float (kdr_format_float). Answers carry millions of floats, so this
+ * runs at the speed of a shortest-round-trip printer: the digits come from
+ * Dragonbox (kdr_float_shortest.cpp, Debian libdragonbox-dev), the layout
+ * (sign, plain notation for decimal points in [-4, 12], else 1.5e-7) is
+ * done here. Until commit 9466b74 this file had its own binary-search
+ * printer, now tests/support/old_codecs.c, the reference the Dragonbox
+ * output is checked against (same digits wherever that printer found the
+ * shortest, never longer; tests/test_codecs.c).
  *
- * Method: a float and the two midpoints to its neighbours are exact in
- * double. For p = 1, 2, ... significant digits we take the two p-digit
- * decimals bracketing the float and accept one if it lies strictly inside
- * the rounding interval by a margin far larger than the error of the double
- * arithmetic used to check it (a few ulps of double), so every accepted
- * decimal rounds back exactly, even through strtod then (float). Cases too
- * close to call (rare) just take one more digit; p = 9 always fits because
- * 9 digits are ~6x finer than float spacing, and a libc %.9g fallback keeps
- * the function total.
+ * Shortest is not quite enough: most JSON readers (ours in kdr_json_fast.c,
+ * Python's json) parse a number into the nearest double and only then round
+ * to float32. A decimal that lies within half a double ulp of the midpoint
+ * between two floats reads back as the wrong float that way, though strtof
+ * reads it right. Each decimal is therefore checked through the double
+ * path too (one multiply or divide), and the rare one that fails is
+ * replaced by the shortest longer decimal that passes both ways.
  */
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "kdr_proto_internal.h"
 
-/* Acceptance margin, relative to the candidate: doubles carry 2^-53, the
- * check makes at most three roundings. */
-#define KDR_FLOAT_MARGIN 0x1p-44
 /* Plain notation for decimal-point positions in [MIN, MAX], else 1.5e-7. */
 #define KDR_FLOAT_PLAIN_MIN (-4)
 #define KDR_FLOAT_PLAIN_MAX 12
-#define KDR_POW10_BIAS 64
 
-static const double pow10_tab[2 * KDR_POW10_BIAS + 1] = {
-    1e-64, 1e-63, 1e-62, 1e-61, 1e-60, 1e-59, 1e-58, 1e-57,
-    1e-56, 1e-55, 1e-54, 1e-53, 1e-52, 1e-51, 1e-50, 1e-49,
-    1e-48, 1e-47, 1e-46, 1e-45, 1e-44, 1e-43, 1e-42, 1e-41,
-    1e-40, 1e-39, 1e-38, 1e-37, 1e-36, 1e-35, 1e-34, 1e-33,
-    1e-32, 1e-31, 1e-30, 1e-29, 1e-28, 1e-27, 1e-26, 1e-25,
-    1e-24, 1e-23, 1e-22, 1e-21, 1e-20, 1e-19, 1e-18, 1e-17,
-    1e-16, 1e-15, 1e-14, 1e-13, 1e-12, 1e-11, 1e-10, 1e-9,
-    1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1,
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7,
-    1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
-    1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22, 1e23,
-    1e24, 1e25, 1e26, 1e27, 1e28, 1e29, 1e30, 1e31,
-    1e32, 1e33, 1e34, 1e35, 1e36, 1e37, 1e38, 1e39,
-    1e40, 1e41, 1e42, 1e43, 1e44, 1e45, 1e46, 1e47,
-    1e48, 1e49, 1e50, 1e51, 1e52, 1e53, 1e54, 1e55,
-    1e56, 1e57, 1e58, 1e59, 1e60, 1e61, 1e62, 1e63,
-    1e64
-};
+/* kdr_float_shortest.cpp: x finite and > 0 -> digits (no trailing zeros,
+ * at most 9) and exponent, digits * 10^exp10 reading back as x. */
+void kdr_float_shortest(float x, uint32_t *digits, int *exp10);
 
-static double pow10i(int k) { return pow10_tab[k + KDR_POW10_BIAS]; }
+static const double exact_pow10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                       1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                       1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
 
-/* floor(log10(x)) for a positive finite float-valued double. */
-static int decimal_exponent(double x) {
-    uint64_t bits;
-    memcpy(&bits, &x, 8);
-    const int e2 = (int)(bits >> 52) - 1023; /* x in [2^e2, 2^(e2+1)) */
-    /* e2 * log10(2), floored (arithmetic shift-free: e2 may be negative) */
-    const double l = e2 * 0.30102999566398119521;
-    int est = (int)l;
-    if (est > l)
-        est--;
-    if (x >= pow10i(est + 1))
-        est++;
-    else if (x < pow10i(est))
-        est--;
-    return est;
+/* c * 10^q as the correctly rounded double: one rounding when 10^|q| is
+ * exact in double (Clinger), strtod otherwise. */
+static double decimal_to_double(uint32_t c, int q) {
+    if (q >= 0 && q <= 22)
+        return (double)c * exact_pow10[q];
+    if (q < 0 && q >= -22)
+        return (double)c / exact_pow10[-q];
+    char tmp[32];
+    snprintf(tmp, sizeof tmp, "%ue%d", (unsigned)c, q);
+    return strtod(tmp, NULL);
 }
 
-/* Is c * 10^q strictly inside (lo, hi), safely? lo_s, hi_s are the bounds
- * already scaled by 10^-q. */
-static int inside(double c, double lo_s, double hi_s) {
-    const double m = c * KDR_FLOAT_MARGIN;
-    return c > lo_s + m && c < hi_s - m;
-}
-
-/* Exact ties: a decimal on a rounding boundary reads back as x only when
- * x's mantissa is even (ties-to-even). Decidable exactly in double when
- * c * 10^q is an integer below 2^53, which is where short ties occur. */
-static int exact_tie_ok(double c, int q, double lo, double hi, int even) {
-    if (!even || q < 0 || q > 22)
-        return 0;
-    const double v = c * pow10i(q);
-    return v < 0x1p53 && v >= lo && v <= hi;
-}
-
-/* The rounding interval of x as exact doubles, with its decimal exponent. */
-typedef struct float_span {
-    double x, lo, hi;
-    int e10, even;
-} float_span;
-
-static void span_init(float x, float_span *sp) {
-    uint32_t bits;
-    memcpy(&bits, &x, 4);
-    const int be = (int)(bits >> 23);
-    /* 2^((be ? be : 1) - 150) built directly: ldexp is a libm call */
-    const uint64_t ulp_bits = (uint64_t)((be ? be : 1) - 150 + 1023) << 52;
-    double ulp;
-    memcpy(&ulp, &ulp_bits, 8);
-    sp->x = x;
-    /* below a power of two the spacing halves */
-    sp->lo = sp->x - ((bits & 0x7fffff) == 0 && be > 1 ? ulp / 4 : ulp / 2);
-    sp->hi = sp->x + ulp / 2;
-    sp->e10 = decimal_exponent(sp->x);
-    sp->even = (bits & 1) == 0;
-}
-
-/* A p-digit decimal c * 10^q that reads back as x, or 0. */
-static double try_digits(const float_span *sp, int p, int *q_out) {
-    const int q = sp->e10 - p + 1;
-    const double sc = pow10i(-q);
-    const double s = sp->x * sc, lo_s = sp->lo * sc, hi_s = sp->hi * sc;
-    /* s < 10^10 and > 0: truncation is floor, without a libm call */
-    const double c0 = (double)(int64_t)s, c1 = c0 + 1.0;
-    const int c1_first = c1 - s < s - c0;
-    const double a = c1_first ? c1 : c0, b = c1_first ? c0 : c1;
-    *q_out = q;
-    if (inside(a, lo_s, hi_s)) return a;
-    if (inside(b, lo_s, hi_s)) return b;
-    if (exact_tie_ok(a, q, sp->lo, sp->hi, sp->even)) return a;
-    if (exact_tie_ok(b, q, sp->lo, sp->hi, sp->even)) return b;
-    return 0.0;
-}
-
-/* Shortest c, q with c * 10^q reading back as x (x > 0, finite float).
- * Binary search over the digit count: fitting is monotonic in p (a fitting
- * p-digit decimal is also a (p+1)-digit one, and the bracketing (p+1)-digit
- * decimals lie between it and x); where the safety margin breaks that, the
- * search can only end one digit long, never wrong. */
-static int shortest(float x, uint64_t *c_out, int *q_out) {
-    float_span sp;
-    span_init(x, &sp);
-    int lo = 1, hi = 9, found = 0;
-    while (lo <= hi) {
-        const int mid = (lo + hi) / 2;
-        int q;
-        const double c = try_digits(&sp, mid, &q);
-        if (c > 0.0) {
-            *c_out = (uint64_t)c;
-            *q_out = q;
-            found = 1;
-            hi = mid - 1;
-        } else {
-            lo = mid + 1;
+/* The shortest decimal of at least ndig digits that reads back as x both
+ * through strtof and through a double (the fallback of kdr_format_float;
+ * 9 digits always do: they lie within 5e-9 relative of x, the float's
+ * rounding interval is at least 3e-8 wide on either side). */
+static void safe_digits(float x, int ndig, uint32_t *c, int *q) {
+    for (int p = ndig; p <= 9; p++) {
+        char tmp[32], *e;
+        snprintf(tmp, sizeof tmp, "%.*e", p - 1, (double)x);
+        if (strtof(tmp, NULL) != x || (float)strtod(tmp, NULL) != x)
+            continue;
+        uint32_t digits = 0;
+        for (const char *s = tmp; *s && *s != 'e'; s++)
+            if (*s >= '0' && *s <= '9')
+                digits = digits * 10 + (uint32_t)(*s - '0');
+        e = strchr(tmp, 'e');
+        *q = atoi(e + 1) - (p - 1);
+        while (digits % 10 == 0 && digits) {
+            digits /= 10;
+            ++*q;
         }
+        *c = digits;
+        return;
     }
-    return found;
 }
 
-/* Writes the digits of c (no leading zeros) to dst, returns their count. */
-static int put_digits(uint64_t c, char *dst) {
-    char tmp[24];
-    int n = 0;
-    do {
-        tmp[n++] = (char)('0' + c % 10);
-        c /= 10;
-    } while (c);
-    for (int i = 0; i < n; i++)
-        dst[i] = tmp[n - 1 - i];
+/* Two digits at a time: "00".."99". */
+static const char digit_pairs[201] =
+    "00010203040506070809101112131415161718192021222324252627282930313233343536373839"
+    "40414243444546474849505152535455565758596061626364656667686970717273747576777879"
+    "8081828384858687888990919293949596979899";
+
+/* The number of decimal digits of c (1..10). */
+static int digit_count(uint32_t c) {
+    int n = 1;
+    while (n < 10 && c >= (uint32_t)exact_pow10[n])
+        n++;
     return n;
 }
 
-static size_t put_exponent(char *p, int e) {
-    char *s = p;
+/* The n digits of c into dst[0..n), two at a time from the right. */
+static void put_digits(uint32_t c, int n, char *dst) {
+    char *p = dst + n;
+    while (c >= 100) {
+        const uint32_t r = c % 100;
+        c /= 100;
+        p -= 2;
+        memcpy(p, digit_pairs + 2 * r, 2);
+    }
+    if (c >= 10)
+        memcpy(p - 2, digit_pairs + 2 * c, 2);
+    else
+        p[-1] = (char)('0' + c);
+}
+
+static char *put_exponent(char *p, int e) {
     *p++ = 'e';
     if (e < 0) {
         *p++ = '-';
@@ -170,70 +111,65 @@ static size_t put_exponent(char *p, int e) {
     if (e >= 10)
         *p++ = (char)('0' + e / 10);
     *p++ = (char)('0' + e % 10);
-    return (size_t)(p - s);
+    return p;
 }
 
-/* Lays out c * 10^q in plain or scientific notation. */
-static size_t layout(uint64_t c, int q, char *p) {
-    char dig[24] = {0}; /* initialised: gcc -fsanitize cannot see put_digits fill it */
-    while (c % 10 == 0) {
-        c /= 10;
-        q++;
-    }
-    const int n = put_digits(c, dig);
+/* Lays out c * 10^q (c: n <= 9 digits, no trailing zeros) in plain or
+ * scientific notation at p, returns the end. Every copy has a fixed size
+ * (a few moves, never a memcpy call): dig holds the digits zero-padded,
+ * and the text fits in 16 bytes, so the over-long copies stay in the
+ * caller's 40-byte buffer. */
+static char *layout(uint32_t c, int q, char *p) {
+    char dig[16] = {0};
+    const int n = digit_count(c);
+    put_digits(c, n, dig);
     const int point = n + q; /* digits before the decimal point */
-    char *s = p;
     if (point > KDR_FLOAT_PLAIN_MAX || point < KDR_FLOAT_PLAIN_MIN) {
-        *p++ = dig[0];
-        if (n > 1) {
-            *p++ = '.';
-            memcpy(p, dig + 1, (size_t)n - 1);
-            p += n - 1;
-        }
-        return (size_t)(p - s) + put_exponent(p, point - 1);
+        p[0] = dig[0];
+        p[1] = '.';
+        memcpy(p + 2, dig + 1, 8);
+        p += n > 1 ? n + 1 : 1;
+        return put_exponent(p, point - 1);
     }
-    if (point <= 0) {
-        *p++ = '0';
-        *p++ = '.';
-        for (int i = 0; i < -point; i++)
-            *p++ = '0';
-        memcpy(p, dig, (size_t)n);
-        return (size_t)(p + n - s);
+    if (point <= 0) { /* 0.000ddd */
+        memcpy(p, "0.0000", 6);
+        p += 2 - point;
+        memcpy(p, dig, 16);
+        return p + n;
     }
-    if (q >= 0) {
-        memcpy(p, dig, (size_t)n);
-        p += n;
-        for (int i = 0; i < q; i++)
-            *p++ = '0';
-        return (size_t)(p - s);
+    memcpy(p, dig, 16);
+    if (q >= 0) { /* ddd000 */
+        memcpy(p + n, "000000000000", 12);
+        return p + n + q;
     }
-    memcpy(p, dig, (size_t)point);
-    p += point;
-    *p++ = '.';
-    memcpy(p, dig + point, (size_t)(n - point));
-    return (size_t)(p + (n - point) - s);
+    p[point] = '.'; /* ddd.ddd */
+    memcpy(p + point + 1, dig + point, 8);
+    return p + n + 1;
 }
 
+/* The text is made in a local buffer and copied out with one fixed-size
+ * copy of KDR_FLOAT_CHARS bytes (the most the contract lets us write). */
 size_t kdr_format_float(float f, char *dst) {
+    char buf[40];
+    char *p = buf;
     if (!isfinite(f)) {
         memcpy(dst, "null", 4);
         return 4;
     }
-    size_t neg = 0;
     if (signbit(f)) {
-        dst[neg++] = '-';
+        *p++ = '-';
         f = -f;
     }
     if (f == 0.0f) {
-        dst[neg] = '0';
-        return neg + 1;
+        *p++ = '0';
+    } else {
+        uint32_t c;
+        int q;
+        kdr_float_shortest(f, &c, &q);
+        if ((float)decimal_to_double(c, q) != f)
+            safe_digits(f, digit_count(c) + 1, &c, &q);
+        p = layout(c, q, p);
     }
-    uint64_t c;
-    int q;
-    if (shortest(f, &c, &q))
-        return neg + layout(c, q, dst + neg);
-    char tmp[32];
-    int n = snprintf(tmp, sizeof tmp, "%.9g", (double)f);
-    memcpy(dst + neg, tmp, (size_t)n);
-    return neg + (size_t)n;
+    memcpy(dst, buf, KDR_FLOAT_CHARS);
+    return (size_t)(p - buf);
 }

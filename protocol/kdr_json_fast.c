@@ -128,7 +128,7 @@ static int number_array(cursor *c, kdr_numarray *a) {
     cursor k = *c;
     size_t cap = 0;
     memset(a, 0, sizeof *a);
-    a->first_inf = a->first_big = SIZE_MAX;
+    a->first_inf = a->first_big = a->first_nan = SIZE_MAX;
     k.p++;
     skip_ws(&k);
     if (k.p < k.end && *k.p == ']') {
@@ -160,6 +160,27 @@ static int number_array(cursor *c, kdr_numarray *a) {
     return 0;
 }
 
+/* The first byte in [p, end) that ends or complicates a JSON string: '"',
+ * '\\' or a control character (end if none). Eight bytes per step: a byte
+ * b is flagged by (b - x) & ~b & 0x80 when it is below x (here 0x20) or,
+ * after an exclusive or with '"' or '\\', zero; borrows can only flag
+ * bytes after a true hit, so the lowest flag is exact. */
+static const char *string_stop(const char *p, const char *end) {
+    const uint64_t ones = 0x0101010101010101ull, high = 0x8080808080808080ull;
+    for (; end - p >= 8; p += 8) {
+        uint64_t w;
+        memcpy(&w, p, 8);
+        const uint64_t q = w ^ (ones * '"'), b = w ^ (ones * '\\');
+        const uint64_t hit =
+            (((q - ones) & ~q) | ((b - ones) & ~b) | ((w - ones * 0x20) & ~w)) & high;
+        if (hit)
+            return p + (__builtin_ctzll(hit) >> 3);
+    }
+    while (p < end && *p != '"' && *p != '\\' && (unsigned char)*p >= 0x20)
+        p++;
+    return p;
+}
+
 /* {"f32": "<text without escapes>"} at c->p ('{'): 1 and the text's span
  * (c->p after '}'), or 0 (c->p unchanged) for anything else, which cJSON
  * then reads. */
@@ -178,8 +199,7 @@ static int f32_object(cursor *c, kdr_numarray *a) {
     if (k.p >= k.end || *k.p++ != '"')
         return 0;
     const char *text = k.p;
-    while (k.p < k.end && *k.p != '"' && *k.p != '\\' && (unsigned char)*k.p >= 0x20)
-        k.p++;
+    k.p = string_stop(k.p, k.end);
     if (k.p >= k.end || *k.p != '"')
         return 0;
     memset(a, 0, sizeof *a);
@@ -225,7 +245,7 @@ static int has_key(const kdr_pf_doc *doc, const char *key) {
 
 /* Only the float-array fields of the contract take the fast path, so that
  * every other field is seen (and type-checked) through cJSON. */
-static int float_array_field(const char *key) {
+int kdr_pf_float_array_field(const char *key) {
     static const char *const names[] = {"origins", "directions", "tmin",
                                         "tmax",    "points",     "normals"};
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
@@ -239,7 +259,7 @@ static int member_value(cursor *c, const char *key, kdr_pf_doc *doc,
                         kdr_proto_error *err) {
     const int is_array = c->p < c->end && *c->p == '[';
     const int is_object = c->p < c->end && *c->p == '{';
-    if ((is_array || is_object) && float_array_field(key)) {
+    if ((is_array || is_object) && kdr_pf_float_array_field(key)) {
         kdr_numarray a;
         const int r = is_array ? number_array(c, &a) : f32_object(c, &a);
         if (r < 0)
@@ -314,6 +334,6 @@ int kdr_pf_fast_doc(const char *body, size_t len, kdr_pf_doc *doc, kdr_proto_err
 
 kdr_pf_field kdr_pf_get(const kdr_pf_doc *doc, const char *name) {
     kdr_pf_field f = {cJSON_GetObjectItemCaseSensitive(doc->root, name),
-                      find_fast(doc, name)};
+                      find_fast(doc, name), doc->media == KDR_MEDIA_CBOR};
     return f;
 }

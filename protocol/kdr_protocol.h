@@ -2,7 +2,7 @@
  * kdr_protocol.h — the HTTP/JSON contract (shared/API.md) as C: request
  * bodies in, typed queries for the core out; core results in, response
  * bodies out. No sockets, no scene loading: server/ moves the bytes,
- * protocol/ gives them meaning.
+ * protocol/ gives them meaning. Bodies are JSON or CBOR (kdr_media).
  *
  * Conventions:
  *  - Parsers take the body as bytes + length (not NUL-terminated). They
@@ -10,10 +10,12 @@
  *    also stored in err->status together with a detail naming the field and
  *    element at fault ("directions[17]: not a finite number"). On failure the
  *    request struct holds nothing to free (freeing it is still harmless).
- *  - err and out must not be NULL. Flat JSON number arrays are converted
- *    while the body is walked, so up to about twice the body size in floats
+ *  - err and out must not be NULL. Flat JSON number arrays (and CBOR arrays
+ *    of numbers) are converted while the body is walked, so up to about
+ *    twice (CBOR: four times, one-byte integers) the body size in floats
  *    may be allocated before a 413 is known (bodies are limited by the
- *    server); base64 arrays are decoded only after the limit check.
+ *    server); base64 arrays are decoded, and CBOR typed arrays copied, only
+ *    after the limit check.
  *  - Parsed requests own their arrays; the embedded core structs
  *    (kdr_ray_batch, kdr_shadow_query) point into them. Do not copy a request
  *    struct by value and free both copies; free exactly once.
@@ -96,21 +98,68 @@ int kdr_proto_encode_error(const kdr_proto_error *err, kdr_buf *out);
 
 /* ---- requests ---------------------------------------------------------------- */
 
+/* How an answer is written. A request's "encoding" member picks JSON or
+ * BASE64; the server sets CBOR when content negotiation chose
+ * application/cbor (kdr_proto_answer_media). */
 typedef enum kdr_encoding {
     KDR_ENCODING_JSON = 0,   /* arrays of numbers */
     KDR_ENCODING_BASE64 = 1, /* {"f32": ...} / {"i32": ...} */
+    KDR_ENCODING_CBOR = 2,   /* application/cbor, RFC 8746 typed arrays */
 } kdr_encoding;
+
+/* ---- media types (Content-Type, Accept) ------------------------------------ */
+
+typedef enum kdr_media {
+    KDR_MEDIA_OTHER = -1, /* not one we read: 415 */
+    KDR_MEDIA_JSON = 0,   /* application/json (charset, if given, UTF-8) */
+    KDR_MEDIA_CBOR = 1,   /* application/cbor (RFC 8949) */
+} kdr_media;
+
+/* The media type of a request body from its Content-Type (NULL: OTHER). */
+kdr_media kdr_proto_media_of(const char *content_type);
+/* The media type of a query's answer: the one the Accept header ranks
+ * highest (q-values; application/json, application/cbor and the wildcards
+ * application/STAR and STAR/STAR, STAR being '*'); on a tie, or with no Accept header, or when Accept names
+ * neither (an answer is then still sent, as RFC 9110 allows, rather than a
+ * 406), the request's own media type. Errors are always problem+json. */
+kdr_media kdr_proto_answer_media(const char *accept, kdr_media request);
+/* "application/json" / "application/cbor". */
+const char *kdr_proto_media_name(kdr_media m);
+/* The Content-Type of an answer written with enc. */
+const char *kdr_proto_encoding_media(kdr_encoding enc);
+
+/* ---- answer fields ("fields": [...]) ----------------------------------------- */
+
+/* What a bundle or frustum answer holds, as a bit set. Defaults: closest ->
+ * t, prim, u, v; any -> hit. "hit" (0/1) may also be asked of a closest
+ * query (1 where prim >= 0); t, prim, u, v only of closest queries. New
+ * per-ray attributes get the next bits and a row in kdr_fields.c. */
+#define KDR_FIELD_T (1u << 0)
+#define KDR_FIELD_PRIM (1u << 1)
+#define KDR_FIELD_U (1u << 2)
+#define KDR_FIELD_V (1u << 3)
+#define KDR_FIELD_HIT (1u << 4)
+#define KDR_FIELDS_CLOSEST (KDR_FIELD_T | KDR_FIELD_PRIM | KDR_FIELD_U | KDR_FIELD_V)
+#define KDR_FIELDS_ANY KDR_FIELD_HIT
 
 /* POST /v1/scenes/{name}/bundle */
 typedef struct kdr_bundle_request {
     kdr_ray_batch batch; /* ready for kdr_trace_batch */
     kdr_query query;
     kdr_encoding encoding;
+    unsigned fields;     /* KDR_FIELD_* bits, never 0 */
     float *owned[4];     /* org, dir, tmin, tmax storage (internal) */
 } kdr_bundle_request;
 
+/* The parsers read a JSON body (kdr_proto_parse_*) or a body of either
+ * media type (kdr_proto_parse_*_as). A CBOR request's float32 typed arrays
+ * at 4-byte aligned addresses are used in place: its arrays may point INTO
+ * the body, which must then outlive the request. */
 int kdr_proto_parse_bundle(const char *body, size_t len, size_t max_rays,
                            kdr_bundle_request *out, kdr_proto_error *err);
+int kdr_proto_parse_bundle_as(kdr_media media, const char *body, size_t len,
+                              size_t max_rays, kdr_bundle_request *out,
+                              kdr_proto_error *err);
 void kdr_bundle_request_free(kdr_bundle_request *req);
 
 /* POST /v1/scenes/{name}/cone-shadow */
@@ -124,6 +173,9 @@ typedef struct kdr_shadow_request {
 
 int kdr_proto_parse_shadow(const char *body, size_t len, size_t max_rays,
                            kdr_shadow_request *out, kdr_proto_error *err);
+int kdr_proto_parse_shadow_as(kdr_media media, const char *body, size_t len,
+                              size_t max_rays, kdr_shadow_request *out,
+                              kdr_proto_error *err);
 void kdr_shadow_request_free(kdr_shadow_request *req);
 
 /* POST /v1/scenes/{name}/frustum (owns nothing: no free function) */
@@ -132,11 +184,15 @@ typedef struct kdr_frustum_request {
     uint32_t tile;
     kdr_query query;
     kdr_encoding encoding;
+    unsigned fields;   /* KDR_FIELD_* bits, never 0 */
     size_t rays;       /* width * height */
 } kdr_frustum_request;
 
 int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
                             kdr_frustum_request *out, kdr_proto_error *err);
+int kdr_proto_parse_frustum_as(kdr_media media, const char *body, size_t len,
+                               size_t max_rays, kdr_frustum_request *out,
+                               kdr_proto_error *err);
 
 /* ---- responses ------------------------------------------------------------------ */
 
@@ -147,6 +203,12 @@ int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
  * other arrays hold. */
 int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
                           kdr_encoding enc, kdr_buf *out);
+/* The same with a choice of fields (a request's .fields): only those
+ * arrays, in the order t, prim, u, v, hit. hit is read from hits->hit for
+ * an any query and derived from prim (>= 0) for a closest one. fields must
+ * be valid for the query (the parsers ensure it): else KDR_EINVAL. */
+int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query,
+                                 unsigned fields, kdr_encoding enc, kdr_buf *out);
 
 /* {"count":N,"visibility":[N*nlights floats]} plus "stats" when stats is
  * not NULL. */

@@ -1,6 +1,9 @@
 /*
  * kdr_requests.c — the three query bodies of shared/API.md (bundle,
- * cone-shadow, frustum) turned into the core's query structs. Each parser
+ * cone-shadow, frustum), in JSON or CBOR, turned into the core's query
+ * structs; both media types go through the same field readers, so they
+ * share every rule and error message but the form of float arrays. Each
+ * parser
  * checks shapes and limits before it allocates or decodes a request array
  * (so a 413 costs no more than the parse), then reads the arrays, then
  * checks the geometry a core call would
@@ -80,17 +83,19 @@ static int bundle_shapes(const kdr_pf_doc *doc, size_t max, bundle_shape *sh,
 static int read_interval(kdr_pf_field f, const char *name, size_t count, float dflt,
                          float **storage, const float **ptr, size_t *stride,
                          kdr_proto_error *err) {
-    *storage = alloc_floats(count ? count : 1);
+    *stride = count ? 1 : 0;
+    if (count)
+        return kdr_pf_view(f, name, count, KDR_PF_SATURATE, storage, ptr, err);
+    *storage = alloc_floats(1);
     if (!*storage)
         return kdr_proto_error_set(err, 500, "%s: out of memory", name);
     *ptr = *storage;
-    *stride = count ? 1 : 0;
-    if (count)
-        return kdr_pf_read(f, name, *storage, count, KDR_PF_SATURATE, err);
     (*storage)[0] = dflt;
     if (!f.item)
         return 0;
     double d = f.item->valuedouble; /* any number; huge saturates to +-inf */
+    if (isnan(d)) /* only CBOR can carry one */
+        return kdr_proto_error_set(err, 400, "%s: not a number", name);
     (*storage)[0] = d >= KDR_FLOAT_OVERFLOW    ? INFINITY
                     : d <= -KDR_FLOAT_OVERFLOW ? -INFINITY
                                                : (float)d;
@@ -107,37 +112,41 @@ static int zero_direction(const float *dir, size_t n, kdr_proto_error *err) {
 static int bundle_arrays(const kdr_pf_doc *doc, const bundle_shape *sh,
                          kdr_bundle_request *out, kdr_proto_error *err) {
     kdr_ray_batch *b = &out->batch;
-    float *org = out->owned[0] = alloc_floats(sh->norg);
-    float *dir = out->owned[1] = alloc_floats(3 * sh->n);
-    if (!org || !dir)
-        return kdr_proto_error_set(err, 500, "body: out of memory");
-    if (kdr_pf_read(kdr_pf_get(doc, "origins"), "origins", org, sh->norg, 0, err) ||
-        kdr_pf_read(kdr_pf_get(doc, "directions"), "directions", dir, 3 * sh->n, 0, err))
+    if (kdr_pf_view(kdr_pf_get(doc, "origins"), "origins", sh->norg, 0, &out->owned[0],
+                    &b->org, err) ||
+        kdr_pf_view(kdr_pf_get(doc, "directions"), "directions", 3 * sh->n, 0,
+                    &out->owned[1], &b->dir, err))
         return err->status;
     b->n = sh->n;
-    b->org = org;
     b->org_stride = sh->norg == 3 ? 0 : 3;
-    b->dir = dir;
     if (read_interval(kdr_pf_get(doc, "tmin"), "tmin", sh->ntmin, 0.0f, &out->owned[2],
                       &b->tmin, &b->tmin_stride, err) ||
         read_interval(kdr_pf_get(doc, "tmax"), "tmax", sh->ntmax, INFINITY, &out->owned[3],
                       &b->tmax, &b->tmax_stride, err))
         return err->status;
-    return zero_direction(dir, sh->n, err);
+    return zero_direction(b->dir, sh->n, err);
 }
 
 int kdr_proto_parse_bundle(const char *body, size_t len, size_t max_rays,
                            kdr_bundle_request *out, kdr_proto_error *err) {
+    return kdr_proto_parse_bundle_as(KDR_MEDIA_JSON, body, len, max_rays, out, err);
+}
+
+int kdr_proto_parse_bundle_as(kdr_media media, const char *body, size_t len,
+                              size_t max_rays, kdr_bundle_request *out,
+                              kdr_proto_error *err) {
     kdr_pf_doc doc;
     bundle_shape sh = {0, 0, 0, 0};
     memset(out, 0, sizeof *out);
     err->status = 0;
     err->detail[0] = '\0';
-    if (kdr_pf_parse_body(body, len, &doc, err))
+    if (kdr_pf_parse_body(media, body, len, &doc, err))
         return err->status;
     int st = bundle_shapes(&doc, limit_of(max_rays), &sh, err);
     if (!st)
         st = kdr_pf_query(doc.root, &out->query, err);
+    if (!st)
+        st = kdr_pf_fields(doc.root, out->query, &out->fields, err);
     if (!st)
         st = kdr_pf_encoding(doc.root, &out->encoding, err);
     if (!st)
@@ -250,17 +259,11 @@ static int shadow_points(const kdr_pf_doc *doc, size_t max, kdr_shadow_request *
     if (np / 3 > max || rays > max)
         return kdr_pf_too_many(err, rays, max, "rays (points*lights*samples)");
     q->n = np / 3;
-    q->points = out->owned_points = alloc_floats(np);
-    if (!out->owned_points)
-        return kdr_proto_error_set(err, 500, "points: out of memory");
-    if (kdr_pf_read(pts, "points", out->owned_points, np, 0, err))
+    if (kdr_pf_view(pts, "points", np, 0, &out->owned_points, &q->points, err))
         return err->status;
     if (!kdr_pf_present(nrm))
         return 0;
-    q->normals = out->owned_normals = alloc_floats(nn);
-    if (!out->owned_normals)
-        return kdr_proto_error_set(err, 500, "normals: out of memory");
-    return kdr_pf_read(nrm, "normals", out->owned_normals, nn, 0, err);
+    return kdr_pf_view(nrm, "normals", nn, 0, &out->owned_normals, &q->normals, err);
 }
 
 /* The core rejects a point whose distance to a light's centre is not above
@@ -285,11 +288,17 @@ static int inside_light(const kdr_shadow_query *q, kdr_proto_error *err) {
 
 int kdr_proto_parse_shadow(const char *body, size_t len, size_t max_rays,
                            kdr_shadow_request *out, kdr_proto_error *err) {
+    return kdr_proto_parse_shadow_as(KDR_MEDIA_JSON, body, len, max_rays, out, err);
+}
+
+int kdr_proto_parse_shadow_as(kdr_media media, const char *body, size_t len,
+                              size_t max_rays, kdr_shadow_request *out,
+                              kdr_proto_error *err) {
     kdr_pf_doc doc;
     memset(out, 0, sizeof *out);
     err->status = 0;
     err->detail[0] = '\0';
-    if (kdr_pf_parse_body(body, len, &doc, err))
+    if (kdr_pf_parse_body(media, body, len, &doc, err))
         return err->status;
     int st = read_lights(doc.root, out, err);
     if (!st)
@@ -376,13 +385,19 @@ static int read_camera(const cJSON *root, kdr_camera *c, kdr_proto_error *err) {
 
 int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
                             kdr_frustum_request *out, kdr_proto_error *err) {
+    return kdr_proto_parse_frustum_as(KDR_MEDIA_JSON, body, len, max_rays, out, err);
+}
+
+int kdr_proto_parse_frustum_as(kdr_media media, const char *body, size_t len,
+                               size_t max_rays, kdr_frustum_request *out,
+                               kdr_proto_error *err) {
     kdr_pf_doc doc;
     const cJSON *it, *root;
     uint64_t tile = KDR_PROTO_DEFAULT_TILE;
     memset(out, 0, sizeof *out);
     err->status = 0;
     err->detail[0] = '\0';
-    if (kdr_pf_parse_body(body, len, &doc, err))
+    if (kdr_pf_parse_body(media, body, len, &doc, err))
         return err->status;
     root = doc.root;
     int st = read_camera(root, &out->camera, err);
@@ -391,6 +406,8 @@ int kdr_proto_parse_frustum(const char *body, size_t len, size_t max_rays,
                         err);
     if (!st)
         st = kdr_pf_query(root, &out->query, err);
+    if (!st)
+        st = kdr_pf_fields(root, out->query, &out->fields, err);
     if (!st)
         st = kdr_pf_encoding(root, &out->encoding, err);
     kdr_pf_doc_free(&doc);

@@ -1,10 +1,12 @@
 /*
  * kdr_response.c — response bodies: hits (bundle, frustum), visibilities
  * (cone-shadow), scene descriptions and health. Large arrays never go
- * through a cJSON tree: they are written as text straight into the output
- * buffer, a chunk at a time (kdr_format_float for floats), or as base64 of
- * their little-endian bytes, encoded from a small staging block so misses
- * can be normalised on the way without a second full-size copy.
+ * through a tree: they are written straight into the output buffer a chunk
+ * at a time, as JSON text (kdr_format_float for floats), as base64 of their
+ * little-endian bytes, or as CBOR typed arrays (raw little-endian bytes
+ * after a tag), each from a small staging block so misses are normalised on
+ * the way without a second full-size copy. An answer holds the fields the
+ * request chose (kdr_field_table order), "count" first.
  */
 #include <math.h>
 #include <stdio.h>
@@ -17,15 +19,19 @@
 #define KDR_CHUNK 3072
 #define KDR_INT_CHARS 12 /* "-2147483648" + ',' */
 
-/* Where an array's values come from: floats or int32 or bytes, with misses
- * (prim < 0) replaced by miss_f / -1 when prim is given. */
+/* Where an array's values come from: floats, int32, bytes (0/1), or 0/1
+ * derived from prim >= 0 (hit_of); with misses (prim < 0) replaced by
+ * miss_f in float arrays when prim is given, and negative int32 by -1. */
 typedef struct array_src {
     const float *f;
     const int32_t *i;
     const uint8_t *u8;
+    const int32_t *hit_of;
     const int32_t *prim;
     float miss_f;
 } array_src;
+
+static int src_is_bytes(const array_src *s) { return s->u8 || s->hit_of; }
 
 static float src_float(const array_src *s, size_t k) {
     return s->prim && s->prim[k] < 0 ? s->miss_f : s->f[k];
@@ -34,6 +40,8 @@ static float src_float(const array_src *s, size_t k) {
 static int32_t src_int(const array_src *s, size_t k) {
     if (s->u8)
         return s->u8[k] ? 1 : 0;
+    if (s->hit_of)
+        return s->hit_of[k] >= 0;
     return s->i[k] < 0 ? -1 : s->i[k];
 }
 
@@ -71,80 +79,161 @@ static int json_array(kdr_buf *b, const array_src *s, size_t n) {
     return kdr_buf_append(b, "]", 1);
 }
 
+/* Values [k0, k0 + m) as 4-byte little-endian values in stage. */
+static void stage_words(const array_src *s, size_t k0, size_t m, void *stage) {
+    if (s->f) {
+        float *f = stage;
+        if (!s->prim) {
+            memcpy(f, s->f + k0, m * sizeof *f);
+            return;
+        }
+        for (size_t k = 0; k < m; k++)
+            f[k] = src_float(s, k0 + k);
+    } else {
+        int32_t *i = stage;
+        for (size_t k = 0; k < m; k++)
+            i[k] = src_int(s, k0 + k);
+    }
+}
+
 static int base64_array(kdr_buf *b, const array_src *s, size_t n) {
-    union {
-        float f[KDR_CHUNK];
-        int32_t i[KDR_CHUNK];
-    } stage;
+    _Alignas(16) unsigned char stage[4 * KDR_CHUNK];
     if (kdr_buf_append(b, s->f ? "{\"f32\":\"" : "{\"i32\":\"", 8) ||
         kdr_buf_reserve(b, kdr_base64_encoded_len(4 * n) + 2))
         return KDR_ENOMEM;
     for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
         const size_t m = n - k0 < KDR_CHUNK ? n - k0 : KDR_CHUNK;
-        for (size_t k = 0; k < m; k++) {
-            if (s->f)
-                stage.f[k] = src_float(s, k0 + k);
-            else
-                stage.i[k] = src_int(s, k0 + k);
-        }
-        b->len += kdr_base64_encode(&stage, 4 * m, b->data + b->len);
+        stage_words(s, k0, m, stage);
+        b->len += kdr_base64_encode(stage, 4 * m, b->data + b->len);
     }
     return KDR_BUF_LIT(b, "\"}");
 }
 
-/* ,"name":<array> */
+/* An RFC 8746 typed array: uint8 (tag 64) for 0/1 arrays, int32 (78) or
+ * float32 (85) little-endian otherwise. */
+static int cbor_array(kdr_buf *b, const array_src *s, size_t n) {
+    if (src_is_bytes(s)) {
+        if (kdr_cbor_typed_head(b, KDR_CBOR_TAG_U8, n))
+            return KDR_ENOMEM;
+        unsigned char *p = (unsigned char *)b->data + b->len;
+        for (size_t k = 0; k < n; k++)
+            p[k] = (unsigned char)src_int(s, k);
+        b->len += n;
+        return 0;
+    }
+    if (kdr_cbor_typed_head(b, s->f ? KDR_CBOR_TAG_F32LE : KDR_CBOR_TAG_I32LE, 4 * n))
+        return KDR_ENOMEM;
+    _Alignas(16) unsigned char stage[4 * KDR_CHUNK];
+    for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
+        const size_t m = n - k0 < KDR_CHUNK ? n - k0 : KDR_CHUNK;
+        stage_words(s, k0, m, stage);
+        kdr_buf_put(b, stage, 4 * m);
+    }
+    return 0;
+}
+
+/* One "name": array member (JSON: preceded by a comma). */
 static int named_array(kdr_buf *b, const char *name, const array_src *s, size_t n,
                        kdr_encoding enc) {
+    if (enc == KDR_ENCODING_CBOR)
+        return kdr_cbor_text(b, name) || cbor_array(b, s, n);
     if (kdr_buf_append(b, ",", 1) || kdr_buf_json_string(b, name) ||
         kdr_buf_append(b, ":", 1))
         return KDR_ENOMEM;
     return enc == KDR_ENCODING_BASE64 ? base64_array(b, s, n) : json_array(b, s, n);
 }
 
-static int count_head(kdr_buf *b, size_t n) {
+/* The answer's head: "count" and room for members more entries. */
+static int count_head(kdr_buf *b, size_t n, size_t members, kdr_encoding enc) {
+    if (enc == KDR_ENCODING_CBOR)
+        return kdr_cbor_map(b, 1 + members) || kdr_cbor_text(b, "count") ||
+               kdr_cbor_uint(b, n);
     char head[48];
     int len = snprintf(head, sizeof head, "{\"count\":%zu", n);
     return kdr_buf_append(b, head, (size_t)len);
 }
 
-int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
-                          kdr_encoding enc, kdr_buf *out) {
-    if (count_head(out, n))
+static int close_answer(kdr_buf *b, kdr_encoding enc) {
+    return enc == KDR_ENCODING_CBOR ? 0 : kdr_buf_append(b, "}", 1);
+}
+
+/* The source of answer field bit for a query. */
+static array_src field_src(const kdr_hits *h, kdr_query query, unsigned bit) {
+    array_src s = {0};
+    switch (bit) {
+    case KDR_FIELD_T: s = (array_src){.f = h->t, .prim = h->prim, .miss_f = -1.0f}; break;
+    case KDR_FIELD_PRIM: s = (array_src){.i = h->prim}; break;
+    case KDR_FIELD_U: s = (array_src){.f = h->u, .prim = h->prim, .miss_f = 0.0f}; break;
+    case KDR_FIELD_V: s = (array_src){.f = h->v, .prim = h->prim, .miss_f = 0.0f}; break;
+    default: /* KDR_FIELD_HIT */
+        if (query == KDR_ANY)
+            s.u8 = h->hit;
+        else
+            s.hit_of = h->prim;
+        break;
+    }
+    return s;
+}
+
+int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query,
+                                 unsigned fields, kdr_encoding enc, kdr_buf *out) {
+    size_t members = 0;
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
+        const kdr_field_info *fi = &kdr_field_table[k];
+        if (!(fields & fi->bit))
+            continue;
+        if (fi->closest_only && query == KDR_ANY)
+            return KDR_EINVAL;
+        members++;
+    }
+    if (members == 0 || (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY)))
+        return KDR_EINVAL;
+    if (count_head(out, n, members, enc))
         return KDR_ENOMEM;
-    if (query == KDR_ANY) {
-        const array_src hit = {.u8 = hits->hit};
-        if (named_array(out, "hit", &hit, n, enc))
-            return KDR_ENOMEM;
-    } else {
-        const array_src t = {.f = hits->t, .prim = hits->prim, .miss_f = -1.0f};
-        const array_src prim = {.i = hits->prim};
-        const array_src u = {.f = hits->u, .prim = hits->prim, .miss_f = 0.0f};
-        const array_src v = {.f = hits->v, .prim = hits->prim, .miss_f = 0.0f};
-        if (named_array(out, "t", &t, n, enc) || named_array(out, "prim", &prim, n, enc) ||
-            named_array(out, "u", &u, n, enc) || named_array(out, "v", &v, n, enc))
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
+        const kdr_field_info *fi = &kdr_field_table[k];
+        if (!(fields & fi->bit))
+            continue;
+        const array_src s = field_src(hits, query, fi->bit);
+        if (named_array(out, fi->name, &s, n, enc))
             return KDR_ENOMEM;
     }
-    return kdr_buf_append(out, "}", 1);
+    return close_answer(out, enc);
+}
+
+int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
+                          kdr_encoding enc, kdr_buf *out) {
+    return kdr_proto_encode_hits_fields(
+        hits, n, query, query == KDR_ANY ? KDR_FIELDS_ANY : KDR_FIELDS_CLOSEST, enc, out);
+}
+
+static int shadow_stats(kdr_buf *out, const kdr_shadow_stats *stats, kdr_encoding enc) {
+    if (enc == KDR_ENCODING_CBOR)
+        return kdr_cbor_text(out, "stats") || kdr_cbor_map(out, 3) ||
+               kdr_cbor_text(out, "cones_decided") ||
+               kdr_cbor_uint(out, stats->cones_decided) ||
+               kdr_cbor_text(out, "rays_traced") || kdr_cbor_uint(out, stats->rays_traced) ||
+               kdr_cbor_text(out, "nodes_visited") ||
+               kdr_cbor_uint(out, stats->nodes_visited);
+    char tail[160];
+    int len = snprintf(tail, sizeof tail,
+                       ",\"stats\":{\"cones_decided\":%llu,\"rays_traced\":%llu,"
+                       "\"nodes_visited\":%llu}",
+                       (unsigned long long)stats->cones_decided,
+                       (unsigned long long)stats->rays_traced,
+                       (unsigned long long)stats->nodes_visited);
+    return kdr_buf_append(out, tail, (size_t)len);
 }
 
 int kdr_proto_encode_shadow(const float *visibility, size_t n, size_t nlights,
                             const kdr_shadow_stats *stats, kdr_encoding enc,
                             kdr_buf *out) {
     const array_src vis = {.f = visibility};
-    if (count_head(out, n) || named_array(out, "visibility", &vis, n * nlights, enc))
+    if (count_head(out, n, stats ? 2 : 1, enc) ||
+        named_array(out, "visibility", &vis, n * nlights, enc) ||
+        (stats && shadow_stats(out, stats, enc)))
         return KDR_ENOMEM;
-    if (stats) {
-        char tail[160];
-        int len = snprintf(tail, sizeof tail,
-                           ",\"stats\":{\"cones_decided\":%llu,\"rays_traced\":%llu,"
-                           "\"nodes_visited\":%llu}",
-                           (unsigned long long)stats->cones_decided,
-                           (unsigned long long)stats->rays_traced,
-                           (unsigned long long)stats->nodes_visited);
-        if (kdr_buf_append(out, tail, (size_t)len))
-            return KDR_ENOMEM;
-    }
-    return kdr_buf_append(out, "}", 1);
+    return close_answer(out, enc);
 }
 
 /* ---- scenes and health ------------------------------------------------------- */

@@ -168,10 +168,12 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     (void)version;
     kdr_http *h = cls;
     kdr_server *srv = h->srv;
-    kdr_request req = {.method = method,
-                       .path = url,
-                       .content_type = MHD_lookup_connection_value(
-                           c, MHD_HEADER_KIND, MHD_HTTP_HEADER_CONTENT_TYPE)};
+    kdr_request req = {
+        .method = method,
+        .path = url,
+        .content_type =
+            MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_CONTENT_TYPE),
+        .accept = MHD_lookup_connection_value(c, MHD_HEADER_KIND, MHD_HTTP_HEADER_ACCEPT)};
     req_state *rs = *req_cls;
     if (!rs) return on_first(h, c, &req, req_cls);
     if (rs->queued) { /* answered early; MHD may still hand us body bytes */

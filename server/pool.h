@@ -12,6 +12,16 @@
 
 #include <stddef.h>
 
+/* Work per chunk, shared by kdrayd (query.c) and kdray-trace: large enough
+ * to amortise the pool hand-off, small enough that a 2-core machine balances
+ * a 64K-ray request. Frustum chunks are a multiple of 4 tiles so that the
+ * 4-frusta grouping is never cut. Both programs must split alike: a
+ * cone-shadow call carries state from point to point (each light's last
+ * blocker and walk back-off), so its kdr_shadow_stats depend on where the
+ * point chunks start (the visibilities never do), and the integration test
+ * compares the daemon's stats with kdray-trace's. */
+enum { KDR_CHUNK_RAYS = 4096, KDR_CHUNK_TILES = 16, KDR_CHUNK_POINTS = 64 };
+
 typedef struct kdr_pool kdr_pool;
 typedef void (*kdr_pool_fn)(void *ctx, size_t chunk);
 

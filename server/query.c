@@ -1,8 +1,10 @@
 /*
- * query.c — the three query endpoints: protocol/ parses the body, the job
- * pool splits the work into chunks over disjoint ranges of the core's
- * range-taking calls, protocol/ encodes the answer. Chunks write disjoint
- * slices of one output, so the answer is the single-threaded answer.
+ * query.c — the three query endpoints: protocol/ parses the body (JSON or
+ * CBOR, by Content-Type), the job pool splits the work into chunks over
+ * disjoint ranges of the core's range-taking calls, protocol/ encodes the
+ * answer (the fields the request chose, in the media type Accept chose).
+ * Chunks write disjoint slices of one output, so the answer is the
+ * single-threaded answer.
  */
 #include <stdatomic.h>
 #include <stdio.h>
@@ -13,14 +15,20 @@
 #include "log.h"
 #include "server.h"
 
-/* Work per chunk: large enough to amortise the pool hand-off, small enough
- * that a 2-core machine balances a 64K-ray request well. Frustum chunks are
- * a multiple of 4 tiles so that the 4-frusta grouping is never cut. */
-static const size_t CHUNK_RAYS = 4096;
-static const size_t CHUNK_TILES = 16;
-static const size_t CHUNK_POINTS = 64;
+/* Chunk sizes: KDR_CHUNK_* in pool.h (kdray-trace splits alike). */
 
-static const char *const CT_JSON = "application/json";
+/* The body's media type (the precheck refused any other) and the answer's
+ * encoding: CBOR when Accept (or, without one, the request) asks for it,
+ * else what the body's "encoding" member said. */
+static kdr_media body_media(const kdr_request *req) {
+    return kdr_proto_media_of(req->content_type);
+}
+
+static kdr_encoding answer_encoding(const kdr_request *req, kdr_encoding asked) {
+    return kdr_proto_answer_media(req->accept, body_media(req)) == KDR_MEDIA_CBOR
+               ? KDR_ENCODING_CBOR
+               : asked;
+}
 
 /* What every chunk needs, plus the first core error any chunk saw. */
 typedef struct query_job {
@@ -104,9 +112,10 @@ static void hits_free(kdr_hits *h) {
     free(h->hit);
 }
 
-/* Runs j over all chunks and encodes hits for n rays. */
+/* Runs j over all chunks and encodes the chosen fields of hits for n rays. */
 static void run_hits(kdr_server *srv, query_job *j, kdr_pool_fn fn, size_t n,
-                     kdr_encoding enc, const char *what, kdr_response *out) {
+                     unsigned fields, kdr_encoding enc, const char *what,
+                     kdr_response *out) {
     if (hits_alloc(&j->hits, n, j->query) != 0) {
         hits_free(&j->hits);
         kdr_route_problem(out, 500, "out of memory for the results");
@@ -119,8 +128,9 @@ static void run_hits(kdr_server *srv, query_job *j, kdr_pool_fn fn, size_t n,
     } else {
         kdr_buf b;
         kdr_buf_init(&b);
-        kdr_route_answer_buf(out, kdr_proto_encode_hits(&j->hits, n, j->query, enc, &b), &b,
-                             CT_JSON);
+        kdr_route_answer_buf(
+            out, kdr_proto_encode_hits_fields(&j->hits, n, j->query, fields, enc, &b), &b,
+            kdr_proto_encoding_media(enc));
     }
     hits_free(&j->hits);
 }
@@ -129,18 +139,20 @@ static void answer_bundle(kdr_server *srv, const kdr_served_scene *s,
                           const kdr_request *req, kdr_response *out) {
     kdr_bundle_request br;
     kdr_proto_error err = {0};
-    if (kdr_proto_parse_bundle(req->body, req->len, srv->max_rays, &br, &err) != 0) {
+    if (kdr_proto_parse_bundle_as(body_media(req), req->body, req->len, srv->max_rays, &br,
+                                  &err) != 0) {
         kdr_bundle_request_free(&br);
         problem_from(out, &err);
         return;
     }
     query_job j = {.scene = s->scene,
                    .total = br.batch.n,
-                   .per_chunk = CHUNK_RAYS,
+                   .per_chunk = KDR_CHUNK_RAYS,
                    .query = br.query,
                    .batch = &br.batch};
     atomic_init(&j.rc, KDR_OK);
-    run_hits(srv, &j, bundle_chunk, br.batch.n, br.encoding, "bundle", out);
+    run_hits(srv, &j, bundle_chunk, br.batch.n, br.fields,
+             answer_encoding(req, br.encoding), "bundle", out);
     if (out->status == 200) kdr_metrics_rays(KDR_RAYS_BUNDLE, br.batch.n);
     kdr_bundle_request_free(&br);
 }
@@ -149,17 +161,19 @@ static void answer_frustum(kdr_server *srv, const kdr_served_scene *s,
                            const kdr_request *req, kdr_response *out) {
     kdr_frustum_request fr;
     kdr_proto_error err = {0};
-    if (kdr_proto_parse_frustum(req->body, req->len, srv->max_rays, &fr, &err) != 0) {
+    if (kdr_proto_parse_frustum_as(body_media(req), req->body, req->len, srv->max_rays, &fr,
+                                   &err) != 0) {
         problem_from(out, &err);
         return;
     }
     query_job j = {.scene = s->scene,
                    .total = kdr_frustum_tile_count(&fr.camera, fr.tile),
-                   .per_chunk = CHUNK_TILES,
+                   .per_chunk = KDR_CHUNK_TILES,
                    .query = fr.query,
                    .frust = &fr};
     atomic_init(&j.rc, KDR_OK);
-    run_hits(srv, &j, frustum_chunk, fr.rays, fr.encoding, "frustum", out);
+    run_hits(srv, &j, frustum_chunk, fr.rays, fr.fields, answer_encoding(req, fr.encoding),
+             "frustum", out);
     if (out->status == 200) kdr_metrics_rays(KDR_RAYS_FRUSTUM, fr.rays);
 }
 
@@ -192,13 +206,13 @@ static void shadow_stats_sum(const kdr_shadow_stats *per, size_t n,
 }
 
 static void run_shadow(kdr_server *srv, const kdr_served_scene *s,
-                       const kdr_shadow_request *sr, kdr_response *out) {
+                       const kdr_shadow_request *sr, kdr_encoding enc, kdr_response *out) {
     const kdr_shadow_query *q = &sr->query;
-    size_t nchunks = chunk_count(q->n, CHUNK_POINTS);
+    size_t nchunks = chunk_count(q->n, KDR_CHUNK_POINTS);
     size_t nvis = q->n * q->nlights;
     query_job j = {.scene = s->scene,
                    .total = q->n,
-                   .per_chunk = CHUNK_POINTS,
+                   .per_chunk = KDR_CHUNK_POINTS,
                    .shadow = q,
                    .visibility = malloc((nvis ? nvis : 1) * sizeof(float)),
                    .shadow_stats =
@@ -220,9 +234,8 @@ static void run_shadow(kdr_server *srv, const kdr_served_scene *s,
             kdr_buf_init(&b);
             kdr_route_answer_buf(out,
                        kdr_proto_encode_shadow(j.visibility, q->n, q->nlights,
-                                               sr->want_stats ? &sum : NULL, sr->encoding,
-                                               &b),
-                       &b, CT_JSON);
+                                               sr->want_stats ? &sum : NULL, enc, &b),
+                       &b, kdr_proto_encoding_media(enc));
             kdr_metrics_rays(KDR_RAYS_SHADOW, sum.rays_traced);
         }
     }
@@ -234,12 +247,13 @@ static void answer_shadow(kdr_server *srv, const kdr_served_scene *s,
                           const kdr_request *req, kdr_response *out) {
     kdr_shadow_request sr;
     kdr_proto_error err = {0};
-    if (kdr_proto_parse_shadow(req->body, req->len, srv->max_rays, &sr, &err) != 0) {
+    if (kdr_proto_parse_shadow_as(body_media(req), req->body, req->len, srv->max_rays, &sr,
+                                  &err) != 0) {
         kdr_shadow_request_free(&sr);
         problem_from(out, &err);
         return;
     }
-    run_shadow(srv, s, &sr, out);
+    run_shadow(srv, s, &sr, answer_encoding(req, sr.encoding), out);
     kdr_shadow_request_free(&sr);
 }
 

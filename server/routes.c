@@ -8,7 +8,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
 
 #include "kdr_protocol.h"
 #include "server.h"
@@ -88,28 +87,6 @@ static void problemf(kdr_response *out, unsigned status, const char *fmt, const 
     kdr_route_problem(out, status, detail);
 }
 
-/* application/json, optionally with parameters; a charset must be UTF-8. */
-static int is_json_type(const char *ct) {
-    if (!ct) return 0;
-    ct += strspn(ct, " \t");
-    if (strncasecmp(ct, CT_JSON, strlen(CT_JSON))) return 0;
-    ct += strlen(CT_JSON);
-    for (;;) {
-        ct += strspn(ct, " \t");
-        if (*ct == '\0') return 1;
-        if (*ct++ != ';') return 0;
-        ct += strspn(ct, " \t");
-        if (!strncasecmp(ct, "charset=", 8)) {
-            const char *v = ct + 8 + (ct[8] == '"');
-            size_t n = strcspn(v, "\"; \t");
-            if (!((n == 5 && !strncasecmp(v, "utf-8", 5)) ||
-                  (n == 4 && !strncasecmp(v, "utf8", 4))))
-                return 0;
-        }
-        ct += strcspn(ct, ";");
-    }
-}
-
 static int not_ready(kdr_server *srv, kdr_response *out) {
     if (atomic_load(&srv->stopping)) {
         kdr_route_problem(out, 503, "shutting down");
@@ -147,9 +124,10 @@ int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long conten
         problemf(out, 404, "scene %s: no such scene", r.scene, r.scene_len);
         return 1;
     }
-    if (is_post_endpoint(r.ep) && !is_json_type(req->content_type)) {
+    if (is_post_endpoint(r.ep) && kdr_proto_media_of(req->content_type) == KDR_MEDIA_OTHER) {
         const char *ct = req->content_type ? req->content_type : "(none)";
-        problemf(out, 415, "Content-Type %s: expected application/json", ct, strlen(ct));
+        problemf(out, 415, "Content-Type %s: expected application/json or application/cbor",
+                 ct, strlen(ct));
         return 1;
     }
     if (content_length >= 0 && (unsigned long long)content_length > srv->max_body) {

@@ -28,6 +28,7 @@ typedef struct kdr_request {
     const char *method;
     const char *path;
     const char *content_type; /* NULL if absent */
+    const char *accept;       /* NULL if absent */
     const char *body;
     size_t len;
 } kdr_request;

@@ -24,8 +24,6 @@
 #include "log.h"
 #include "pool.h"
 
-enum { CHUNK = 4096, CHUNK_TILES = 16, CHUNK_POINTS = 64 };
-
 typedef struct cli {
     const char *scene_path, *kind;
     int fast;
@@ -160,7 +158,7 @@ static int do_bundle(kdr_pool *pool, job *j, const char *body, size_t len, const
     j->batch = &br.batch;
     j->query = br.query;
     j->total = br.batch.n;
-    j->per = c->fast ? CHUNK : br.batch.n;
+    j->per = c->fast ? KDR_CHUNK_RAYS : br.batch.n;
     int rc = do_hits(pool, j, bundle_chunk, br.batch.n, br.encoding, c->repeat, out);
     kdr_bundle_request_free(&br);
     return rc;
@@ -173,7 +171,7 @@ static int do_frustum(kdr_pool *pool, job *j, const char *body, size_t len, cons
     j->fr = &fr;
     j->query = fr.query;
     j->total = kdr_frustum_tile_count(&fr.camera, fr.tile);
-    j->per = c->fast ? CHUNK_TILES : j->total;
+    j->per = c->fast ? KDR_CHUNK_TILES : j->total;
     return do_hits(pool, j, frustum_chunk, fr.rays, fr.encoding, c->repeat, out);
 }
 
@@ -186,7 +184,7 @@ static int do_shadow(kdr_pool *pool, job *j, const char *body, size_t len, const
     }
     j->sq = &sr.query;
     j->total = sr.query.n;
-    j->per = c->fast ? CHUNK_POINTS : (sr.query.n ? sr.query.n : 1);
+    j->per = c->fast ? KDR_CHUNK_POINTS : (sr.query.n ? sr.query.n : 1);
     size_t nchunks = (j->total + j->per - 1) / j->per;
     j->vis = malloc((sr.query.n * sr.query.nlights + 1) * sizeof(float));
     j->stats = calloc(nchunks + 1, sizeof(kdr_shadow_stats));

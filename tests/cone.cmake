@@ -3,4 +3,4 @@
 # on the same rays, and cones placed on the tree's own split planes.
 add_executable(test_cone ${CMAKE_CURRENT_SOURCE_DIR}/test_cone.c)
 target_link_libraries(test_cone PRIVATE kdray_testsupport kdray_core m)
-add_test(NAME cone COMMAND test_cone)
+add_test(NAME cone COMMAND test_cone --caps cone)

@@ -5,15 +5,14 @@ target_link_libraries(test_core PRIVATE kdray_core)
 add_test(NAME test_core COMMAND test_core)
 
 # Real scenes against brute force (121K triangles per ray: slow under ASan).
-set(KDRAY_CORE_ENGINE /usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb)
-if(TARGET kdray_scenes AND EXISTS ${KDRAY_CORE_ENGINE})
-  add_executable(test_core_scene ${CMAKE_CURRENT_SOURCE_DIR}/test_core_scene.c)
-  target_link_libraries(test_core_scene PRIVATE kdray_core kdray_scenes)
-  add_test(NAME test_core_scene
-           COMMAND test_core_scene 1500 ${CMAKE_SOURCE_DIR}/scenes/default.glb
-                   ${KDRAY_CORE_ENGINE})
-  set_tests_properties(test_core_scene PROPERTIES LABELS slow)
-endif()
+# The model's presence is checked by tests/cmake/required_tools.cmake.
+set(KDRAY_CORE_ENGINE ${KDRAY_ASSIMP_MODELS}/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb)
+add_executable(test_core_scene ${CMAKE_CURRENT_SOURCE_DIR}/test_core_scene.c)
+target_link_libraries(test_core_scene PRIVATE kdray_core kdray_scenes)
+add_test(NAME test_core_scene
+         COMMAND test_core_scene 1500 ${CMAKE_SOURCE_DIR}/scenes/default.glb
+                 ${KDRAY_CORE_ENGINE})
+set_tests_properties(test_core_scene PROPERTIES LABELS slow)
 
 # test_core_perf: a measurement tool, not a test (never add_test it): kd
 # build time and single-ray rays/s against Embree in the same run.

@@ -1,55 +1,52 @@
 # glTF loading and the real-scene ladder (owner: scenes).
 # scenes_fetch prepares ${KDRAY_SCENE_DIR} from Debian packages and is the
 # fixture for every ladder test (fixture names: scenes and scenes_fetch).
+# Its tools (python3, assimp) and models are checked by
+# tests/cmake/required_tools.cmake; a missing model file fails the test.
 add_test(NAME scenes_fetch COMMAND ${CMAKE_SOURCE_DIR}/scenes/fetch ${KDRAY_SCENE_DIR})
-set_tests_properties(scenes_fetch PROPERTIES FIXTURES_SETUP "scenes;scenes_fetch")
+set_tests_properties(scenes_fetch PROPERTIES FIXTURES_SETUP "scenes;scenes_fetch"
+                     ENVIRONMENT "KDRAY_ASSIMP_MODELS=${KDRAY_ASSIMP_MODELS}")
 
-if(TARGET kdray_scenes)
-  # Synthetic files written by the test: every feature and error path.
-  add_executable(test_scenes ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes.c)
-  target_link_libraries(test_scenes PRIVATE kdray_scenes m)
-  add_test(NAME scenes_loader COMMAND test_scenes)
+# Synthetic files written by the test: every feature and error path.
+add_executable(test_scenes ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes.c)
+target_link_libraries(test_scenes PRIVATE kdray_scenes m)
+add_test(NAME scenes_loader COMMAND test_scenes)
 
-  # Real files: assimp-testmodels, the default scene, the fetched ladder.
-  add_executable(test_scenes_real ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes_real.c)
-  target_link_libraries(test_scenes_real PRIVATE kdray_scenes m)
-  add_test(NAME scenes_models COMMAND test_scenes_real models /usr/share/assimp/models)
-  add_test(NAME scenes_default COMMAND test_scenes_real default
-           ${CMAKE_SOURCE_DIR}/scenes/default.glb)
-  add_test(NAME scenes_ladder COMMAND test_scenes_real ladder ${KDRAY_SCENE_DIR}/ladder.txt)
-  set_tests_properties(scenes_models scenes_ladder PROPERTIES SKIP_RETURN_CODE 77)
-  set_tests_properties(scenes_ladder PROPERTIES FIXTURES_REQUIRED scenes)
+# Real files: assimp-testmodels, the default scene, the fetched ladder.
+add_executable(test_scenes_real ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes_real.c)
+target_link_libraries(test_scenes_real PRIVATE kdray_scenes m)
+add_test(NAME scenes_models COMMAND test_scenes_real models ${KDRAY_ASSIMP_MODELS})
+add_test(NAME scenes_default COMMAND test_scenes_real default
+         ${CMAKE_SOURCE_DIR}/scenes/default.glb)
+add_test(NAME scenes_ladder COMMAND test_scenes_real ladder ${KDRAY_SCENE_DIR}/ladder.txt)
+set_tests_properties(scenes_ladder PROPERTIES FIXTURES_REQUIRED scenes)
 
-  # An independent oracle for transforms, hierarchy and numbering: assimp's
-  # OBJ export flattens the same file in the same order; every triangle must
-  # match. (Skipped, 77, without assimp or the model.)
-  set(KDRAY_G2 /usr/share/assimp/models/glTF2)
-  foreach(pair "engine=${KDRAY_G2}/2CylinderEngine-glTF-Binary/2CylinderEngine.glb"
-               "clearcoat=${KDRAY_G2}/ClearCoat-glTF/ClearCoatTest.gltf"
-               "texture_transform=${KDRAY_G2}/textureTransform/TextureTransformTest.gltf"
-               "default=${CMAKE_SOURCE_DIR}/scenes/default.glb")
-    string(REPLACE "=" ";" kv "${pair}")
-    list(GET kv 0 name)
-    list(GET kv 1 file)
-    add_test(NAME scenes_vs_assimp_${name}
-             COMMAND sh -c "command -v assimp >/dev/null && [ -f '${file}' ] || exit 77; assimp export '${file}' 'assimp_${name}.obj' >/dev/null && '$<TARGET_FILE:test_scenes_real>' obj 'assimp_${name}.obj' '${file}'"
-             WORKING_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR})
-    set_tests_properties(scenes_vs_assimp_${name} PROPERTIES SKIP_RETURN_CODE 77)
-  endforeach()
-endif()
+# An independent oracle for transforms, hierarchy and numbering: assimp's
+# OBJ export flattens the same file in the same order; every triangle must
+# match. A missing model file fails the test.
+set(KDRAY_G2 ${KDRAY_ASSIMP_MODELS}/glTF2)
+foreach(pair "engine=${KDRAY_G2}/2CylinderEngine-glTF-Binary/2CylinderEngine.glb"
+             "clearcoat=${KDRAY_G2}/ClearCoat-glTF/ClearCoatTest.gltf"
+             "texture_transform=${KDRAY_G2}/textureTransform/TextureTransformTest.gltf"
+             "default=${CMAKE_SOURCE_DIR}/scenes/default.glb")
+  string(REPLACE "=" ";" kv "${pair}")
+  list(GET kv 0 name)
+  list(GET kv 1 file)
+  add_test(NAME scenes_vs_assimp_${name}
+           COMMAND sh -c "'${KDRAY_ASSIMP}' export '${file}' 'assimp_${name}.obj' >/dev/null && '$<TARGET_FILE:test_scenes_real>' obj 'assimp_${name}.obj' '${file}'"
+           WORKING_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR})
+endforeach()
 
-if(TARGET kdray_scene_info)
-  add_test(NAME scenes_info COMMAND kdray_scene_info ${CMAKE_SOURCE_DIR}/scenes/default.glb)
-  set_tests_properties(scenes_info PROPERTIES
-    PASS_REGULAR_EXPRESSION "triangles: +[1-9][0-9]*.*kd-tree: +[1-9]")
-endif()
+add_test(NAME scenes_info COMMAND kdray_scene_info ${CMAKE_SOURCE_DIR}/scenes/default.glb)
+set_tests_properties(scenes_info PROPERTIES
+  PASS_REGULAR_EXPRESSION "triangles: +[1-9][0-9]*.*kd-tree: +[1-9]")
 
 # libFuzzer target for the loader, with -DKDRAY_FUZZ=ON (the sanitizer pass
 # of scripts/dev test): the project builds with gcc, so clang++ compiles the
-# harness and the loader (tinygltf included) separately, then runs it for a
-# bounded time on assimp-testmodels' small glTF 2.0 files.
-find_program(KDRAY_CLANGXX NAMES clang++ clang++-14)
-if(KDRAY_FUZZ AND KDRAY_CLANGXX AND EXISTS /usr/share/assimp/models/glTF2)
+# harness and the loader (tinygltf included) separately (KDRAY_CLANGXX,
+# required with KDRAY_FUZZ: tests/cmake/required_tools.cmake), then runs it
+# for a bounded time on assimp-testmodels' small glTF 2.0 files.
+if(KDRAY_FUZZ)
   set(KDRAY_FUZZ_GLTF_BIN ${CMAKE_CURRENT_BINARY_DIR}/fuzz_gltf)
   add_custom_command(
     OUTPUT ${KDRAY_FUZZ_GLTF_BIN}
@@ -67,6 +64,6 @@ if(KDRAY_FUZZ AND KDRAY_CLANGXX AND EXISTS /usr/share/assimp/models/glTF2)
   add_custom_target(fuzz_gltf ALL DEPENDS ${KDRAY_FUZZ_GLTF_BIN})
   add_test(NAME scenes_fuzz
            COMMAND ${CMAKE_COMMAND} -E env ASAN_OPTIONS=detect_leaks=1
-                   sh -c "rm -rf scenes-fuzz-corpus && mkdir scenes-fuzz-corpus && find /usr/share/assimp/models/glTF2 -name '*.gltf' -size -40k -exec cp {} scenes-fuzz-corpus/ \\; && '${KDRAY_FUZZ_GLTF_BIN}' -max_total_time=20 -rss_limit_mb=2048 -max_len=20000 -timeout=10 scenes-fuzz-corpus; rc=$?; rm -f scenes-fuzz-input-*; exit $rc"
+                   sh -c "rm -rf scenes-fuzz-corpus && mkdir scenes-fuzz-corpus && find '${KDRAY_G2}' -name '*.gltf' -size -40k -exec cp {} scenes-fuzz-corpus/ \\; && '${KDRAY_FUZZ_GLTF_BIN}' -max_total_time=20 -rss_limit_mb=2048 -max_len=20000 -timeout=10 scenes-fuzz-corpus; rc=$?; rm -f scenes-fuzz-input-*; exit $rc"
            WORKING_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR})
 endif()

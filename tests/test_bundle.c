@@ -524,7 +524,7 @@ static int check_ladder(const char *dir) {
     char err[256];
     int n = ladder_read(dir, &e, err, sizeof err);
     if (n < 0) {
-        printf("skipped: %s\n", err);
+        printf("no ladder: %s\n", err);
         return 77;
     }
     for (int i = 0; i < n; i++) {

@@ -8,12 +8,16 @@
  * cone traversal that skips a leaf some sample enters shows up as a count
  * mismatch; the scenes are many small triangles so that most blocked
  * samples are blocked by one triangle only.
+ *
+ *   test_cone [--caps NAME]   NAME: bound the explained classes of the
+ *                             Embree comparison (tests/support/caps.h)
  */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "caps.h"
 #include "compare.h"
 #include "kd_cone.h"
 #include "kd_internal.h"
@@ -22,6 +26,7 @@
 #include "oracle.h"
 
 static int failures;
+static const char *g_caps; /* --caps NAME, or NULL */
 
 #define CHECK(cond, ...)                                                     \
     do {                                                                     \
@@ -391,7 +396,9 @@ static void test_soup_vs_embree(void) {
     kdr_shadow_query qw = make_query(pts, NP, wide, 2, 96);
     check_modes("soup, wide cones, grouped", s, &b, &qw);
 
-    oracle *o = oracle_create(b.v, b.n, NULL);
+    oracle_opts oo;
+    oracle_opts_judge(&oo);
+    oracle *o = oracle_create(b.v, b.n, &oo);
     CHECK(o != NULL, "embree oracle");
     cmp_tally tally;
     cmp_tally_init(&tally);
@@ -413,6 +420,8 @@ static void test_soup_vs_embree(void) {
     cmp_tally_print(stdout, "cone samples vs embree", &tally);
     cmp_tally_print_bad(stderr, "cone samples vs embree", &tally);
     CHECK(cmp_tally_unexplained(&tally) == 0, "embree disagreements");
+    CHECK(caps_check(stdout, g_caps, "cone samples vs embree", &tally) == 0,
+          "explained classes within their caps");
     CHECK(tally.hits > 0 && tally.hits < tally.rays, "mixed shadow");
     if (o)
         oracle_free(o);
@@ -591,7 +600,12 @@ static void test_ranges(void) {
     free(b.v);
 }
 
-int main(void) {
+int main(int argc, char **argv) {
+    g_caps = caps_arg(&argc, argv);
+    if (argc > 1) {
+        fprintf(stderr, "usage: %s [--caps NAME]\n", argv[0]);
+        return 2;
+    }
     test_invalid();
     test_ray_definition();
     test_analytic();

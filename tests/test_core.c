@@ -82,6 +82,12 @@ static size_t check_node(const kdr_scene *s, uint32_t idx, kdr_bounds box,
     const int k = kd_axis(n);
     CHECK(n->u.split > box.min[k] && n->u.split < box.max[k]);
     CHECK(kd_above(n) > idx + 1);
+    /* kd_layout's empty-child flags, which walks trust without looking */
+    if (kd_above(n) < s->nnodes) {
+        const kd_node *b = n + 1, *a = &s->nodes[kd_above(n)];
+        CHECK(kd_below_empty(n) == (kd_is_leaf(b) && kd_count(b) == 0));
+        CHECK(kd_above_empty(n) == (kd_is_leaf(a) && kd_count(a) == 0));
+    }
     kdr_bounds lb = box, rb = box;
     lb.max[k] = rb.min[k] = n->u.split;
     return 1 + check_node(s, idx + 1, lb, depth + 1, seen) +

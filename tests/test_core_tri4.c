@@ -1,6 +1,6 @@
 /*
- * test_core_tri4.c — kd_tri4_intersect and kd_tri8_intersect (AVX2, when
- * the CPU has it) of core/kd_tri_multi.h against kd_tri_intersect
+ * test_core_tri4.c — kd_ntri_test4 and kd_ntri_test8 (AVX2, when
+ * the CPU has it) of core/kd_tri_ntri.h against kd_tri_intersect
  * (core/kd_tri.h), lane by lane, bit for bit: hit mask, t,
  * u = V / det and v = W / det. Triangles are random, share vertices and
  * edges with the ray's target (so edge functions are exactly 0 and the
@@ -11,7 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "kd_tri_multi.h"
+#include "kd_tri_ntri.h"
 
 #define ROUNDS 200000
 
@@ -45,13 +45,13 @@ static int lane_bad(const kd_ray_pre *pre, const float *tri, float tmin,
 
 KD_AVX2 static int check8(const kd_ray_pre *pre, float tris[8][9], float tmin,
                           float tmax) {
-    kd_ray_pre8 pre8;
-    kd_ray_pre8_init(pre, &pre8);
+    kd_ntri_pre8 pre8;
+    kd_ntri_pre_init8(pre, &pre8);
     const float *rows[8];
     for (int j = 0; j < 8; j++)
         rows[j] = tris[j];
     f8 t8, V8, W8, d8;
-    const int m = kd_tri8_intersect(&pre8, rows, f8_set1(tmin), f8_set1(tmax),
+    const int m = kd_ntri_test8(&pre8, rows, f8_set1(tmin), f8_set1(tmax),
                                     &t8, &V8, &W8, &d8);
     _Alignas(32) float t[8], V[8], W[8], d[8];
     f8_store(t, t8), f8_store(V, V8), f8_store(W, W8), f8_store(d, d8);
@@ -77,13 +77,13 @@ static int check_round(int avx2) {
     if (dir[0] == 0.0f && dir[1] == 0.0f && dir[2] == 0.0f)
         return 0;
     kd_ray_pre pre;
-    kd_ray_pre4 pre4;
+    kd_ntri_pre4 pre4;
     kd_ray_precompute(org, dir, &pre);
-    kd_ray_pre4_init(&pre, &pre4);
+    kd_ntri_pre_init4(&pre, &pre4);
     const float tmin = (rng & 8) ? 0.0f : 0.25f, tmax = (rng & 16) ? 1e30f : 1.0f;
     const float *rows[4] = {tris[0], tris[1], tris[2], tris[3]};
     f4 t4, V4, W4, d4;
-    const int m = kd_tri4_intersect(&pre4, rows, f4_set1(tmin), f4_set1(tmax),
+    const int m = kd_ntri_test4(&pre4, rows, f4_set1(tmin), f4_set1(tmax),
                                     &t4, &V4, &W4, &d4);
     _Alignas(16) float t[4], V[4], W[4], d[4];
     f4_store(t, t4), f4_store(V, V4), f4_store(W, W4), f4_store(d, d4);

@@ -15,14 +15,17 @@
  *                                      all but those
  *
  * Fails on any unexplained disagreement (see tests/support/compare.h), any
- * ray from inside a closed mesh that misses, and (stress brute) any
- * difference from brute force. Exit 77 (skip) only when the ladder was never fetched.
+ * ray from inside a closed mesh that misses, (stress brute) any
+ * difference from brute force, and (with --caps NAME, anywhere on the
+ * line) an explained class over its cap (tests/support/caps.h). Exit 77 when the ladder was never fetched (a
+ * failure under ctest, whose scenes_fetch fixture fetches it first).
  */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "caps.h"
 #include "compare.h"
 #include "kdray.h"
 #include "ladder.h"
@@ -124,7 +127,9 @@ static int build_both(const stress_scene *s, kdr_scene **kd, oracle **o) {
         printf("kdr_scene_build: %s\n", kdr_strerror(rc));
         return -1;
     }
-    *o = oracle_create(s->tris, s->ntris, NULL);
+    oracle_opts oo;
+    oracle_opts_judge(&oo);
+    *o = oracle_create(s->tris, s->ntris, &oo);
     if (!*o) {
         kdr_scene_free(*kd);
         return -1;
@@ -261,6 +266,7 @@ int main(int argc, char **argv) {
     cmp_tally_init(&s.closest);
     cmp_tally_init(&s.any);
     int rc;
+    const char *caps = caps_arg(&argc, argv);
     if (argc >= 2 && strcmp(argv[1], "stress") == 0) {
         rc = run_stress(argc >= 3 ? strtoul(argv[2], NULL, 10) : STRESS_RAYS,
                         argc >= 4 && strcmp(argv[3], "brute") == 0, &s);
@@ -273,7 +279,8 @@ int main(int argc, char **argv) {
             return SKIP;
     } else {
         fprintf(stderr,
-                "usage: %s stress [rays [brute]] | ladder DIR [max_tris [rays [KINDS]]]\n",
+                "usage: %s [--caps NAME] stress [rays [brute]] | "
+                "ladder DIR [max_tris [rays [KINDS]]]\n",
                 argv[0]);
         return 2;
     }
@@ -287,5 +294,8 @@ int main(int argc, char **argv) {
            (unsigned long long)s.inside_miss,
            (unsigned long long)s.inside_rays,
            (unsigned long long)s.embree_inside_miss);
-    return rc != 0 || bad != 0 || s.brute_mismatch != 0 || s.inside_miss != 0;
+    const int over = caps_check(stdout, caps, "TOTAL closest", &s.closest) +
+                     caps_check(stdout, caps, "TOTAL any", &s.any);
+    return rc != 0 || bad != 0 || s.brute_mismatch != 0 || s.inside_miss != 0 ||
+           over != 0;
 }

@@ -4,11 +4,15 @@
  * (core/kd_tri.h over all triangles) must agree with Embree up to proven
  * boundary cases, and every ray from inside a closed region must hit. If
  * this fails, the oracle, the generator or the judge is wrong, not the
- * kd-tree.
+ * kd-tree. With --caps NAME the explained classes are bounded too
+ * (tests/support/caps.h).
+ *
+ *   test_embree_ref [--caps NAME]
  */
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "caps.h"
 #include "compare.h"
 #include "oracle.h"
 #include "stress.h"
@@ -21,7 +25,9 @@ static int check_scene(stress_scene_kind kind, cmp_tally *all) {
     stress_scene s;
     if (stress_scene_make(kind, SEED, &s) != 0)
         return 1;
-    oracle *o = oracle_create(s.tris, s.ntris, NULL);
+    oracle_opts oo;
+    oracle_opts_judge(&oo);
+    oracle *o = oracle_create(s.tris, s.ntris, &oo);
     kdr_ray *rays = malloc(RAYS_PER_KIND * sizeof *rays);
     int fail = !o || !rays;
     for (int rk = 0; !fail && rk < STRESS_NRAYS; rk++) {
@@ -66,14 +72,20 @@ static int check_scene(stress_scene_kind kind, cmp_tally *all) {
     return fail;
 }
 
-int main(void) {
+int main(int argc, char **argv) {
+    const char *caps = caps_arg(&argc, argv);
     cmp_tally all;
     int fail = 0;
+    if (argc > 1) {
+        fprintf(stderr, "usage: %s [--caps NAME]\n", argv[0]);
+        return 2;
+    }
     cmp_tally_init(&all);
     for (int k = 0; k < STRESS_NSCENES; k++)
         fail |= check_scene((stress_scene_kind)k, &all);
     cmp_tally_print(stdout, "TOTAL brute force vs Embree", &all);
     const unsigned long long bad = cmp_tally_unexplained(&all);
     printf("unexplained: %llu\n", bad);
+    fail |= caps_check(stdout, caps, "TOTAL brute force vs Embree", &all) != 0;
     return fail || bad != 0;
 }

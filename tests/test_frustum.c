@@ -16,13 +16,17 @@
  * from 0.01 to 179.5 degrees. Images of odd sizes with partial tiles,
  * tiles of 4, 5, 8, 16 and 64, traced in chunks of 1..7 tiles so lane sets
  * are partial and ranges disjoint. One scene is also checked directly
- * against Embree; argument errors and the image-size limit too.
+ * against Embree (with --caps NAME, its explained classes bounded:
+ * tests/support/caps.h); argument errors and the image-size limit too.
+ *
+ *   test_frustum [--caps NAME] [LADDER_DIR]
  */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "caps.h"
 #include "compare.h"
 #include "kd_frustum.h"
 #include "kd_internal.h"
@@ -306,9 +310,11 @@ static void check_scene(const char *name, const float *tris, size_t ntris,
 
 /* One scene against Embree directly (equality with Embree otherwise follows
  * from single rays = Embree, tested by the oracle suites). */
-static void check_embree(const stress_scene *sc) {
+static void check_embree(const stress_scene *sc, const char *caps) {
     kdr_scene *s = NULL;
-    oracle *o = oracle_create(sc->tris, sc->ntris, NULL);
+    oracle_opts oo;
+    oracle_opts_judge(&oo);
+    oracle *o = oracle_create(sc->tris, sc->ntris, &oo);
     kdr_bounds b;
     cmp_tally tally;
     if (!o || kdr_scene_build(sc->tris, sc->ntris, NULL, NULL, NULL, &s) != KDR_OK) {
@@ -339,6 +345,8 @@ static void check_embree(const stress_scene *sc) {
         image_free(&got);
     }
     cmp_tally_print(stdout, "frustum vs embree", &tally);
+    if (caps_check(stdout, caps, "frustum vs embree", &tally) != 0)
+        FAIL("frustum vs embree: an explained class over its cap\n");
     if (cmp_tally_unexplained(&tally)) {
         cmp_tally_print_bad(stderr, "frustum vs embree", &tally);
         FAIL("frustum vs embree: unexplained differences\n");
@@ -467,11 +475,12 @@ static int check_ladder(const char *dir) {
 }
 
 int main(int argc, char **argv) {
+    const char *caps = caps_arg(&argc, argv);
     stress_rng_seed(&g_rng, 20261123);
     check_camera_math();
     if (argc > 1) {
         if (!check_ladder(argv[1]))
-            return 77; /* ctest: skipped */
+            return 77; /* no ladder: a failure under ctest */
     } else {
         for (int kind = 0; kind < STRESS_NSCENES; kind++) {
             stress_scene sc;
@@ -483,7 +492,7 @@ int main(int argc, char **argv) {
                         sc.ntris, 48);
             if (kind == STRESS_CLOSED_MESHES) {
                 kdr_scene *s = NULL;
-                check_embree(&sc);
+                check_embree(&sc, caps);
                 if (kdr_scene_build(sc.tris, sc.ntris, NULL, NULL, NULL, &s) == KDR_OK)
                     check_args(s);
                 kdr_scene_free(s);

@@ -198,23 +198,31 @@ def shadow_payload(bounds, n, seed):
 def test_shadow_equals_core(t, c, d):
     p = shadow_payload(c.scene(SCENE)["bounds"], SHADOW_POINTS, 21)
     plain = dict(p, stats=False)
+    # 64 samples: the whole-light walk, its back-off and the last blockers,
+    # state carried from point to point, so the stats depend on where the
+    # 64-point chunks start (core/kdray.h, server/pool.h KDR_CHUNK_POINTS);
+    # 16 samples take the stateless path below 32.
+    walk = dict(p, samples=64)
     sp = "/v1/scenes/%s/cone-shadow" % SCENE
-    core, core_stats = lib.core_answers(TRACE, [("cone-shadow", plain, "fast"),
-                                                ("cone-shadow", p, "fast")])
+    core, core_stats, core_walk = lib.core_answers(
+        TRACE, [("cone-shadow", plain, "fast"), ("cone-shadow", p, "fast"),
+                ("cone-shadow", walk, "fast")])
     code, _, body = post(c, sp, plain)
     t.eq(code, 200, "cone-shadow status")
     t.eq(body, core, "cone-shadow == core bytes")
-    code, _, body = post(c, sp, p)
-    t.eq(code, 200, "cone-shadow with stats")
-    a, want = json.loads(body), json.loads(core_stats)
-    t.eq(a["visibility"], want["visibility"], "cone-shadow with stats == core")
-    for key in ("cones_decided", "rays_traced"):
-        t.eq(a["stats"][key], want["stats"][key], "stats." + key)
-    if a["stats"]["nodes_visited"] != want["stats"]["nodes_visited"]:
-        # Reported, not failed: the count is the core's business and has
-        # differed between two programs running identical calls.
-        print("note: stats.nodes_visited %d over HTTP, %d in-process" % (
-            a["stats"]["nodes_visited"], want["stats"]["nodes_visited"]))
+    # Same calls on the same scene: every stat is equal, nodes_visited too.
+    got = {}
+    for what, req, want_body in (("16 samples", p, core_stats),
+                                 ("64 samples", walk, core_walk)):
+        code, _, body = post(c, sp, req)
+        t.eq(code, 200, "cone-shadow with stats, " + what)
+        a, want = json.loads(body), json.loads(want_body)
+        t.eq(a["visibility"], want["visibility"], "cone-shadow == core, " + what)
+        for key in ("cones_decided", "rays_traced", "nodes_visited"):
+            t.eq(a["stats"][key], want["stats"][key], "stats.%s, %s" % (key, what))
+        t.check(a["stats"]["nodes_visited"] > 0, "nodes_visited counted, " + what)
+        got[what] = a
+    a = got["16 samples"]
     t.eq(a["count"], SHADOW_POINTS, "count")
     t.eq(len(a["visibility"]), 2 * SHADOW_POINTS, "N*L visibilities")
     t.check(all(0.0 <= v <= 1.0 for v in a["visibility"]), "visibility in [0,1]")

@@ -1,11 +1,15 @@
 /*
  * fuzz_request.c — libFuzzer entry point for protocol/: arbitrary bytes go
- * to all three request parsers (as a body that is not NUL-terminated) and
- * to the strict base64 decoder. Any accepted request must satisfy what the
- * core relies on: the invariants are asserted here, so a parser that lets
- * a bad query through is a crash, not a silent wrong answer.
+ * to all three request parsers, as a JSON body and as a CBOR body (not
+ * NUL-terminated), and to the strict base64 decoder. Any accepted request
+ * must satisfy what the core relies on: the invariants are asserted here,
+ * so a parser that lets a bad query through is a crash, not a silent wrong
+ * answer. An accepted CBOR bundle is also written out as its JSON twin,
+ * which must parse to the same rays bit for bit, and answers of the
+ * request's shape are encoded in every encoding.
  */
 #include <math.h>
+#include <stdio.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,10 +31,55 @@ static int finite_n(const float *v, size_t n) {
     return 1;
 }
 
-static void fuzz_bundle(const char *body, size_t len) {
+static void put_float(kdr_buf *b, float f) {
+    char tmp[KDR_FLOAT_CHARS];
+    if (isinf(f))
+        kdr_buf_append(b, f > 0 ? "1e999" : "-1e999", f > 0 ? 5 : 6);
+    else
+        kdr_buf_append(b, tmp, kdr_format_float(f, tmp));
+}
+
+static void put_floats(kdr_buf *b, const char *key, const float *v, size_t n, int list) {
+    kdr_buf_append(b, key, strlen(key));
+    if (list)
+        kdr_buf_append(b, "[", 1);
+    for (size_t i = 0; i < n; i++) {
+        if (i)
+            kdr_buf_append(b, ",", 1);
+        put_float(b, v[i]);
+    }
+    if (list)
+        kdr_buf_append(b, "]", 1);
+}
+
+/* An accepted CBOR bundle as JSON parses to the same batch. */
+static void json_twin(const kdr_bundle_request *r) {
+    const kdr_ray_batch *x = &r->batch;
+    kdr_buf j;
+    kdr_buf_init(&j);
+    put_floats(&j, "{\"origins\":", x->org, x->org_stride ? 3 * x->n : 3, 1);
+    put_floats(&j, ",\"directions\":", x->dir, 3 * x->n, 1);
+    put_floats(&j, ",\"tmin\":", x->tmin, x->tmin_stride ? x->n : 1, x->tmin_stride);
+    put_floats(&j, ",\"tmax\":", x->tmax, x->tmax_stride ? x->n : 1, x->tmax_stride);
+    kdr_buf_append(&j, r->query == KDR_ANY ? ",\"query\":\"any\"}" : "}",
+                   r->query == KDR_ANY ? 15 : 1);
+    kdr_bundle_request t;
+    kdr_proto_error err;
+    check(kdr_proto_parse_bundle(j.data, j.len, FUZZ_MAX_RAYS, &t, &err) == 0);
+    const kdr_ray_batch *y = &t.batch;
+    check(x->n == y->n && x->org_stride == y->org_stride && t.query == r->query);
+    check(!memcmp(x->dir, y->dir, 12 * x->n));
+    check(!memcmp(x->org, y->org, x->org_stride ? 12 * x->n : 12));
+    check(!memcmp(x->tmin, y->tmin, x->tmin_stride ? 4 * x->n : 4));
+    check(!memcmp(x->tmax, y->tmax, x->tmax_stride ? 4 * x->n : 4));
+    kdr_bundle_request_free(&t);
+    kdr_buf_free(&j);
+}
+
+static void fuzz_bundle(kdr_media media, const char *body, size_t len) {
     kdr_bundle_request r;
     kdr_proto_error err;
-    int st = kdr_proto_parse_bundle(body, len, FUZZ_MAX_RAYS, &r, &err);
+    int st = kdr_proto_parse_bundle_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
     check(st == err.status || st == 0);
     if (st == 0) {
         const kdr_ray_batch *b = &r.batch;
@@ -40,16 +89,23 @@ static void fuzz_bundle(const char *body, size_t len) {
             check(b->dir[3 * i] != 0 || b->dir[3 * i + 1] != 0 || b->dir[3 * i + 2] != 0);
         for (size_t i = 0; i < (b->tmax_stride ? b->n : 1); i++)
             check(!isnan(b->tmax[i]));
-        /* encode a fake result of the right size both ways */
-        kdr_buf out;
-        kdr_buf_init(&out);
+        check(r.fields != 0);
+        if (media == KDR_MEDIA_CBOR)
+            json_twin(&r);
+        /* encode a fake result of the right size every way */
         float *t = calloc(b->n, 4);
         int32_t *prim = calloc(b->n, 4);
         uint8_t *hit = calloc(b->n, 1);
         kdr_hits h = {.t = t, .prim = prim, .u = t, .v = t, .hit = hit};
         check(t && prim && hit);
-        check(kdr_proto_encode_hits(&h, b->n, r.query, r.encoding, &out) == 0);
-        kdr_buf_free(&out);
+        for (int enc = 0; enc < 3; enc++) {
+            kdr_buf out;
+            kdr_buf_init(&out);
+            check(kdr_proto_encode_hits_fields(&h, b->n, r.query, r.fields,
+                                               enc ? (kdr_encoding)enc : r.encoding,
+                                               &out) == 0);
+            kdr_buf_free(&out);
+        }
         free(t), free(prim), free(hit);
     } else {
         check(st == 400 || st == 413);
@@ -58,10 +114,10 @@ static void fuzz_bundle(const char *body, size_t len) {
     kdr_bundle_request_free(&r);
 }
 
-static void fuzz_shadow(const char *body, size_t len) {
+static void fuzz_shadow(kdr_media media, const char *body, size_t len) {
     kdr_shadow_request r;
     kdr_proto_error err;
-    int st = kdr_proto_parse_shadow(body, len, FUZZ_MAX_RAYS, &r, &err);
+    int st = kdr_proto_parse_shadow_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
     if (st == 0) {
         const kdr_shadow_query *q = &r.query;
         check(q->n >= 1 && q->nlights >= 1 && q->nlights <= KDR_PROTO_MAX_LIGHTS);
@@ -77,12 +133,12 @@ static void fuzz_shadow(const char *body, size_t len) {
     kdr_shadow_request_free(&r);
 }
 
-static void fuzz_frustum(const char *body, size_t len) {
+static void fuzz_frustum(kdr_media media, const char *body, size_t len) {
     kdr_frustum_request r;
     kdr_proto_error err;
-    int st = kdr_proto_parse_frustum(body, len, FUZZ_MAX_RAYS, &r, &err);
+    int st = kdr_proto_parse_frustum_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
     if (st == 0) {
-        check(kdr_camera_validate(&r.camera) == KDR_OK);
+        check(kdr_camera_validate(&r.camera) == KDR_OK && r.fields != 0);
         check(r.tile >= 4 && r.tile <= 64 && r.rays <= FUZZ_MAX_RAYS);
     } else {
         check(st == 400 || st == 413);
@@ -148,9 +204,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     if (!body)
         return 0;
     memcpy(body, data, size);
-    fuzz_bundle(body, size);
-    fuzz_shadow(body, size);
-    fuzz_frustum(body, size);
+    for (int m = 0; m < 2; m++) {
+        const kdr_media media = m ? KDR_MEDIA_CBOR : KDR_MEDIA_JSON;
+        fuzz_bundle(media, body, size);
+        fuzz_shadow(media, body, size);
+        fuzz_frustum(media, body, size);
+    }
     fuzz_base64(body, size);
     fuzz_paths_agree(body, size);
     free(body);

@@ -203,7 +203,9 @@ static int run_scene(acc_kind k, const stress_scene *s, const acc_opts *opt,
     kdr_scene *kd = NULL;
     if (kdr_scene_build(s->tris, s->ntris, NULL, NULL, NULL, &kd) != KDR_OK)
         return -1;
-    oracle *o = oracle_create(s->tris, s->ntris, NULL);
+    oracle_opts oo;
+    oracle_opts_judge(&oo);
+    oracle *o = oracle_create(s->tris, s->ntris, &oo);
     kdr_ray *rays = malloc((opt->rays + 1) * sizeof *rays);
     int rc = (!o || !rays) ? -1 : 0;
     if (rc == 0) {

@@ -35,7 +35,8 @@ typedef struct acc_result {
     uint64_t own_unexplained; /* unexplained vs Embree and not inherited
                                  from the single-ray answer (bundles and
                                  frusta equal to single rays inherit its
-                                 disagreements: accuracy_single owns them) */
+                                 disagreements: accuracy_single owns them);
+                                 for cones every unexplained shadow sample */
     uint64_t inside, inside_miss; /* watertightness probes and failures */
     uint64_t errors;       /* API calls that returned an error */
     /* cones: (point, light) pairs, pairs whose visibility differs from the

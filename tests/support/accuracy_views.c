@@ -194,10 +194,12 @@ static void judge_pair(const stress_scene *s, const kdr_scene *kd,
         const int em_blocked = oracle_occluded1(o, &r);
         kdr_intersect1(kd, &r, &h, NULL);
         oracle_intersect1(o, &r, &em);
-        cmp_tally_add(&res->any, &r,
-                      cmp_occluded(s->tris, s->ntris, &r, blocked, em_blocked,
-                                   &h, &em),
-                      0.0, em_blocked);
+        const cmp_class c = cmp_occluded(s->tris, s->ntris, &r, blocked,
+                                         em_blocked, &h, &em);
+        cmp_tally_add(&res->any, &r, c, 0.0, em_blocked);
+        /* Shadow samples are this suite's own rays (no other gate traces
+         * them), so an unexplained one fails accuracy_cone_shadow. */
+        res->own_unexplained += cmp_is_unexplained(c);
         lit += !blocked;
         em_lit += !em_blocked;
     }

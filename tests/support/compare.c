@@ -16,10 +16,16 @@
 #include "kd_traverse.h"
 #include "kd_tri.h"
 
-/* How many float roundings of the edge functions' magnitude count as "on
- * the edge" (Embree's Pluecker test and kd_tri.h round differently, and
- * Embree widens edges by one ulp of the determinant). */
-#define EDGE_ULPS 64.0
+/* How many FLT_EPSILONs of the edge functions' magnitude (m below) count as
+ * "on the edge". kd_tri.h's float edge function is within 5 FLT_EPSILON of
+ * its own term magnitude of the exact one (first order: 2 FLT_EPSILON per
+ * sheared coordinate, products and difference), and m sums all three
+ * edges' magnitudes; Embree's Pluecker test rounds a similar number of
+ * times in another frame and widens edges by one ulp of the determinant.
+ * 16 covers both evaluations with room to spare. Measured on every gate
+ * (docs/ACCURACY.md, "Caps"): no disagreement needs more than 1; 64 (the
+ * old value) only moved rays from parallel (|det| <= 3 tol) into edge. */
+#define EDGE_ULPS 16.0
 /* t agrees when within CMP_T_REL_TOL relative, or within this many ulps of
  * the largest coordinate involved (the inputs' own rounding). */
 #define T_FLOOR_ULPS 8.0

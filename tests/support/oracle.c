@@ -28,6 +28,11 @@ void oracle_opts_default(oracle_opts *opts) {
     opts->device_config = NULL;
 }
 
+void oracle_opts_judge(oracle_opts *opts) {
+    oracle_opts_default(opts);
+    opts->device_config = ORACLE_JUDGE_CONFIG;
+}
+
 static double clock_ms(clockid_t id) {
     struct timespec ts;
     clock_gettime(id, &ts);

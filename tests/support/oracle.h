@@ -30,6 +30,16 @@ typedef struct oracle_opts {
 /* robust = 1, quality = HIGH, device_config = NULL (Embree's default). */
 void oracle_opts_default(oracle_opts *opts);
 
+/* What the accuracy gates judge with: the defaults plus device_config
+ * ORACLE_JUDGE_CONFIG. Embree's robust kernels decide some boundary rays
+ * differently per ISA (between AVX-512, AVX2 and SSE4.2 a class moves by
+ * up to 15%, frustum ties by 44%: docs/ACCURACY.md, "Caps"), so the
+ * gates cap Embree at AVX2, which every AVX2 machine runs the same: their
+ * class counts, and the caps on them (caps.h), are then machine-independent.
+ * Benchmarks never use this. */
+#define ORACLE_JUDGE_CONFIG "max_isa=avx2"
+void oracle_opts_judge(oracle_opts *opts);
+
 typedef struct oracle oracle;
 
 /* Builds Embree's BVH over ntris triangles (9*ntris floats; copied). NULL on

@@ -1,27 +1,21 @@
 /*
- * kd_tri_lanes.h — the one-ray-against-KT_W-triangles watertight test,
- * written once for any lane count. No include guard: kd_tri_multi.h
- * includes it once per width after defining
- *   KT_W      lanes (4 or 8)
- *   VF, V(op) the lane type and its helpers (f4 / f4_op, f8 / f8_op)
- *   KT(x)     the function prefix (kd_tri4_x, kd_tri8_x)
- *   KT_PRE(x) the per-ray prefix (kd_ray_pre4x, kd_ray_pre8x)
- *   KT_FN     the function qualifiers (the avx2 target for 8 lanes)
- * and a KT(load)(r, A, B, C) that transposes rows r[0..KT_W-1] into the
- * vertices' x, y, z vectors (lane j of A[i] is r[j][i], of B[i] r[j][3 + i],
- * of C[i] r[j][6 + i]).
+ * kd_tri_ntri_lanes.h — the one-ray-against-KD_W-triangles watertight test,
+ * written once for any lane count (template of kd_tri_ntri.h, which
+ * instantiates it per width with the convention of simd_width.h, after
+ * defining KD_WN(kd_ntri_load)(r, A, B, C): the transpose of rows
+ * r[0..KD_W-1] into the vertices' x, y, z vectors). No include guard.
  *
  * Every lane performs exactly the float operations of kd_tri_intersect
  * (core/kd_tri.h) in the same order, so keep both in step.
  */
 
-/* A ray's shear broadcast to KT_W lanes (built once per ray). */
-typedef struct KT_PRE() {
+/* A ray's shear broadcast to KD_W lanes (built once per ray). */
+typedef struct KD_WN(kd_ntri_pre) {
     VF ox, oy, oz, sx, sy, sz;
     int kx, ky, kz;
-} KT_PRE();
+} KD_WN(kd_ntri_pre);
 
-KT_FN void KT_PRE(_init)(const kd_ray_pre *p, KT_PRE() *q) {
+KD_FN void KD_WN(kd_ntri_pre_init)(const kd_ray_pre *p, KD_WN(kd_ntri_pre) *q) {
     q->ox = V(set1)(p->org[p->kx]);
     q->oy = V(set1)(p->org[p->ky]);
     q->oz = V(set1)(p->org[p->kz]);
@@ -34,13 +28,13 @@ KT_FN void KT_PRE(_init)(const kd_ray_pre *p, KT_PRE() *q) {
 }
 
 /* The scalar double-precision recomputation for the lanes in `lanes`. */
-KT_FN void KT(exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
+KD_FN void KD_WN(kd_ntri_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
                      VF *Ue, VF *Ve, VF *We) {
-    _Alignas(sizeof(VF)) float s[9][KT_W];
+    _Alignas(sizeof(VF)) float s[9][KD_W];
     const VF in[9] = {ax, ay, bx, by, cx, cy, *Ue, *Ve, *We};
     for (int k = 0; k < 9; k++)
         V(store)(s[k], in[k]);
-    for (int j = 0; j < KT_W; j++) {
+    for (int j = 0; j < KD_W; j++) {
         if (!((lanes >> j) & 1))
             continue;
         kd_tri_edges_exact(s[0][j], s[1][j], s[2][j], s[3][j], s[4][j], s[5][j],
@@ -52,18 +46,18 @@ KT_FN void KT(exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
 }
 
 /*
- * Tests the triangles whose rows are r[0..KT_W-1] (rows may repeat);
+ * Tests the triangles whose rows are r[0..KD_W-1] (rows may repeat);
  * returns the lane mask of hits with tmin <= t <= tmax and their t, scaled
  * edge functions Ve, We (kd_tri.h's V, W) and det (u = Ve / det,
  * v = We / det, as kd_tri_intersect computes
  * them). When no lane passes the edge tests, the outputs are zero and t is
  * never computed.
  */
-KT_FN int KT(intersect)(const KT_PRE() *p, const float *const r[KT_W],
+KD_FN int KD_WN(kd_ntri_test)(const KD_WN(kd_ntri_pre) *p, const float *const r[KD_W],
                         VF tmin, VF tmax, VF *t_out, VF *V_out, VF *W_out,
                         VF *det_out) {
     VF A[3], B[3], C[3];
-    KT(load)(r, A, B, C);
+    KD_WN(kd_ntri_load)(r, A, B, C);
     /* vertices relative to the origin */
     const VF Ax = V(sub)(A[p->kx], p->ox), Ay = V(sub)(A[p->ky], p->oy),
              Az0 = V(sub)(A[p->kz], p->oz);
@@ -86,7 +80,7 @@ KT_FN int KT(intersect)(const KT_PRE() *p, const float *const r[KT_W],
     const int zl = V(bits)(
         V(or)(V(or)(V(eq)(Ue, zero), V(eq)(Ve, zero)), V(eq)(We, zero)));
     if (zl)
-        KT(exact)(zl, ax, ay, bx, by, cx, cy, &Ue, &Ve, &We);
+        KD_WN(kd_ntri_exact)(zl, ax, ay, bx, by, cx, cy, &Ue, &Ve, &We);
     const VF neg =
         V(or)(V(or)(V(lt)(Ue, zero), V(lt)(Ve, zero)), V(lt)(We, zero));
     const VF pos =

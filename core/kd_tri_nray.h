@@ -1,12 +1,12 @@
 /*
- * kd_tri_simd.h — the watertight ray-triangle test of core/kd_tri.h for a
- * bundle of rays against one triangle, one ray per lane.
+ * kd_tri_nray.h — the watertight ray-triangle test of core/kd_tri.h for N
+ * rays against ONE triangle, one ray per lane (bundles, frusta, cone
+ * packets). Its twin for one ray against N triangles is kd_tri_ntri.h.
  *
- * This is a template: include it after defining the lane layer
- *   KB_W      lanes (4 or 8)        VF     the vector type (f4 or f8)
- *   V(op)     the helper f4_op/f8_op KB(x)  a width-suffixed name
- *   KB_FN     the qualifiers of every function (static, maybe KD_AVX2)
- * (core/kd_traverse_bundle.h does this for the bundle traversals).
+ * This is a template with the convention of simd_width.h: define KD_W,
+ * include simd_width.h, then this file (kd_traverse_bundle.h,
+ * kd_frustum_trav.h and kd_cone_packet.h do). Names carry the width:
+ * kd_nray_test4, kd_nray_test8, ...
  *
  * Bit-identity with kd_tri_intersect is the whole point: each lane performs
  * exactly the scalar float operations in the scalar order. Lanes may shear
@@ -21,24 +21,24 @@
 #include "simd.h"
 
 /* Per-lane shear of a bundle (kd_ray_pre, transposed). */
-typedef struct KB(tri_pre) {
+typedef struct KD_WN(kd_nray_pre) {
     VF ox, oy, oz;                    /* org[kx], org[ky], org[kz] */
     VF sx, sy, sz;
     VF kx0, kx1, ky0, ky1, kz0, kz1;  /* lane masks: kx == 0, kx == 1, ... */
-#if KB_W == 8
+#if KD_W == 8
     VF idx[9]; /* int32 indices of A, B, C's x, y, z in tri[0..7] / tri[1..8] */
 #endif
     int uniform;                      /* every used lane shears alike */
     int kx, ky, kz;                   /* the shared axes when uniform */
-} KB(tri_pre);
+} KD_WN(kd_nray_pre);
 
 /* Transposes the scalar precomputations of the lanes in `used`; unused
  * lanes copy lane `ref` so they compute harmless numbers. */
-KB_FN void KB(tri_pre_init)(KB(tri_pre) *p, const kd_ray_pre *pre, int used,
+KD_FN void KD_WN(kd_nray_pre_init)(KD_WN(kd_nray_pre) *p, const kd_ray_pre *pre, int used,
                             int ref) {
-    _Alignas(32) float f[12][KB_W];
+    _Alignas(32) float f[12][KD_W];
     int uniform = 1;
-    for (int j = 0; j < KB_W; j++) {
+    for (int j = 0; j < KD_W; j++) {
         const kd_ray_pre *r = &pre[(used >> j) & 1 ? j : ref];
         uniform &= r->kz == pre[ref].kz && r->kx == pre[ref].kx;
         f[0][j] = r->org[r->kx];
@@ -59,9 +59,9 @@ KB_FN void KB(tri_pre_init)(KB(tri_pre) *p, const kd_ray_pre *pre, int used,
         *dst[k] = V(load)(f[k]);
     for (int k = 6; k < 12; k++) /* -1.0f has the sign bit: make full masks */
         *dst[k] = V(signmask)(*dst[k]);
-#if KB_W == 8
-    _Alignas(32) int32_t ix[9][KB_W];
-    for (int j = 0; j < KB_W; j++) {
+#if KD_W == 8
+    _Alignas(32) int32_t ix[9][KD_W];
+    for (int j = 0; j < KD_W; j++) {
         const kd_ray_pre *r = &pre[(used >> j) & 1 ? j : ref];
         const int k[3] = {r->kx, r->ky, r->kz};
         for (int c = 0; c < 3; c++) {
@@ -80,7 +80,7 @@ KB_FN void KB(tri_pre_init)(KB(tri_pre) *p, const kd_ray_pre *pre, int used,
 }
 
 /* Lanes' value of axis k where m0 / m1 flag k == 0 / k == 1 (else 2). */
-KB_FN VF KB(tri_axis)(VF m0, VF m1, VF x, VF y, VF z) {
+KD_FN VF KD_WN(kd_nray_axis)(VF m0, VF m1, VF x, VF y, VF z) {
     return V(sel)(m0, x, V(sel)(m1, y, z));
 }
 
@@ -89,7 +89,7 @@ KB_FN VF KB(tri_axis)(VF m0, VF m1, VF x, VF y, VF z) {
  * (divisions and selects only, so every lane gets the scalar bits). `used`
  * lanes decide `uniform`; the others must hold finite, non-zero directions.
  */
-KB_FN void KB(tri_pre_setup)(KB(tri_pre) *p, const VF org[3], const VF dir[3],
+KD_FN void KD_WN(kd_nray_setup)(KD_WN(kd_nray_pre) *p, const VF org[3], const VF dir[3],
                              int used) {
     const VF absm = V(seti)(0x7fffffff);
     const VF ax = V(and)(dir[0], absm), ay = V(and)(dir[1], absm),
@@ -99,25 +99,25 @@ KB_FN void KB(tri_pre_setup)(KB(tri_pre) *p, const VF org[3], const VF dir[3],
     const VF z0 = V(and)(ge_xy, V(le)(az, ax));
     const VF z1 = V(andnot)(ge_xy, V(le)(az, ay));
     const VF z2 = V(andnot)(V(or)(z0, z1), V(seti)(-1));
-    const VF dkz = KB(tri_axis)(z0, z1, dir[0], dir[1], dir[2]);
+    const VF dkz = KD_WN(kd_nray_axis)(z0, z1, dir[0], dir[1], dir[2]);
     const VF swap = V(lt)(dkz, V(set1)(0.0f));
     /* kx = kz + 1, ky = kz + 2 (mod 3), exchanged when dir[kz] < 0 */
     p->kx0 = V(sel)(swap, z1, z2), p->kx1 = V(sel)(swap, z2, z0);
     p->ky0 = V(sel)(swap, z2, z1), p->ky1 = V(sel)(swap, z0, z2);
     p->kz0 = z0, p->kz1 = z1;
-    p->ox = KB(tri_axis)(p->kx0, p->kx1, org[0], org[1], org[2]);
-    p->oy = KB(tri_axis)(p->ky0, p->ky1, org[0], org[1], org[2]);
-    p->oz = KB(tri_axis)(z0, z1, org[0], org[1], org[2]);
-    p->sx = V(div)(KB(tri_axis)(p->kx0, p->kx1, dir[0], dir[1], dir[2]), dkz);
-    p->sy = V(div)(KB(tri_axis)(p->ky0, p->ky1, dir[0], dir[1], dir[2]), dkz);
+    p->ox = KD_WN(kd_nray_axis)(p->kx0, p->kx1, org[0], org[1], org[2]);
+    p->oy = KD_WN(kd_nray_axis)(p->ky0, p->ky1, org[0], org[1], org[2]);
+    p->oz = KD_WN(kd_nray_axis)(z0, z1, org[0], org[1], org[2]);
+    p->sx = V(div)(KD_WN(kd_nray_axis)(p->kx0, p->kx1, dir[0], dir[1], dir[2]), dkz);
+    p->sy = V(div)(KD_WN(kd_nray_axis)(p->ky0, p->ky1, dir[0], dir[1], dir[2]), dkz);
     p->sz = V(div)(V(set1)(1.0f), dkz);
-#if KB_W == 8
+#if KD_W == 8
     for (int c = 0; c < 3; c++) {
         const VF m0 = c == 0 ? p->kx0 : c == 1 ? p->ky0 : z0;
         const VF m1 = c == 0 ? p->kx1 : c == 1 ? p->ky1 : z1;
-        p->idx[c] = KB(tri_axis)(m0, m1, V(seti)(0), V(seti)(1), V(seti)(2));
-        p->idx[3 + c] = KB(tri_axis)(m0, m1, V(seti)(3), V(seti)(4), V(seti)(5));
-        p->idx[6 + c] = KB(tri_axis)(m0, m1, V(seti)(5), V(seti)(6), V(seti)(7));
+        p->idx[c] = KD_WN(kd_nray_axis)(m0, m1, V(seti)(0), V(seti)(1), V(seti)(2));
+        p->idx[3 + c] = KD_WN(kd_nray_axis)(m0, m1, V(seti)(3), V(seti)(4), V(seti)(5));
+        p->idx[6 + c] = KD_WN(kd_nray_axis)(m0, m1, V(seti)(5), V(seti)(6), V(seti)(7));
     }
 #endif
     /* uniform: every used lane has the same kz and the same swap */
@@ -132,18 +132,18 @@ KB_FN void KB(tri_pre_setup)(KB(tri_pre) *p, const VF org[3], const VF dir[3],
 }
 
 /* Component k of vertex v, per lane, where m0/m1 flag k == 0 / k == 1. */
-KB_FN VF KB(tri_pick)(VF m0, VF m1, const float *v) {
+KD_FN VF KD_WN(kd_nray_pick)(VF m0, VF m1, const float *v) {
     return V(sel)(m0, V(set1)(v[0]), V(sel)(m1, V(set1)(v[1]), V(set1)(v[2])));
 }
 
 /* The scalar double-precision recomputation, for the lanes in `lanes`. */
-KB_FN void KB(tri_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
+KD_FN void KD_WN(kd_nray_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
                          VF *U, VF *Vv, VF *W) {
-    _Alignas(32) float s[9][KB_W];
+    _Alignas(32) float s[9][KD_W];
     const VF in[9] = {ax, ay, bx, by, cx, cy, *U, *Vv, *W};
     for (int k = 0; k < 9; k++)
         V(store)(s[k], in[k]);
-    for (int j = 0; j < KB_W; j++) {
+    for (int j = 0; j < KD_W; j++) {
         if (!((lanes >> j) & 1))
             continue;
         kd_tri_edges_exact(s[0][j], s[1][j], s[2][j], s[3][j], s[4][j], s[5][j],
@@ -160,7 +160,7 @@ KB_FN void KB(tri_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
  * det (u = V / det, v = W / det: callers divide only for the lanes whose
  * best hit changes, as the scalar test divides only on a hit).
  */
-KB_FN VF KB(tri_test_raw)(const KB(tri_pre) *p, const float *tri, VF act,
+KD_FN VF KD_WN(kd_nray_test_raw)(const KD_WN(kd_nray_pre) *p, const float *tri, VF act,
                           VF tmin, VF tmax, VF *t_out, VF *V_out, VF *W_out,
                           VF *det_out) {
     VF Ax, Ay, Az0, Bx, By, Bz0, Cx, Cy, Cz0;
@@ -175,7 +175,7 @@ KB_FN VF KB(tri_test_raw)(const KB(tri_pre) *p, const float *tri, VF act,
         Cy = V(sub)(V(set1)(tri[6 + p->ky]), p->oy);
         Cz0 = V(sub)(V(set1)(tri[6 + p->kz]), p->oz);
     } else {
-#if KB_W == 8
+#if KD_W == 8
         const VF lo = f8_loadu(tri), hi = f8_loadu(tri + 1);
         Ax = V(sub)(f8_permute(lo, p->idx[0]), p->ox);
         Ay = V(sub)(f8_permute(lo, p->idx[1]), p->oy);
@@ -187,15 +187,15 @@ KB_FN VF KB(tri_test_raw)(const KB(tri_pre) *p, const float *tri, VF act,
         Cy = V(sub)(f8_permute(hi, p->idx[7]), p->oy);
         Cz0 = V(sub)(f8_permute(hi, p->idx[8]), p->oz);
 #else
-        Ax = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 0), p->ox);
-        Ay = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 0), p->oy);
-        Az0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 0), p->oz);
-        Bx = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 3), p->ox);
-        By = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 3), p->oy);
-        Bz0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 3), p->oz);
-        Cx = V(sub)(KB(tri_pick)(p->kx0, p->kx1, tri + 6), p->ox);
-        Cy = V(sub)(KB(tri_pick)(p->ky0, p->ky1, tri + 6), p->oy);
-        Cz0 = V(sub)(KB(tri_pick)(p->kz0, p->kz1, tri + 6), p->oz);
+        Ax = V(sub)(KD_WN(kd_nray_pick)(p->kx0, p->kx1, tri + 0), p->ox);
+        Ay = V(sub)(KD_WN(kd_nray_pick)(p->ky0, p->ky1, tri + 0), p->oy);
+        Az0 = V(sub)(KD_WN(kd_nray_pick)(p->kz0, p->kz1, tri + 0), p->oz);
+        Bx = V(sub)(KD_WN(kd_nray_pick)(p->kx0, p->kx1, tri + 3), p->ox);
+        By = V(sub)(KD_WN(kd_nray_pick)(p->ky0, p->ky1, tri + 3), p->oy);
+        Bz0 = V(sub)(KD_WN(kd_nray_pick)(p->kz0, p->kz1, tri + 3), p->oz);
+        Cx = V(sub)(KD_WN(kd_nray_pick)(p->kx0, p->kx1, tri + 6), p->ox);
+        Cy = V(sub)(KD_WN(kd_nray_pick)(p->ky0, p->ky1, tri + 6), p->oy);
+        Cz0 = V(sub)(KD_WN(kd_nray_pick)(p->kz0, p->kz1, tri + 6), p->oz);
 #endif
     }
     /* shear into ray space */
@@ -210,7 +210,7 @@ KB_FN VF KB(tri_test_raw)(const KB(tri_pre) *p, const float *tri, VF act,
     VF z = V(or)(V(or)(V(eq)(U, zero), V(eq)(Vv, zero)), V(eq)(W, zero));
     int zl = V(bits)(V(and)(z, act));
     if (zl)
-        KB(tri_exact)(zl, ax, ay, bx, by, cx, cy, &U, &Vv, &W);
+        KD_WN(kd_nray_exact)(zl, ax, ay, bx, by, cx, cy, &U, &Vv, &W);
     VF neg = V(or)(V(or)(V(lt)(U, zero), V(lt)(Vv, zero)), V(lt)(W, zero));
     VF pos = V(or)(V(or)(V(gt)(U, zero), V(gt)(Vv, zero)), V(gt)(W, zero));
     VF ok = V(andnot)(V(and)(neg, pos), act);
@@ -232,10 +232,10 @@ KB_FN VF KB(tri_test_raw)(const KB(tri_pre) *p, const float *tri, VF act,
 }
 
 /* The same with u, v computed for every hit lane. */
-KB_FN VF KB(tri_test)(const KB(tri_pre) *p, const float *tri, VF act, VF tmin,
-                      VF tmax, VF *t_out, VF *u_out, VF *v_out) {
+KD_FN VF KD_WN(kd_nray_test)(const KD_WN(kd_nray_pre) *p, const float *tri, VF act,
+                             VF tmin, VF tmax, VF *t_out, VF *u_out, VF *v_out) {
     VF Vv, W, det;
-    VF ok = KB(tri_test_raw)(p, tri, act, tmin, tmax, t_out, &Vv, &W, &det);
+    VF ok = KD_WN(kd_nray_test_raw)(p, tri, act, tmin, tmax, t_out, &Vv, &W, &det);
     *u_out = *v_out = V(set1)(0.0f);
     if (V(bits)(ok)) {
         *u_out = V(div)(Vv, det);

@@ -1,0 +1,579 @@
+/*
+ * ab_core.c — kdray_ab: two builds of the kdray core in ONE process, so a
+ * change to the core is judged against its parent on the same machine
+ * state (bench/ab builds it; read that script first). Revision A's and B's
+ * libkdray_core.a are linked side by side with every global symbol renamed
+ * to A_... and B_... (objcopy --redefine-syms), and Embree (fast mode,
+ * HIGH quality, threads=1, FTZ/DAZ on around its calls only) runs beside
+ * them on the same rays.
+ *
+ * For each ladder scene it builds A's and B's kd-trees and prints their
+ * shape (nodes, depth, refs per leaf, SAH cost, bytes per triangle), then
+ * for each ray set traces A, B and (single rays only) Embree in rounds,
+ * rotating their order every round, and prints the best Mrays/s of each,
+ * the median over rounds of the per-round ratio B/A (with its range), kd /
+ * Embree, nodes and triangle tests per ray, and how many answers differ
+ * between A and B (they must not: every change keeps answers bit for bit).
+ *
+ * Ray sets (the issue's benchmark, same generators as kdray_bench):
+ *   camera   closest, a square image of bench_camera_rays' view, per ray
+ *   random   closest, origins in the bounds, uniform directions, per ray
+ *   ao       any hit, 16 hemisphere rays per surface point, per ray
+ *   ao64     any hit, 64 rays per point, per ray (the bundles' baseline)
+ *   b8ao     ao64 through kdr_trace_batch(AUTO): 8-wide bundles per point
+ *   b8cam    camera rays in 4x2 pixel blocks through kdr_trace_batch(AUTO)
+ *   frustum  the camera through kdr_frustum_trace(MULTI4, tile 8)
+ *   cone16   kdr_shadow_trace(CONE), 16 samples per point toward a small
+ *            light (bench_cone's, r = 0.03 diagonal), points and normals
+ *            of ao's surface points (rays / 16 points)
+ *   cone64   the same with bench_cone's large light (r = 0.25) at 64 spp
+ *
+ *   kdray_ab [--dir DIR] [--only NAME]... [--rays N] [--rounds R]
+ *            [--set NAME]...
+ */
+#define _POSIX_C_SOURCE 200809L
+#include <embree3/rtcore.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <xmmintrin.h>
+
+#include "kdray.h"
+#include "ladder.h"
+#include "oracle.h"
+#include "stress.h"
+
+/* ---- the two cores ----------------------------------------------------------- */
+
+#define AB_DECLARE(P)                                                           \
+    int P##kdr_scene_build(const float *, size_t, const kdr_build_opts *,       \
+                           kdr_log_fn, void *, kdr_scene **);                   \
+    void P##kdr_scene_free(kdr_scene *);                                        \
+    void P##kdr_scene_tree_stats(const kdr_scene *, kdr_tree_stats *);          \
+    int P##kdr_intersect1(const kdr_scene *, const kdr_ray *, kdr_hit *,        \
+                          kdr_trav_stats *);                                    \
+    int P##kdr_occluded1(const kdr_scene *, const kdr_ray *, kdr_trav_stats *); \
+    int P##kdr_trace_batch(const kdr_scene *, const kdr_ray_batch *, size_t,    \
+                           size_t, kdr_query, kdr_trav_mode, kdr_hits *,        \
+                           kdr_trav_stats *);                                   \
+    int P##kdr_frustum_trace(const kdr_scene *, const kdr_camera *, uint32_t,   \
+                             size_t, size_t, kdr_query, kdr_frustum_mode,       \
+                             kdr_hits *, kdr_trav_stats *);                     \
+    size_t P##kdr_frustum_tile_count(const kdr_camera *, uint32_t);             \
+    int P##kdr_shadow_trace(const kdr_scene *, const kdr_shadow_query *, size_t, \
+                            size_t, kdr_shadow_mode, float *, kdr_shadow_stats *);
+AB_DECLARE(A_)
+AB_DECLARE(B_)
+
+typedef struct core_api {
+    int (*build)(const float *, size_t, const kdr_build_opts *, kdr_log_fn,
+                 void *, kdr_scene **);
+    void (*release)(kdr_scene *);
+    void (*tree_stats)(const kdr_scene *, kdr_tree_stats *);
+    int (*intersect1)(const kdr_scene *, const kdr_ray *, kdr_hit *,
+                      kdr_trav_stats *);
+    int (*occluded1)(const kdr_scene *, const kdr_ray *, kdr_trav_stats *);
+    int (*trace_batch)(const kdr_scene *, const kdr_ray_batch *, size_t, size_t,
+                       kdr_query, kdr_trav_mode, kdr_hits *, kdr_trav_stats *);
+    int (*frustum)(const kdr_scene *, const kdr_camera *, uint32_t, size_t,
+                   size_t, kdr_query, kdr_frustum_mode, kdr_hits *,
+                   kdr_trav_stats *);
+    size_t (*tiles)(const kdr_camera *, uint32_t);
+    int (*shadow)(const kdr_scene *, const kdr_shadow_query *, size_t, size_t,
+                  kdr_shadow_mode, float *, kdr_shadow_stats *);
+} core_api;
+
+#define AB_API(P)                                                               \
+    {P##kdr_scene_build,  P##kdr_scene_free,    P##kdr_scene_tree_stats,        \
+     P##kdr_intersect1,   P##kdr_occluded1,     P##kdr_trace_batch,             \
+     P##kdr_frustum_trace, P##kdr_frustum_tile_count, P##kdr_shadow_trace}
+static const core_api cores[2] = {AB_API(A_), AB_API(B_)};
+
+/* ---- clocks ------------------------------------------------------------------ */
+
+static double cpu_s(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* ---- ray sets ------------------------------------------------------------------ */
+
+enum {
+    SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
+    SET_CONE16, SET_CONE64, NSETS
+};
+static const char *const set_names[NSETS] = {"camera", "random",  "ao",
+                                             "ao64",   "b8ao",    "b8cam",
+                                             "frustum", "cone16", "cone64"};
+
+typedef struct scene_in {
+    const float *tris;
+    size_t ntris;
+    float lo[3], hi[3], diag;
+} scene_in;
+
+static void scene_bounds(scene_in *s) {
+    for (int k = 0; k < 3; k++)
+        s->lo[k] = INFINITY, s->hi[k] = -INFINITY;
+    for (size_t i = 0; i < 3 * s->ntris; i++) {
+        const float *p = s->tris + 3 * i;
+        for (int k = 0; k < 3; k++) {
+            s->lo[k] = p[k] < s->lo[k] ? p[k] : s->lo[k];
+            s->hi[k] = p[k] > s->hi[k] ? p[k] : s->hi[k];
+        }
+    }
+    double d = 0;
+    for (int k = 0; k < 3; k++)
+        d += (double)(s->hi[k] - s->lo[k]) * (s->hi[k] - s->lo[k]);
+    s->diag = (float)sqrt(d);
+}
+
+/* bench_camera_rays' camera: outside the box, looking at its centre. */
+static void camera_of(const scene_in *s, size_t n, kdr_camera *cam) {
+    static const float view[3] = {0.55f, 0.35f, 0.75f};
+    uint32_t side = (uint32_t)sqrt((double)n);
+    memset(cam, 0, sizeof *cam);
+    cam->up[1] = 1.0f;
+    cam->fov_y_deg = 45.0f;
+    cam->width = cam->height = side ? side : 1;
+    for (int k = 0; k < 3; k++) {
+        cam->target[k] = 0.5f * (s->lo[k] + s->hi[k]);
+        cam->eye[k] = cam->target[k] + 1.1f * s->diag * view[k];
+    }
+}
+
+/* Camera rays, row-major (tiled != 0: in 4x2 pixel blocks). */
+static size_t camera_rays(const kdr_camera *cam, int tiled, kdr_ray *out) {
+    size_t i = 0;
+    if (!tiled) {
+        for (uint32_t y = 0; y < cam->height; y++)
+            for (uint32_t x = 0; x < cam->width; x++)
+                kdr_camera_ray(cam, x, y, &out[i++]);
+        return i;
+    }
+    for (uint32_t ty = 0; ty < cam->height; ty += 2)
+        for (uint32_t tx = 0; tx < cam->width; tx += 4)
+            for (uint32_t k = 0; k < 8; k++) {
+                const uint32_t px = tx + (k & 1) + 2 * (k >> 2);
+                const uint32_t py = ty + ((k >> 1) & 1);
+                if (px < cam->width && py < cam->height)
+                    kdr_camera_ray(cam, px, py, &out[i++]);
+            }
+    return i;
+}
+
+static void random_rays(const scene_in *s, size_t n, kdr_ray *out) {
+    stress_rng r;
+    stress_rng_seed(&r, 7);
+    for (size_t i = 0; i < n; i++) {
+        for (int k = 0; k < 3; k++)
+            out[i].org[k] = s->lo[k] + (s->hi[k] - s->lo[k]) * stress_rng_float(&r);
+        stress_rng_dir(&r, out[i].dir);
+        out[i].tmin = 0.0f;
+        out[i].tmax = INFINITY;
+    }
+}
+
+/* bench_ao_rays: per_point hemisphere rays around a random triangle's
+ * geometric normal, [1e-4, 1] * 0.1 diagonal. */
+static void ao_rays(const scene_in *s, size_t n, size_t per_point, kdr_ray *out) {
+    const float reach = 0.1f * s->diag;
+    stress_rng r;
+    stress_rng_seed(&r, 7);
+    float p[3] = {0, 0, 0}, nrm[3] = {0, 1, 0};
+    for (size_t i = 0; i < n; i++) {
+        if (i % per_point == 0) {
+            const float *t = s->tris + 9 * (stress_rng_next(&r) % s->ntris);
+            float a = stress_rng_float(&r), c = stress_rng_float(&r);
+            if (a + c > 1.0f)
+                a = 1.0f - a, c = 1.0f - c;
+            float e1[3], e2[3];
+            for (int k = 0; k < 3; k++) {
+                e1[k] = t[3 + k] - t[k];
+                e2[k] = t[6 + k] - t[k];
+                p[k] = t[k] + a * e1[k] + c * e2[k];
+            }
+            nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
+            nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
+            nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
+        }
+        float d[3];
+        stress_rng_dir(&r, d);
+        const float dot = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2];
+        for (int k = 0; k < 3; k++) {
+            out[i].org[k] = p[k];
+            out[i].dir[k] = dot < 0 ? -d[k] : d[k];
+        }
+        out[i].tmin = 1e-4f * reach;
+        out[i].tmax = reach;
+    }
+}
+
+/* Points on random triangles (ao_rays' points) outside bench_cone's light,
+ * each with a direction on its normal's side as the "normal" (the query
+ * only uses it to offset the point toward the light), written to pts
+ * (3 floats per point, then 3 per normal). */
+static void cone_query(const scene_in *s, size_t npts, int large, uint32_t spp,
+                       kdr_ray *scratch, float *pts, kdr_sphere_light *li,
+                       kdr_shadow_query *q) {
+    static const float dir[3] = {-0.35f, 0.85f, 0.40f};
+    const float dist = large ? 0.55f : 0.9f;
+    for (int k = 0; k < 3; k++)
+        li->center[k] = 0.5f * (s->lo[k] + s->hi[k]) + dist * s->diag * dir[k];
+    li->radius = (large ? 0.25f : 0.03f) * s->diag;
+    float *nrm = pts + 3 * npts;
+    ao_rays(s, npts, 1, scratch);
+    size_t m = 0;
+    for (size_t i = 0; i < npts; i++) {
+        double d2 = 0;
+        for (int k = 0; k < 3; k++) {
+            const double d = scratch[i].org[k] - li->center[k];
+            d2 += d * d;
+        }
+        if (d2 <= 1.01 * li->radius * li->radius)
+            continue;
+        for (int k = 0; k < 3; k++) {
+            pts[3 * m + k] = scratch[i].org[k];
+            nrm[3 * m + k] = scratch[i].dir[k]; /* the hemisphere side */
+        }
+        m++;
+    }
+    memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
+    *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
+                            .lights = li, .nlights = 1, .samples = spp,
+                            .seed = 7, .epsilon = 1e-4f};
+}
+
+/* ---- one ray set, traced by A, B and Embree -------------------------------- */
+
+typedef struct job {
+    int set;
+    kdr_query q;
+    const kdr_ray *rays;
+    size_t n, group; /* batches: rays per kdr_trace_batch call (shared origin) */
+    const kdr_camera *cam;
+    float *bdir; /* batch directions, 3n */
+    const kdr_shadow_query *sq; /* cone sets: n = points * samples */
+} job;
+
+typedef struct result {
+    float *t;
+    int32_t *prim;
+    float *u, *v;
+    uint8_t *hit;
+} result;
+
+static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
+                     result *o, kdr_trav_stats *st) {
+    if (j->sq) { /* visibility per point, as the t column */
+        kdr_shadow_stats ss = {0, 0, 0};
+        c->shadow(s, j->sq, 0, j->sq->n, KDR_SHADOW_CONE, o->t, &ss);
+        st->rays += j->n;
+        st->nodes_visited += ss.nodes_visited;
+        st->tri_tests += ss.rays_traced;
+        return;
+    }
+    if (j->set == SET_FRUSTUM) {
+        kdr_hits h = {o->t, o->prim, o->u, o->v, o->hit};
+        c->frustum(s, j->cam, 8, 0, c->tiles(j->cam, 8), j->q, KDR_FRUSTUM_MULTI4,
+                   &h, st);
+        return;
+    }
+    if (j->set == SET_B8AO || j->set == SET_B8CAM) {
+        for (size_t first = 0; first < j->n; first += j->group) {
+            const size_t g = j->n - first < j->group ? j->n - first : j->group;
+            const kdr_ray *r0 = &j->rays[first];
+            kdr_ray_batch b = {g, r0->org, 0, j->bdir + 3 * first,
+                               &r0->tmin, 0, &r0->tmax, 0};
+            kdr_hits h = {o->t + first, o->prim + first, o->u + first,
+                          o->v + first, o->hit + first};
+            c->trace_batch(s, &b, 0, g, j->q, KDR_TRAV_AUTO, &h, st);
+        }
+        return;
+    }
+    for (size_t i = 0; i < j->n; i++) {
+        if (j->q == KDR_ANY) {
+            o->hit[i] = (uint8_t)c->occluded1(s, &j->rays[i], st);
+        } else {
+            kdr_hit h;
+            c->intersect1(s, &j->rays[i], &h, st);
+            o->t[i] = h.t, o->prim[i] = h.prim;
+        }
+    }
+}
+
+static void trace_embree(RTCScene sc, const job *j) {
+    const unsigned csr = _mm_getcsr();
+    _mm_setcsr(csr | 0x8040); /* FTZ | DAZ: Embree's recommended mode */
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    for (size_t i = 0; i < j->n; i++) {
+        const kdr_ray *r = &j->rays[i];
+        struct RTCRayHit rh;
+        rh.ray.org_x = r->org[0], rh.ray.org_y = r->org[1], rh.ray.org_z = r->org[2];
+        rh.ray.dir_x = r->dir[0], rh.ray.dir_y = r->dir[1], rh.ray.dir_z = r->dir[2];
+        rh.ray.tnear = r->tmin, rh.ray.tfar = r->tmax, rh.ray.time = 0.0f;
+        rh.ray.mask = 0xFFFFFFFFu, rh.ray.id = 0, rh.ray.flags = 0;
+        if (j->q == KDR_ANY) {
+            rtcOccluded1(sc, &ctx, &rh.ray);
+        } else {
+            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+            rtcIntersect1(sc, &ctx, &rh);
+        }
+    }
+    _mm_setcsr(csr);
+}
+
+static int cmp_double(const void *a, const void *b) {
+    const double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+static size_t result_diffs(const job *j, const result *a, const result *b) {
+    size_t d = 0;
+    if (j->sq) {
+        for (size_t i = 0; i < j->sq->n; i++)
+            d += memcmp(&a->t[i], &b->t[i], 4) != 0;
+        return d;
+    }
+    for (size_t i = 0; i < j->n; i++) {
+        if (j->q == KDR_ANY)
+            d += a->hit[i] != b->hit[i];
+        else
+            d += a->prim[i] != b->prim[i] || memcmp(&a->t[i], &b->t[i], 4) != 0;
+    }
+    return d;
+}
+
+static void result_copy(const job *j, const result *from, result *to) {
+    memcpy(to->t, from->t, j->n * 4);
+    memcpy(to->prim, from->prim, j->n * 4);
+    memcpy(to->hit, from->hit, j->n);
+}
+
+/* Both cores write into the same buffers (out[2]), so that neither gains
+ * from where its outputs happen to live; the first round's answers are
+ * copied to out[0] and out[1] for the comparison. */
+static void run_job(const job *j, kdr_scene *const kd[2], RTCScene sc, int rounds,
+                    result out[3]) {
+    const int emb = j->set <= SET_AO64;
+    double best[3] = {INFINITY, INFINITY, INFINITY};
+    double ratio_ba[64], ratio_ae[64], ratio_be[64];
+    kdr_trav_stats st[2];
+    if (rounds > 64)
+        rounds = 64;
+    for (int r = 0; r < rounds; r++) {
+        double sec[3] = {0, 0, 0};
+        for (int k = 0; k < 3; k++) {
+            const int who = (r + k) % 3;
+            if (who == 2 && !emb)
+                continue;
+            const double t0 = cpu_s();
+            if (who == 2) {
+                trace_embree(sc, j);
+            } else {
+                memset(&st[who], 0, sizeof st[who]);
+                trace_kd(&cores[who], kd[who], j, &out[2], &st[who]);
+            }
+            sec[who] = cpu_s() - t0;
+            if (r == 0 && who < 2)
+                result_copy(j, &out[2], &out[who]);
+            best[who] = sec[who] < best[who] ? sec[who] : best[who];
+        }
+        ratio_ba[r] = sec[0] / sec[1];
+        ratio_ae[r] = emb ? sec[2] / sec[0] : 0;
+        ratio_be[r] = emb ? sec[2] / sec[1] : 0;
+    }
+    qsort(ratio_ba, (size_t)rounds, sizeof(double), cmp_double);
+    qsort(ratio_ae, (size_t)rounds, sizeof(double), cmp_double);
+    qsort(ratio_be, (size_t)rounds, sizeof(double), cmp_double);
+    const double mr = (double)j->n * 1e-6;
+    printf("  %-8s %8.2f %8.2f %8.2f | %5.3f (%5.3f-%5.3f)", set_names[j->set],
+           mr / best[0], mr / best[1], emb ? mr / best[2] : 0.0,
+           ratio_ba[rounds / 2], ratio_ba[0], ratio_ba[rounds - 1]);
+    if (emb)
+        printf(" | %5.3f %5.3f", ratio_ae[rounds / 2], ratio_be[rounds / 2]);
+    else
+        printf(" | %5s %5s", "-", "-");
+    const double ra = st[0].rays ? (double)st[0].rays : 1.0;
+    const double rb = st[1].rays ? (double)st[1].rays : 1.0;
+    printf(" | %6.1f %6.1f %6.1f %6.1f | %zu\n", (double)st[0].nodes_visited / ra,
+           (double)st[1].nodes_visited / rb, (double)st[0].tri_tests / ra,
+           (double)st[1].tri_tests / rb, result_diffs(j, &out[0], &out[1]));
+    fflush(stdout);
+}
+
+/* ---- driver ----------------------------------------------------------------------- */
+
+typedef struct opts {
+    const char *dir;
+    const char *only[16];
+    int nonly;
+    int sets; /* bit mask */
+    size_t rays;
+    int rounds;
+} opts;
+
+static void print_tree(const char *who, const kdr_tree_stats *t, double ms,
+                       size_t ntris) {
+    printf("  %s: build %.0f ms, %llu nodes, %llu leaves (%llu empty), depth %llu,"
+           " %.2f refs/leaf, %.2f refs/tri, SAH %.1f, %.1f B/tri\n",
+           who, ms, (unsigned long long)t->nodes, (unsigned long long)t->leaves,
+           (unsigned long long)t->empty_leaves, (unsigned long long)t->max_depth,
+           t->refs_per_leaf, (double)t->refs / (double)(ntris ? ntris : 1),
+           t->sah_cost, (double)t->bytes / (double)(ntris ? ntris : 1));
+}
+
+static int run_scene(const opts *o, const ladder_entry *e) {
+    char err[512];
+    float *tris;
+    size_t ntris;
+    if (ladder_load(e, &tris, &ntris, err, sizeof err) != 0) {
+        fprintf(stderr, "%s\n", err);
+        return -1;
+    }
+    scene_in si = {tris, ntris, {0}, {0}, 0};
+    scene_bounds(&si);
+    printf("%s (%zu triangles)\n", e->name, ntris);
+    kdr_scene *kd[2] = {NULL, NULL};
+    for (int c = 0; c < 2; c++) {
+        const double t0 = cpu_s();
+        if (cores[c].build(tris, ntris, NULL, NULL, NULL, &kd[c]) != KDR_OK) {
+            fprintf(stderr, "%s: build failed\n", e->name);
+            return -1;
+        }
+        kdr_tree_stats ts;
+        cores[c].tree_stats(kd[c], &ts);
+        print_tree(c ? "B" : "A", &ts, (cpu_s() - t0) * 1e3, ntris);
+    }
+    oracle_opts oo;
+    oracle_opts_default(&oo);
+    oo.robust = 0;
+    oo.quality = RTC_BUILD_QUALITY_HIGH;
+    oo.device_config = "threads=1";
+    oracle *orc = oracle_create(tris, ntris, &oo);
+    const size_t n = o->rays;
+    kdr_ray *rays = malloc(n * sizeof *rays);
+    float *bdir = malloc(3 * n * sizeof *bdir);
+    result out[3];
+    for (int c = 0; c < 3; c++) {
+        out[c].t = malloc(n * 4), out[c].prim = malloc(n * 4);
+        out[c].u = malloc(n * 4), out[c].v = malloc(n * 4);
+        out[c].hit = malloc(n);
+    }
+    printf("  %-8s %8s %8s %8s | %-19s | %5s %5s | %6s %6s %6s %6s | %s\n", "set",
+           "A Mr/s", "B Mr/s", "emb", "B/A med (range)", "A/emb", "B/emb",
+           "nodeA", "nodeB", "testA", "testB", "diff");
+    kdr_camera cam;
+    camera_of(&si, n, &cam);
+    for (int set = 0; set < NSETS; set++) {
+        if (!((o->sets >> set) & 1))
+            continue;
+        job j = {set, KDR_CLOSEST, rays, n, n, &cam, bdir};
+        switch (set) {
+        case SET_CAMERA:
+        case SET_FRUSTUM:
+            j.n = camera_rays(&cam, 0, rays);
+            break;
+        case SET_B8CAM:
+            j.n = camera_rays(&cam, 1, rays);
+            break;
+        case SET_RANDOM:
+            random_rays(&si, n, rays);
+            break;
+        case SET_AO:
+            ao_rays(&si, n, 16, rays), j.q = KDR_ANY;
+            break;
+        default: /* ao64, b8ao */
+            ao_rays(&si, n, 64, rays), j.q = KDR_ANY, j.group = 64;
+            break;
+        }
+        kdr_shadow_query sq;
+        kdr_sphere_light li;
+        if (set == SET_CONE16 || set == SET_CONE64) {
+            const int large = set == SET_CONE64;
+            const uint32_t spp = large ? 64 : 16;
+            cone_query(&si, n / spp, large, spp, rays, bdir, &li, &sq);
+            j.sq = &sq;
+            j.n = sq.n * spp;
+        } else {
+            for (size_t i = 0; i < j.n; i++)
+                memcpy(bdir + 3 * i, rays[i].dir, 12);
+        }
+        run_job(&j, kd, oracle_rtc_scene(orc), o->rounds, out);
+    }
+    for (int c = 0; c < 2; c++)
+        cores[c].release(kd[c]);
+    for (int c = 0; c < 3; c++) {
+        free(out[c].t), free(out[c].prim), free(out[c].u), free(out[c].v);
+        free(out[c].hit);
+    }
+    oracle_free(orc);
+    free(rays);
+    free(bdir);
+    free(tris);
+    return 0;
+}
+
+static int parse(int argc, char **argv, opts *o) {
+    o->dir = ladder_default_dir();
+    o->rays = 262144;
+    o->rounds = 5;
+    o->sets = 0;
+    for (int i = 1; i + 1 < argc; i += 2) {
+        const char *f = argv[i], *v = argv[i + 1];
+        if (strcmp(f, "--dir") == 0)
+            o->dir = v;
+        else if (strcmp(f, "--only") == 0 && o->nonly < 16)
+            o->only[o->nonly++] = v;
+        else if (strcmp(f, "--rays") == 0)
+            o->rays = strtoul(v, NULL, 10);
+        else if (strcmp(f, "--rounds") == 0)
+            o->rounds = atoi(v);
+        else if (strcmp(f, "--set") == 0) {
+            int k = 0;
+            while (k < NSETS && strcmp(set_names[k], v) != 0)
+                k++;
+            if (k == NSETS)
+                return -1;
+            o->sets |= 1 << k;
+        } else
+            return -1;
+    }
+    if (argc % 2 == 0 || o->rays == 0 || o->rounds < 1 || !o->dir)
+        return -1;
+    if (!o->sets)
+        o->sets = (1 << NSETS) - 1;
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    opts o;
+    memset(&o, 0, sizeof o);
+    if (parse(argc, argv, &o) != 0) {
+        fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
+                        "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
+                        "frustum|cone16|cone64]...\n", argv[0]);
+        return 2;
+    }
+    ladder_entry *v;
+    char err[512];
+    const int n = ladder_read(o.dir, &v, err, sizeof err);
+    if (n < 0) {
+        fprintf(stderr, "%s\n", err);
+        return 1;
+    }
+    int fail = 0;
+    for (int i = 0; i < n; i++) {
+        int sel = o.nonly == 0;
+        for (int k = 0; k < o.nonly; k++)
+            sel |= strcmp(o.only[k], v[i].name) == 0;
+        if (sel)
+            fail |= run_scene(&o, &v[i]) != 0;
+    }
+    free(v);
+    return fail;
+}

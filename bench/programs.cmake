@@ -1,0 +1,41 @@
+# The benchmark programs (not tests): one library holding the harness, the
+# Embree rival and every section, and one main (bench_main.c) built four
+# times with different default sections. kdray_testsupport (the ladder,
+# the Embree scene builder, the RNG) is defined after bench/ and is linked
+# by name. Run them all with bench/run-all; compare two commits with
+# bench/compare (docs/BENCHMARKS.md).
+find_package(embree 3.13 REQUIRED)
+add_library(kdray_bench_lib STATIC
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_harness.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_rays.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/rival.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/rival_trace.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_core.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_bundle.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_frustum.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_cone.c)
+target_include_directories(kdray_bench_lib PUBLIC ${CMAKE_CURRENT_SOURCE_DIR})
+target_link_libraries(kdray_bench_lib PUBLIC kdray_testsupport kdray_core embree m)
+target_compile_definitions(kdray_bench_lib PRIVATE
+  KDRAY_CONE_PLOT="${CMAKE_CURRENT_SOURCE_DIR}/plot_cone.gp")
+
+set(KDRAY_BENCH_PROGRAMS kdray_bench kdray_bench_bundle kdray_bench_frustum kdray_bench_cone)
+set(index 0)
+foreach(prog ${KDRAY_BENCH_PROGRAMS})
+  add_executable(${prog} ${CMAKE_CURRENT_SOURCE_DIR}/bench_main.c)
+  target_link_libraries(${prog} PRIVATE kdray_bench_lib)
+  target_compile_definitions(${prog} PRIVATE BENCH_PROGRAM=${index})
+  math(EXPR index "${index} + 1")
+endforeach()
+
+# Smoke test (not a measurement): every section in one quick run on the two
+# smallest rungs, in the normal and the ASan/UBSan build. It fails if a
+# section fails, if a rival API's answers disagree with kdray's (the ray
+# conversion), or if kd_cone and kd_rays differ. The ladder comes from the
+# scenes_fetch fixture (tests/scenes.cmake); KDRAY_SCENE_DIR is set by
+# tests/CMakeLists.txt, which is read after this file, hence the path.
+add_test(NAME bench_smoke
+  COMMAND kdray_bench --dir ${CMAKE_BINARY_DIR}/scene-ladder --only box --only teapots
+          --section core --section bundle --section frustum --section cone --quick
+          --rays 4096 --frame 64 --res 16 --samples 1,16 --ref-samples 64 --repeat 1)
+set_tests_properties(bench_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
