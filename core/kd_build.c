@@ -34,6 +34,7 @@
 #include "kd_traverse.h"
 
 #define KD_LOG_PHASES 1000000 /* log each phase above this size */
+#define KD_MAX_THREADS 1024   /* kdr_build_opts.threads beyond this: 1024 */
 #define KD_ROOT_PAD 0x1p-20f  /* root padding, relative (~8 ulps) */
 
 /* ---- fragments: where a task writes ------------------------------------------- */
@@ -444,9 +445,14 @@ static size_t spawn_min_for(size_t nvalid, int threads) {
 
 static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
                       kdr_log_fn log, void *user) {
-    /* below two tasks' worth, helper threads would only be started and
-     * joined: build on the caller */
-    const int threads = o->threads > 1 && nvalid >= 2 * KD_SPAWN_MIN ? o->threads : 1;
+    /* No more threads than tasks of KD_SPAWN_MIN triangles could keep busy
+     * (below two, the caller alone), nor than KD_MAX_THREADS: extra ones
+     * would only be started and joined. */
+    const size_t useful = nvalid / KD_SPAWN_MIN;
+    size_t t = o->threads > 1 ? (size_t)o->threads : 1;
+    t = t < useful ? t : useful;
+    t = t < KD_MAX_THREADS ? t : KD_MAX_THREADS;
+    const int threads = t > 1 ? (int)t : 1;
     builder proto;
     memset(&proto, 0, sizeof proto);
     proto.tris = s->tris;
