@@ -2,11 +2,11 @@
  * test_core_build.c — the binned and parallel build (core/kd_build*.c).
  *
  * 1. The tree does not depend on the thread count: scenes large enough to
- *    be cut into many tasks are built with 1, 2, 3 and 8 threads, with the
- *    exact sweep everywhere and binned tops over exact subtrees;
- *    node and reference arrays must be byte-identical
- *    and the statistics equal, and a build with threads must really have
- *    run in pieces (the build's log says how many).
+ *    be cut into many tasks are built with 1, 2, 3, 8 and INT_MAX (capped
+ *    by the build) threads, with the exact sweep everywhere and with
+ *    binned tops over exact subtrees; node and reference arrays must be
+ *    byte-identical and the statistics equal, and a build with threads
+ *    must really have run in pieces (the build's log says how many).
  * 2. Binned trees answer like brute force (a sample of rays per mode; the
  *    adversarial scenes of test_core run on binned trees too).
  * It is also the program the ThreadSanitizer test runs (tests/core.cmake).
@@ -169,7 +169,7 @@ static size_t check_rays(const scene *sc, const kdr_scene *s, int nrays) {
  * small scenes by test_core; on these it is slow. */
 static void test_scene(const scene *sc) {
     static const int modes[] = {INT_MAX, 500, 8000};
-    static const int threads[] = {3, 2, 8};
+    static const int threads[] = {3, 2, 8, INT_MAX}; /* INT_MAX: capped by the build */
     for (size_t m = 0; m < sizeof modes / sizeof *modes; m++) {
         const int exact_max = modes[m];
         int pieces;
