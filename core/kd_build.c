@@ -1,23 +1,26 @@
 /*
- * kd_build.c — SAH kd-tree construction in O(N log N), after Wald and
- * Havran, "On building fast kd-trees for ray tracing, and on doing that in
- * O(N log N)" (2006).
+ * kd_build.c — SAH kd-tree construction: the recursion, and the public
+ * kdr_scene_build. The stages it calls live in kd_build_events.c (sorted
+ * event lists and their partition), kd_build_clip.c (perfect splits),
+ * kd_build_sah.c (the split searches), kd_build_bin.c (the binned top) and
+ * kd_build_par.c (threads, and the final node and reference arrays);
+ * kd_build.h says what they share.
  *
- * Every node has three sorted event lists, one per axis. An event is one
- * 64-bit key: the order-preserving bits of its position (high 32), its type
- * (end < planar < start, bits 30-31) and its triangle (low 30 bits), so that
- * sorting keys sorts events by (position, type, triangle). The lists are
- * sorted once at the root (radix sort); a split then partitions each list
- * in order, and only the triangles that straddle the plane get new events:
- * they are clipped to the node's box and then to each side of the plane
- * ("perfect splits"), and their few new events are sorted and merged in.
- * The children's lists live in a scratch buffer per depth: the build is
- * depth-first, so a subtree only ever writes the buffers below it.
+ * A node with more than opts.exact_max triangles is binned: its triangles
+ * are a plain array with their bounds, its plane comes from min-max bins
+ * (Mitsuba 0.6's scheme). Smaller nodes use the exact O(N log N) sweep of
+ * Wald and Havran, "On building fast kd-trees for ray tracing, and on doing
+ * that in O(N log N)" (2006): three sorted event lists per node, made once
+ * where the node turned exact (or at the root). A node becomes a leaf when
+ * it is small, deep, or when pbrt's bad-refine rule says its best split
+ * does not pay; otherwise both children are built depth-first, below child
+ * first, so the below child is always the node right after its parent. A
+ * triangle lying in the split plane goes to one side only; a triangle
+ * touching the plane from one side goes to that side only.
  *
- * Clipping runs in double and rounds the bounds of computed points outward,
- * so a triangle is never left out of a box it touches. A triangle lying in
- * the split plane goes to the cheaper side; a triangle touching the plane
- * from one side goes to that side only.
+ * With threads, a child subtree big enough (builder.spawn_min) is handed
+ * to another worker instead of being built in place; the decisions never
+ * depend on where a subtree is built, so neither does the tree.
  */
 #include <assert.h>
 #include <math.h>
@@ -27,545 +30,149 @@
 #include <string.h>
 #include <time.h>
 
-#include "kd_internal.h"
+#include "kd_build.h"
 #include "kd_traverse.h"
 
-#define KD_MAX_TRIS ((size_t)1 << 30)  /* triangle ids fit 30 bits */
-#define KD_MAX_NODES ((size_t)1 << 30) /* above-child index fits 30 bits */
-#define KD_LOG_PHASES 1000000          /* log each phase above this size */
-#define KD_ROOT_PAD 0x1p-20f           /* root padding, relative (~8 ulps) */
+#define KD_LOG_PHASES 1000000 /* log each phase above this size */
+#define KD_MAX_THREADS 1024   /* kdr_build_opts.threads beyond this: 1024 */
+#define KD_ROOT_PAD 0x1p-20f  /* root padding, relative (~8 ulps) */
 
-enum { EV_END = 0, EV_PLANAR = 1, EV_START = 2 };
-enum { SIDE_BOTH = 0, SIDE_LEFT = 1, SIDE_RIGHT = 2 };
-
-typedef uint64_t kd_event;
-
-typedef struct ev_list {
-    kd_event *e[3];
-    size_t n[3];
-    size_t ntri;
-} ev_list;
-
-typedef struct kd_split {
-    int axis;
-    float pos;
-    int planar_left;
-    float cost;
-} kd_split;
-
-typedef struct builder {
-    const float *tris;
-    kdr_build_opts o;
-    int max_depth;
-    uint8_t *side; /* per triangle, valid for the node being split */
-    kd_event *lvl[KD_MAX_DEPTH + 1]; /* children of a node at depth d */
-    size_t lvl_cap[KD_MAX_DEPTH + 1];
-    uint32_t *both; /* straddlers of the node being split */
-    size_t both_cap;
-    kd_event *add; /* their new events */
-    size_t add_cap;
-    kd_node *nodes;
-    size_t nnodes, cap_nodes;
-    uint32_t *refs;
-    size_t nrefs, cap_refs;
-    uint64_t leaves, empty_leaves, depth_seen;
-    double sah, inv_root_area;
-    int err;
-} builder;
-
-/* ---- event keys ---------------------------------------------------------- */
-
-static inline uint32_t float_key(float f) {
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-}
-
-static inline float key_float(uint32_t k) {
-    uint32_t u = (k & 0x80000000u) ? (k & 0x7fffffffu) : ~k;
-    float f;
-    memcpy(&f, &u, sizeof f);
-    return f;
-}
-
-/* pos + 0.0f turns -0.0 into +0.0 so equal positions share one key. */
-static inline kd_event ev_make(float pos, unsigned type, uint32_t tri) {
-    return ((uint64_t)float_key(pos + 0.0f) << 32) | ((uint64_t)type << 30) | tri;
-}
-static inline uint32_t ev_tri(kd_event e) { return (uint32_t)e & 0x3fffffffu; }
-static inline unsigned ev_type(kd_event e) { return (unsigned)(e >> 30) & 3u; }
-static inline uint32_t ev_key(kd_event e) { return (uint32_t)(e >> 32); }
-
-/* Inputs are finite, so plain compares do; fminf/fmaxf are library calls
- * without -ffast-math. */
-static inline float min3(float a, float b, float c) {
-    float m = a < b ? a : b;
-    return m < c ? m : c;
-}
-static inline float max3(float a, float b, float c) {
-    float m = a > b ? a : b;
-    return m > c ? m : c;
-}
-
-static void ev_free(ev_list *l) {
-    for (int k = 0; k < 3; k++) {
-        free(l->e[k]);
-        l->e[k] = NULL;
-    }
-}
-
-/* Appends the events of a triangle with bounds bb to dst[k] + n[k]. */
-static void ev_add(kd_event *dst[3], size_t n[3], const kdr_bounds *bb,
-                   uint32_t tri) {
-    for (int k = 0; k < 3; k++) {
-        if (bb->min[k] == bb->max[k]) {
-            dst[k][n[k]++] = ev_make(bb->min[k], EV_PLANAR, tri);
-        } else {
-            dst[k][n[k]++] = ev_make(bb->min[k], EV_START, tri);
-            dst[k][n[k]++] = ev_make(bb->max[k], EV_END, tri);
-        }
-    }
-}
-
-/* LSD radix sort on bits 30..63 (position and type); stable, so events
- * generated in triangle order end up in full key order. */
-static void radix_sort(kd_event *a, kd_event *tmp, size_t n) {
-    static const int shift[3] = {30, 41, 52};
-    static const int bits[3] = {11, 11, 12};
-    size_t count[1u << 12];
-    for (int pass = 0; pass < 3; pass++) {
-        const size_t nb = (size_t)1 << bits[pass];
-        const uint64_t mask = nb - 1;
-        memset(count, 0, nb * sizeof *count);
-        for (size_t i = 0; i < n; i++)
-            count[(a[i] >> shift[pass]) & mask]++;
-        size_t sum = 0;
-        for (size_t b = 0; b < nb; b++) {
-            size_t c = count[b];
-            count[b] = sum;
-            sum += c;
-        }
-        for (size_t i = 0; i < n; i++)
-            tmp[count[(a[i] >> shift[pass]) & mask]++] = a[i];
-        memcpy(a, tmp, n * sizeof *a);
-    }
-}
-
-/* ---- boxes and clipping ---------------------------------------------------- */
-
-static double box_area(const kdr_bounds *b) {
-    double dx = (double)b->max[0] - b->min[0];
-    double dy = (double)b->max[1] - b->min[1];
-    double dz = (double)b->max[2] - b->min[2];
-    return 2.0 * (dx * dy + dy * dz + dz * dx);
-}
-
-typedef struct cvert {
-    double p[3];
-    unsigned exact; /* bit k: p[k] is exactly a float of the input */
-} cvert;
-
-/* Sutherland-Hodgman step: keeps the part where sign * (p[k] - c) >= 0. */
-static int clip_plane(const cvert *in, int n, cvert *out, int k, float c,
-                      double sign) {
-    int m = 0;
-    for (int i = 0; i < n; i++) {
-        const cvert *a = &in[i], *b = &in[(i + 1) % n];
-        double da = sign * (a->p[k] - c), db = sign * (b->p[k] - c);
-        if (da >= 0.0)
-            out[m++] = *a;
-        if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0)) {
-            cvert *v = &out[m++];
-            double t = da / (da - db);
-            v->exact = 1u << k;
-            for (int j = 0; j < 3; j++) {
-                v->p[j] = a->p[j] + t * (b->p[j] - a->p[j]);
-                if (j != k && a->p[j] == b->p[j])
-                    v->exact |= a->exact & b->exact & (1u << j);
-            }
-            v->p[k] = c;
-        }
-    }
-    return m;
-}
-
-/* The next float toward -infinity (finite input). */
-static inline float step_down(float f) {
-    uint32_t u;
-    if (f == 0.0f)
-        return -FLT_TRUE_MIN;
-    memcpy(&u, &f, sizeof u);
-    u = f > 0.0f ? u - 1 : u + 1;
-    memcpy(&f, &u, sizeof f);
-    return f;
-}
-
-/* Clips tri to box (only against the planes its bounds cross) into out[];
- * returns the vertex count, 0 when nothing is left. */
-static int clip_to_box(const float *tri, const kdr_bounds *box, cvert out[16]) {
-    cvert tmp[16];
-    cvert *buf[2] = {out, tmp};
-    int n = 3, cur = 0;
-    for (int i = 0; i < 3; i++) {
-        for (int k = 0; k < 3; k++)
-            out[i].p[k] = tri[3 * i + k];
-        out[i].exact = 7u;
-    }
-    for (int k = 0; k < 3 && n > 0; k++) {
-        if (min3(tri[k], tri[3 + k], tri[6 + k]) < box->min[k]) {
-            n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->min[k], 1.0);
-            cur ^= 1;
-        }
-        if (n > 0 && max3(tri[k], tri[3 + k], tri[6 + k]) > box->max[k]) {
-            n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->max[k], -1.0);
-            cur ^= 1;
-        }
-    }
-    if (cur)
-        memcpy(out, tmp, (size_t)n * sizeof *out);
-    return n;
-}
-
-/* Bounds of a clipped polygon, computed coordinates rounded outward, cut
- * to box; 0 when empty. */
-static int poly_bounds(const cvert *v, int n, const kdr_bounds *box,
-                       kdr_bounds *out) {
-    if (n == 0)
-        return 0;
-    for (int k = 0; k < 3; k++) {
-        float lo = INFINITY, hi = -INFINITY;
-        for (int i = 0; i < n; i++) {
-            const float f = (float)v[i].p[k];
-            const int ex = (v[i].exact >> k) & 1u;
-            const float flo = ex ? f : step_down(f);
-            const float fhi = ex ? f : -step_down(-f);
-            lo = flo < lo ? flo : lo;
-            hi = fhi > hi ? fhi : hi;
-        }
-        out->min[k] = lo > box->min[k] ? lo : box->min[k];
-        out->max[k] = hi < box->max[k] ? hi : box->max[k];
-        if (out->min[k] > out->max[k])
-            return 0;
-    }
-    return 1;
-}
-
-/* Fallback when double clipping loses a sliver: the triangle's bounds cut
- * to the box (still conservative). */
-static int tri_bounds_in_box(const float *tri, const kdr_bounds *box,
-                             kdr_bounds *out) {
-    for (int k = 0; k < 3; k++) {
-        float lo = min3(tri[k], tri[3 + k], tri[6 + k]);
-        float hi = max3(tri[k], tri[3 + k], tri[6 + k]);
-        out->min[k] = lo > box->min[k] ? lo : box->min[k];
-        out->max[k] = hi < box->max[k] ? hi : box->max[k];
-        if (out->min[k] > out->max[k])
-            return 0;
-    }
-    return 1;
-}
-
-/* ---- split search: one sweep per axis -------------------------------------- */
-
-typedef struct sah_ctx {
-    float min, max;      /* node extent on the axis */
-    float cap, perim;    /* child area = 2 (cap + len * perim) */
-    float inv_area;      /* 1 / node area */
-    float isect, trav, bonus;
-} sah_ctx;
-
-static float sah_cost(const sah_ctx *c, float p, size_t nl, size_t nr) {
-    float pl = 2.0f * (c->cap + (p - c->min) * c->perim) * c->inv_area;
-    float pr = 2.0f * (c->cap + (c->max - p) * c->perim) * c->inv_area;
-    float eb = (nl == 0 || nr == 0) ? 1.0f - c->bonus : 1.0f;
-    return c->trav + c->isect * eb * (pl * (float)nl + pr * (float)nr);
-}
-
-/* Evaluates plane p with nl left, np planar, nr right; planar triangles go
- * to the cheaper side (left on ties). */
-static void sah_try(const sah_ctx *c, int k, float p, size_t nl, size_t np,
-                    size_t nr, kd_split *best) {
-    float cl = sah_cost(c, p, nl + np, nr);
-    float cr = sah_cost(c, p, nl, nr + np);
-    float cost = cl <= cr ? cl : cr;
-    if (cost < best->cost) {
-        best->cost = cost;
-        best->axis = k;
-        best->pos = p;
-        best->planar_left = cl <= cr;
-    }
-}
-
-static void sweep_axis(const builder *b, const kdr_bounds *box,
-                       const ev_list *ev, int k, kd_split *best) {
-    const int a1 = (k + 1) % 3, a2 = (k + 2) % 3;
-    const float d1 = box->max[a1] - box->min[a1], d2 = box->max[a2] - box->min[a2];
-    sah_ctx c = {box->min[k], box->max[k], d1 * d2, d1 + d2, 0.0f,
-                 b->o.isect_cost, b->o.trav_cost, b->o.empty_bonus};
-    float area = 2.0f * (c.cap + (c.max - c.min) * c.perim);
-    if (!(area > 0.0f) || !(c.max > c.min))
-        return;
-    c.inv_area = 1.0f / area;
-    const kd_event *e = ev->e[k];
-    const size_t n = ev->n[k];
-    size_t nl = 0, nr = ev->ntri;
-    for (size_t i = 0; i < n;) {
-        const uint32_t key = ev_key(e[i]);
-        size_t pe = 0, pp = 0, ps = 0;
-        do { /* one group: the events at this position */
-            const unsigned type = ev_type(e[i]);
-            pe += type == EV_END;
-            pp += type == EV_PLANAR;
-            ps += type == EV_START;
-        } while (++i < n && ev_key(e[i]) == key);
-        const float p = key_float(key);
-        nr -= pp + pe;
-        if (p > c.min && p < c.max)
-            sah_try(&c, k, p, nl, pp, nr, best);
-        nl += ps + pp;
-    }
-}
-
-static int find_split(const builder *b, const kdr_bounds *box,
-                      const ev_list *ev, kd_split *best) {
-    best->axis = -1;
-    best->pos = 0.0f;
-    best->planar_left = 1;
-    best->cost = INFINITY;
-    for (int k = 0; k < 3; k++)
-        sweep_axis(b, box, ev, k, best);
-    return best->axis >= 0;
-}
-
-/* ---- splitting the event lists ------------------------------------------------ */
-
-/* Makes *p hold at least need elements; the old contents are dead. */
-static int grow(void **p, size_t *cap, size_t need, size_t elem) {
-    if (need <= *cap)
-        return KDR_OK;
-    size_t c = *cap ? *cap : 4096;
-    while (c < need)
-        c *= 2;
-    free(*p);
-    *p = malloc(c * elem);
-    *cap = *p ? c : 0;
-    return *p ? KDR_OK : KDR_ENOMEM;
-}
-
-/* Marks each triangle of the node LEFT, RIGHT or BOTH and gathers the BOTH
- * ones in b->both; returns their count, or (size_t)-1 without memory.
- * One pass over the split axis suffices: a triangle's start event comes
- * before its end event. */
-static size_t classify(builder *b, const ev_list *ev, const kd_split *s) {
-    if (grow((void **)&b->both, &b->both_cap, ev->ntri + 1, sizeof *b->both))
-        return (size_t)-1;
-    const kd_event *e = ev->e[s->axis];
-    const uint32_t split_key = float_key(s->pos + 0.0f);
-    uint8_t *side = b->side;
-    size_t nboth = 0;
-    for (size_t i = 0; i < ev->n[s->axis]; i++) {
-        const uint32_t key = ev_key(e[i]), tri = ev_tri(e[i]);
-        switch (ev_type(e[i])) {
-        case EV_START:
-            side[tri] = key >= split_key ? SIDE_RIGHT : SIDE_BOTH;
-            break;
-        case EV_END:
-            if (key <= split_key)
-                side[tri] = SIDE_LEFT;
-            else if (side[tri] == SIDE_BOTH)
-                b->both[nboth++] = tri;
-            break;
-        default: /* planar */
-            side[tri] = (key < split_key || (key == split_key && s->planar_left))
-                            ? SIDE_LEFT
-                            : SIDE_RIGHT;
-        }
-    }
-    return nboth;
-}
-
-/* Merges sorted add[0..nadd) into dst, whose old sorted events sit at
- * dst[nadd .. nadd+nold); the write index never passes the read index. */
-static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
-                       const kd_event *add) {
-    size_t i = nadd, j = 0, w = 0;
-    const size_t end = nadd + nold;
-    while (j < nadd) {
-        if (i < end && dst[i] <= add[j])
-            dst[w++] = dst[i++];
-        else
-            dst[w++] = add[j++];
-    }
-}
-
-/* Sorts the few new events of straddling triangles (keys are unique). */
-static void sort_events(kd_event *a, size_t n) {
-    while (n > 16) {
-        kd_event x = a[0], y = a[n / 2], z = a[n - 1];
-        kd_event p = x < y ? (y < z ? y : (x < z ? z : x)) : (x < z ? x : (y < z ? z : y));
-        size_t i = 0, j = n - 1;
-        for (;;) {
-            while (a[i] < p)
-                i++;
-            while (a[j] > p)
-                j--;
-            if (i >= j)
-                break;
-            kd_event t = a[i];
-            a[i++] = a[j];
-            a[j--] = t;
-        }
-        sort_events(a, j + 1);
-        a += j + 1;
-        n -= j + 1;
-    }
-    for (size_t i = 1; i < n; i++) {
-        kd_event v = a[i];
-        size_t j = i;
-        for (; j > 0 && a[j - 1] > v; j--)
-            a[j] = a[j - 1];
-        a[j] = v;
-    }
-}
-
-/* Clips the straddlers to both child boxes; their new events go to
- * add[0..2] (left) and add[3..5] (right), sorted. Each triangle is clipped
- * to the node's box once, then that polygon to either side of the plane. */
-static void clip_both(builder *b, size_t nboth, const kdr_bounds *box,
-                      const kd_split *s, const kdr_bounds cbox[2],
-                      kd_event *add[6], size_t nadd[6], size_t ntri[2]) {
-    for (size_t i = 0; i < nboth; i++) {
-        const float *tri = b->tris + 9 * (size_t)b->both[i];
-        cvert poly[16], half[16];
-        const int n = clip_to_box(tri, box, poly);
-        for (int side = 0; side < 2; side++) {
-            kdr_bounds bb;
-            const int m = n ? clip_plane(poly, n, half, s->axis, s->pos,
-                                         side ? 1.0 : -1.0)
-                            : 0;
-            if (poly_bounds(half, m, &cbox[side], &bb) ||
-                tri_bounds_in_box(tri, &cbox[side], &bb)) {
-                ev_add(add + 3 * side, nadd + 3 * side, &bb, b->both[i]);
-                ntri[side]++;
-            }
-        }
-    }
-    for (int k = 0; k < 6; k++)
-        sort_events(add[k], nadd[k]);
-}
-
-/* Partitions the node's events into the two children (kept in order,
- * branch-free) and merges in the straddlers' new events. The children live
- * in this depth's scratch buffer: a subtree only writes deeper buffers. */
-static int split_events(builder *b, const ev_list *ev, const kd_split *s,
-                        const kdr_bounds *box, const kdr_bounds cbox[2],
-                        int depth, ev_list ch[2]) {
-    const size_t nboth = classify(b, ev, s);
-    if (nboth == (size_t)-1)
-        return KDR_ENOMEM;
-    const size_t stride = 2 * nboth + 1;
-    if (grow((void **)&b->add, &b->add_cap, 6 * stride, sizeof *b->add))
-        return KDR_ENOMEM;
-    kd_event *add[6];
-    size_t nadd[6] = {0, 0, 0, 0, 0, 0}, ntri[2] = {0, 0};
-    for (int k = 0; k < 6; k++)
-        add[k] = b->add + (size_t)k * stride;
-    clip_both(b, nboth, box, s, cbox, add, nadd, ntri);
-    size_t need = 0;
-    for (int k = 0; k < 3; k++)
-        need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
-    if (grow((void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)))
-        return KDR_ENOMEM;
-    kd_event *base = b->lvl[depth];
-    for (int k = 0; k < 3; k++) {
-        kd_event *w[2];
-        for (int side = 0; side < 2; side++) {
-            ch[side].e[k] = base;
-            w[side] = base + nadd[3 * side + k];
-            base += ev->n[k] + nadd[3 * side + k];
-        }
-        for (size_t i = 0; i < ev->n[k]; i++) {
-            const kd_event e = ev->e[k][i];
-            const uint8_t sd = b->side[ev_tri(e)];
-            *w[0] = e;
-            *w[1] = e;
-            w[0] += sd == SIDE_LEFT;
-            w[1] += sd == SIDE_RIGHT;
-            if (k == 0 && ev_type(e) != EV_END) {
-                ntri[0] += sd == SIDE_LEFT;
-                ntri[1] += sd == SIDE_RIGHT;
-            }
-        }
-        for (int side = 0; side < 2; side++) {
-            const size_t na = nadd[3 * side + k];
-            const size_t nold = (size_t)(w[side] - ch[side].e[k]) - na;
-            merge_tail(ch[side].e[k], na, nold, add[3 * side + k]);
-            ch[side].n[k] = na + nold;
-        }
-    }
-    ch[0].ntri = ntri[0];
-    ch[1].ntri = ntri[1];
-    return KDR_OK;
-}
-
-/* ---- the recursion ------------------------------------------------------------- */
+/* ---- fragments: where a task writes ------------------------------------------- */
 
 static int push_node(builder *b, size_t *idx) {
-    if (b->nnodes >= KD_MAX_NODES)
+    kd_frag *f = b->frag;
+    if (f->nnodes >= KD_MAX_NODES)
         return KDR_ERANGE;
-    if (b->nnodes == b->cap_nodes) {
-        size_t cap = b->cap_nodes ? 2 * b->cap_nodes : 1024;
-        kd_node *n = realloc(b->nodes, cap * sizeof *n);
+    if (f->nnodes == f->cap_nodes) {
+        size_t cap = f->cap_nodes ? 2 * f->cap_nodes : 1024;
+        kd_node *n = realloc(f->nodes, cap * sizeof *n);
         if (!n)
             return KDR_ENOMEM;
-        b->nodes = n;
-        b->cap_nodes = cap;
+        f->nodes = n;
+        f->cap_nodes = cap;
     }
-    *idx = b->nnodes++;
+    *idx = f->nnodes++;
     return KDR_OK;
 }
 
 static int reserve_refs(builder *b, size_t more) {
-    if (b->nrefs + more > UINT32_MAX)
+    kd_frag *f = b->frag;
+    if (f->nrefs + more > UINT32_MAX)
         return KDR_ERANGE;
-    if (b->nrefs + more <= b->cap_refs)
+    if (f->nrefs + more <= f->cap_refs)
         return KDR_OK;
-    size_t cap = b->cap_refs ? b->cap_refs : 1024;
-    while (cap < b->nrefs + more)
+    size_t cap = f->cap_refs ? f->cap_refs : 1024;
+    while (cap < f->nrefs + more)
         cap *= 2;
-    uint32_t *r = realloc(b->refs, cap * sizeof *r);
+    uint32_t *r = realloc(f->refs, cap * sizeof *r);
     if (!r)
         return KDR_ENOMEM;
-    b->refs = r;
-    b->cap_refs = cap;
+    f->refs = r;
+    f->cap_refs = cap;
     return KDR_OK;
 }
 
-static void make_leaf(builder *b, const ev_list *ev, const kdr_bounds *box,
-                      int depth) {
+/* A new leaf of count references; returns where they go, NULL on error. */
+static uint32_t *push_leaf(builder *b, size_t count) {
     size_t idx;
-    const size_t count = ev->ntri;
     int err = count >= KD_MAX_TRIS ? KDR_ERANGE : reserve_refs(b, count);
     if (err == KDR_OK)
         err = push_node(b, &idx);
     if (err != KDR_OK) {
         b->err = err;
-        return;
+        return NULL;
     }
-    b->nodes[idx].u.first = (uint32_t)b->nrefs;
-    b->nodes[idx].bits = ((uint32_t)count << 2) | KD_LEAF;
-    for (size_t i = 0; i < ev->n[0]; i++)
-        if (ev_type(ev->e[0][i]) != EV_END)
-            b->refs[b->nrefs++] = ev_tri(ev->e[0][i]);
-    b->leaves++;
-    b->empty_leaves += count == 0;
-    if ((uint64_t)depth > b->depth_seen)
-        b->depth_seen = (uint64_t)depth;
-    b->sah += b->o.isect_cost * (double)count * box_area(box) * b->inv_root_area;
+    kd_frag *f = b->frag;
+    f->nodes[idx].u.first = (uint32_t)f->nrefs;
+    f->nodes[idx].bits = ((uint32_t)count << 2) | KD_LEAF;
+    f->nrefs += count;
+    return f->refs + f->nrefs - count;
 }
 
-static void build_node(builder *b, const kdr_bounds *box, const ev_list *ev,
-                       int depth, int bad);
+/* The placeholder of a subtree another worker builds into fragment id. */
+static void push_link(builder *b, uint32_t id) {
+    size_t idx;
+    int err = push_node(b, &idx);
+    if (err != KDR_OK) {
+        b->err = err;
+        return;
+    }
+    b->frag->nodes[idx].u.first = KD_LINK;
+    b->frag->nodes[idx].bits = (id << 2) | KD_LEAF;
+    b->frag->links++;
+}
+
+/* An interior node at split s; its above child is set by set_above. */
+static int push_interior(builder *b, const kd_split *s, size_t *idx) {
+    int err = push_node(b, idx);
+    if (err != KDR_OK) {
+        b->err = err;
+        return err;
+    }
+    b->frag->nodes[*idx].u.split = s->pos;
+    b->frag->nodes[*idx].bits = (uint32_t)s->axis;
+    return KDR_OK;
+}
+
+static void set_above(builder *b, size_t idx, int axis) {
+    b->frag->nodes[idx].bits = ((uint32_t)b->frag->nnodes << 2) | (uint32_t)axis;
+}
+
+static int stopped(builder *b) { return b->err || kd_build_failed(b); }
+
+/* pbrt's termination: is splitting a node of n triangles at s worth it?
+ * Updates the count of bad refines on the path. */
+static int split_pays(size_t n, const kd_split *s, const builder *b, int *bad) {
+    const float leaf_cost = b->o.isect_cost * (float)n;
+    if (s->cost > leaf_cost)
+        ++*bad;
+    return !((s->cost > 4.0f * leaf_cost && n < KD_BAD_SMALL) ||
+             *bad >= KD_BAD_REFINES);
+}
+
+/* ---- the exact sweep (event lists) --------------------------------------------- */
+
+static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
+                        int depth, int bad);
+
+static void make_leaf(builder *b, const ev_list *ev) {
+    uint32_t *r = push_leaf(b, ev->ntri);
+    if (!r)
+        return;
+    for (size_t i = 0; i < ev->n[0]; i++)
+        if (ev_type(ev->e[0][i]) != EV_END)
+            *r++ = ev_tri(ev->e[0][i]);
+}
+
+/* Hands the above child's lists (copied out of this worker's scratch) to
+ * another worker; 0 if it must be built here. */
+static int spawn_exact(builder *b, const kdr_bounds *cbox, const ev_list *ch,
+                       int depth, int bad, uint32_t *id) {
+    if (!b->pool || ch->ntri < b->spawn_min)
+        return 0;
+    kd_task t;
+    memset(&t, 0, sizeof t);
+    t.kind = KD_TASK_EXACT;
+    t.box = *cbox;
+    t.depth = depth;
+    t.bad = bad;
+    t.block = malloc((ch->n[0] + ch->n[1] + ch->n[2] + 1) * sizeof(kd_event));
+    if (!t.block)
+        return 0;
+    kd_event *w = t.block;
+    for (int k = 0; k < 3; k++) {
+        memcpy(w, ch->e[k], ch->n[k] * sizeof *w);
+        t.ev.e[k] = w;
+        t.ev.n[k] = ch->n[k];
+        w += ch->n[k];
+    }
+    t.ev.ntri = ch->ntri;
+    if (kd_spawn(b, &t, id) != KDR_OK) {
+        free(t.block);
+        return 0;
+    }
+    return 1;
+}
 
 static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
                           const kd_split *s, int depth, int bad) {
@@ -573,38 +180,147 @@ static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
     cbox[0].max[s->axis] = cbox[1].min[s->axis] = s->pos;
     ev_list ch[2];
     size_t idx = 0;
-    int err = split_events(b, ev, s, box, cbox, depth, ch);
-    if (err == KDR_OK)
-        err = push_node(b, &idx);
+    int err = kd_split_events(b, ev, s, box, cbox, depth, ch);
     if (err != KDR_OK) {
         b->err = err;
         return;
     }
-    b->nodes[idx].u.split = s->pos;
-    b->nodes[idx].bits = (uint32_t)s->axis;
-    b->sah += b->o.trav_cost * box_area(box) * b->inv_root_area;
-    build_node(b, &cbox[0], &ch[0], depth + 1, bad);
-    b->nodes[idx].bits = ((uint32_t)b->nnodes << 2) | (uint32_t)s->axis;
-    build_node(b, &cbox[1], &ch[1], depth + 1, bad);
+    if (push_interior(b, s, &idx) != KDR_OK)
+        return;
+    uint32_t id;
+    const int spawned = spawn_exact(b, &cbox[1], &ch[1], depth + 1, bad, &id);
+    build_exact(b, &cbox[0], &ch[0], depth + 1, bad);
+    set_above(b, idx, s->axis);
+    if (spawned)
+        push_link(b, id);
+    else
+        build_exact(b, &cbox[1], &ch[1], depth + 1, bad);
 }
 
-static void build_node(builder *b, const kdr_bounds *box, const ev_list *ev,
-                       int depth, int bad) {
+static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
+                        int depth, int bad) {
     kd_split s;
-    if (b->err)
+    if (stopped(b))
         return;
     if (ev->ntri > (size_t)b->o.leaf_size && depth < b->max_depth &&
-        find_split(b, box, ev, &s)) {
-        const float leaf_cost = b->o.isect_cost * (float)ev->ntri;
-        if (s.cost > leaf_cost)
-            bad++;
-        if (!((s.cost > 4.0f * leaf_cost && ev->ntri < KD_BAD_SMALL) ||
-              bad >= KD_BAD_REFINES)) {
-            make_interior(b, box, ev, &s, depth, bad);
-            return;
-        }
+        kd_find_split(b, box, ev, &s) && split_pays(ev->ntri, &s, b, &bad)) {
+        make_interior(b, box, ev, &s, depth, bad);
+        return;
     }
-    make_leaf(b, ev, box, depth);
+    make_leaf(b, ev);
+}
+
+/* ---- the binned top (prim arrays) ------------------------------------------------ */
+
+static void build_binned(builder *b, const kdr_bounds *box, kd_prims *p,
+                         int depth, int bad);
+
+/* The subtree of a node small enough for the exact sweep. */
+static void binned_to_exact(builder *b, const kdr_bounds *box, kd_prims *p,
+                            int depth, int bad) {
+    ev_list ev;
+    kd_event *block;
+    int err = kd_prims_to_events(p, &ev, &block);
+    free(p->p);
+    p->p = NULL;
+    if (err == KDR_OK && !b->side && !(b->side = malloc(b->ntris)))
+        err = KDR_ENOMEM;
+    if (err == KDR_OK)
+        build_exact(b, box, &ev, depth, bad);
+    else
+        b->err = err;
+    free(block);
+}
+
+static int spawn_binned(builder *b, const kdr_bounds *cbox, kd_prims *ch,
+                        int depth, int bad, uint32_t *id) {
+    if (!b->pool || ch->n < b->spawn_min)
+        return 0;
+    kd_task t;
+    memset(&t, 0, sizeof t);
+    t.kind = KD_TASK_BINNED;
+    t.box = *cbox;
+    t.depth = depth;
+    t.bad = bad;
+    t.prims = *ch;
+    if (kd_spawn(b, &t, id) != KDR_OK)
+        return 0;
+    ch->p = NULL; /* the task owns it now */
+    return 1;
+}
+
+static void make_interior_binned(builder *b, const kdr_bounds *box, kd_prims *p,
+                                 const kd_split *s, int depth, int bad) {
+    kdr_bounds cbox[2] = {*box, *box};
+    cbox[0].max[s->axis] = cbox[1].min[s->axis] = s->pos;
+    kd_prims ch[2];
+    size_t idx;
+    int err = kd_bin_partition(b, box, s, cbox, p, ch);
+    free(p->p);
+    p->p = NULL;
+    if (err != KDR_OK) {
+        b->err = err;
+        return;
+    }
+    if (push_interior(b, s, &idx) != KDR_OK) {
+        free(ch[0].p);
+        free(ch[1].p);
+        return;
+    }
+    uint32_t id;
+    const int spawned = spawn_binned(b, &cbox[1], &ch[1], depth + 1, bad, &id);
+    build_binned(b, &cbox[0], &ch[0], depth + 1, bad);
+    set_above(b, idx, s->axis);
+    if (spawned)
+        push_link(b, id);
+    else
+        build_binned(b, &cbox[1], &ch[1], depth + 1, bad);
+}
+
+/* Builds the subtree of a binned node; frees p->p. */
+static void build_binned(builder *b, const kdr_bounds *box, kd_prims *p,
+                         int depth, int bad) {
+    kd_split s;
+    if (stopped(b)) {
+        free(p->p);
+        p->p = NULL;
+        return;
+    }
+    if (p->n <= (size_t)b->o.exact_max) {
+        binned_to_exact(b, box, p, depth, bad);
+        return;
+    }
+    if (p->n > (size_t)b->o.leaf_size && depth < b->max_depth &&
+        kd_bin_split(b, box, p, &s) && split_pays(p->n, &s, b, &bad)) {
+        make_interior_binned(b, box, p, &s, depth, bad);
+        return;
+    }
+    uint32_t *r = push_leaf(b, p->n);
+    for (size_t i = 0; r && i < p->n; i++)
+        r[i] = p->p[i].tri;
+    free(p->p);
+    p->p = NULL;
+}
+
+void kd_run_task(builder *b, kd_task *t) {
+    switch (t->kind) {
+    case KD_TASK_SORT:
+        kd_radix_sort(t->ev.e[0], t->block, t->ev.n[0]);
+        break;
+    case KD_TASK_EXACT:
+        b->frag = t->frag;
+        if (!b->side && !(b->side = malloc(b->ntris)))
+            b->err = KDR_ENOMEM;
+        else
+            build_exact(b, &t->box, &t->ev, t->depth, t->bad);
+        break;
+    case KD_TASK_BINNED:
+        b->frag = t->frag;
+        build_binned(b, &t->box, &t->prims, t->depth, t->bad);
+        break;
+    }
+    free(t->block);
+    t->block = NULL;
 }
 
 /* ---- the public build -------------------------------------------------------- */
@@ -628,7 +344,8 @@ static void logf_(kdr_log_fn log, void *user, const char *fmt, ...) {
 
 static int check_opts(const kdr_build_opts *o) {
     if (!(o->isect_cost > 0.0f) || !(o->trav_cost >= 0.0f) ||
-        !(o->empty_bonus >= 0.0f && o->empty_bonus < 1.0f) || o->leaf_size < 0)
+        !(o->empty_bonus >= 0.0f && o->empty_bonus < 1.0f) || o->leaf_size < 0 ||
+        o->threads < 0 || o->exact_max < 0)
         return KDR_EINVAL;
     return KDR_OK;
 }
@@ -673,12 +390,17 @@ static void pad_root(kdr_scene *s) {
     s->diagonal = (float)sqrt(d2);
 }
 
-static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev) {
-    kd_event *tmp = malloc((2 * nvalid + 1) * sizeof *tmp);
-    int err = tmp ? KDR_OK : KDR_ENOMEM;
+/* The root's sorted event lists (exact build from the root): made in
+ * triangle order, each axis sorted on its own (SORT tasks, in parallel when
+ * there are threads). */
+static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev,
+                       kd_task sort[3]) {
+    int err = KDR_OK;
     memset(ev, 0, sizeof *ev);
+    memset(sort, 0, 3 * sizeof *sort);
     for (int k = 0; k < 3 && err == KDR_OK; k++)
-        if (!(ev->e[k] = malloc((2 * nvalid + 1) * sizeof(kd_event))))
+        if (!(ev->e[k] = malloc((2 * nvalid + 1) * sizeof(kd_event))) ||
+            !(sort[k].block = malloc((2 * nvalid + 1) * sizeof(kd_event))))
             err = KDR_ENOMEM;
     for (size_t i = 0; i < s->ntris && err == KDR_OK; i++) {
         const float *t = s->tris + 9 * i;
@@ -691,12 +413,17 @@ static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev) {
         }
         ev_add(ev->e, ev->n, &bb, (uint32_t)i);
     }
-    for (int k = 0; k < 3 && err == KDR_OK; k++)
-        radix_sort(ev->e[k], tmp, ev->n[k]);
     ev->ntri = nvalid;
-    free(tmp);
-    if (err != KDR_OK)
-        ev_free(ev);
+    for (int k = 0; k < 3; k++) {
+        sort[k].kind = KD_TASK_SORT;
+        sort[k].ev.e[0] = ev->e[k];
+        sort[k].ev.n[0] = ev->n[k];
+    }
+    if (err != KDR_OK) {
+        kd_ev_free(ev);
+        for (int k = 0; k < 3; k++)
+            free(sort[k].block);
+    }
     return err;
 }
 
@@ -708,55 +435,66 @@ static int max_depth_for(const kdr_build_opts *o, size_t n) {
     return d < KD_MAX_DEPTH ? d : KD_MAX_DEPTH;
 }
 
+/* Subtrees worth a task: big enough to repay the hand-over, few enough
+ * (KD_TASKS_PER_THREAD per thread) to keep the copies of exact lists cheap.
+ * Only where the work is cut depends on the thread count, never the tree. */
+static size_t spawn_min_for(size_t nvalid, int threads) {
+    const size_t per = nvalid / ((size_t)KD_TASKS_PER_THREAD * (size_t)threads);
+    return per > KD_SPAWN_MIN ? per : KD_SPAWN_MIN;
+}
+
 static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
                       kdr_log_fn log, void *user) {
-    builder b;
-    memset(&b, 0, sizeof b);
-    b.tris = s->tris;
-    b.o = *o;
-    b.max_depth = max_depth_for(o, nvalid);
-    double area = box_area(&s->bounds);
-    b.inv_root_area = area > 0.0 ? 1.0 / area : 0.0;
+    /* No more threads than tasks of KD_SPAWN_MIN triangles could keep busy
+     * (below two, the caller alone), nor than KD_MAX_THREADS: extra ones
+     * would only be started and joined. */
+    const size_t useful = nvalid / KD_SPAWN_MIN;
+    size_t t = o->threads > 1 ? (size_t)o->threads : 1;
+    t = t < useful ? t : useful;
+    t = t < KD_MAX_THREADS ? t : KD_MAX_THREADS;
+    const int threads = t > 1 ? (int)t : 1;
+    builder proto;
+    memset(&proto, 0, sizeof proto);
+    proto.tris = s->tris;
+    proto.ntris = s->ntris;
+    proto.o = *o;
+    proto.max_depth = max_depth_for(o, nvalid);
+    proto.spawn_min = spawn_min_for(nvalid, threads);
     const int phases = nvalid > KD_LOG_PHASES;
     double t0 = now_ms();
-    ev_list ev = {{NULL, NULL, NULL}, {0, 0, 0}, 0};
-    b.side = malloc(s->ntris);
-    int err = b.side ? root_events(s, nvalid, &ev) : KDR_ENOMEM;
+    kd_task root, sort[3];
+    memset(&root, 0, sizeof root);
+    root.box = s->bounds;
+    int err, nsort = 0;
+    if (nvalid > (size_t)o->exact_max) {
+        root.kind = KD_TASK_BINNED;
+        err = kd_root_prims(s->tris, s->ntris, nvalid, &root.prims);
+    } else {
+        root.kind = KD_TASK_EXACT;
+        err = root_events(s, nvalid, &root.ev, sort);
+        nsort = 3;
+    }
+    kd_frag **frags = NULL;
+    size_t nfrags = 0;
+    double cpu_ms[2] = {0.0, 0.0};
+    if (err == KDR_OK)
+        err = kd_build_run(&proto, threads, sort, nsort, &root, &frags, &nfrags, cpu_ms);
+    else
+        free(root.prims.p);
+    kd_ev_free(&root.ev);
     if (err == KDR_OK) {
-        if (phases)
-            logf_(log, user, "kd build: %zu events sorted in %.1f ms",
-                  ev.n[0] + ev.n[1] + ev.n[2], now_ms() - t0);
-        build_node(&b, &s->bounds, &ev, 0, 0);
-        err = b.err;
-        if (phases && err == KDR_OK)
-            logf_(log, user, "kd build: %zu nodes, %zu refs after %.1f ms",
-                  b.nnodes, b.nrefs, now_ms() - t0);
+        /* the busiest thread's CPU time bounds the wall time an idle
+         * machine would take for this phase */
+        if (phases || threads > 1)
+            logf_(log, user,
+                  "kd build: %zu pieces on %d thread%s after %.1f ms (CPU: busiest "
+                  "thread %.1f ms, all %.1f ms)",
+                  nfrags, threads, threads == 1 ? "" : "s", now_ms() - t0, cpu_ms[0],
+                  cpu_ms[1]);
+        err = kd_stitch(frags, nfrags, o, s);
     }
-    free(b.side);
-    ev_free(&ev);
-    for (int d = 0; d <= KD_MAX_DEPTH; d++)
-        free(b.lvl[d]);
-    free(b.both);
-    free(b.add);
-    if (err != KDR_OK) {
-        free(b.nodes);
-        free(b.refs);
-        return err;
-    }
-    s->nodes = b.nodes;
-    s->nnodes = b.nnodes;
-    s->refs = b.refs;
-    s->nrefs = b.nrefs;
-    s->stats.nodes = b.nnodes;
-    s->stats.leaves = b.leaves;
-    s->stats.empty_leaves = b.empty_leaves;
-    s->stats.max_depth = b.depth_seen;
-    s->stats.refs = b.nrefs;
-    s->stats.refs_per_leaf = b.leaves > b.empty_leaves
-                                 ? (double)b.nrefs / (double)(b.leaves - b.empty_leaves)
-                                 : 0.0;
-    s->stats.sah_cost = b.sah;
-    return KDR_OK;
+    kd_frags_free(frags, nfrags);
+    return err;
 }
 
 #ifndef NDEBUG

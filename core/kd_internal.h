@@ -1,7 +1,8 @@
 /*
  * kd_internal.h — the built scene as every traversal sees it: the 8-byte
  * node layout, the leaf reference lists and the triangle copy. Shared by
- * kd_build.c and the kd_traverse_*.c files; not part of the public API.
+ * the kd_build*.c files and the kd_traverse_*.c files; not part of the
+ * public API.
  *
  * Node layout (8 bytes, as in pbrt-v3 / Wald's thesis), as every traversal
  * sees it after kd_layout() (core/kd_layout.c):

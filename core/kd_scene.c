@@ -1,7 +1,7 @@
 /*
  * kd_scene.c — the small things around a built scene: error strings, the
  * tuned default build options, accessors and freeing. The build itself is
- * in kd_build.c, the walks in kd_traverse_*.c.
+ * in kd_build*.c, the walks in kd_traverse_*.c.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -32,6 +32,8 @@ void kdr_build_opts_default(kdr_build_opts *opts) {
     opts->empty_bonus = KD_EMPTY_BONUS;
     opts->max_depth = 0;
     opts->leaf_size = KD_LEAF_SIZE;
+    opts->exact_max = KD_EXACT_MAX;
+    opts->threads = 0;
 }
 
 void kdr_scene_free(kdr_scene *scene) {

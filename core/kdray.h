@@ -56,6 +56,16 @@ typedef struct kdr_build_opts {
     float empty_bonus;  /* in [0,1): SAH discount for cutting off empty space */
     int max_depth;      /* <= 0: 6 + 1.3 log2(N) (pbrt: 8 + ...) */
     int leaf_size;      /* never split a node with at most this many refs */
+    int exact_max;      /* >= 0: nodes with more triangles than this choose
+                           their plane from min-max bins, smaller ones by the
+                           exact SAH sweep (default 65536; INT_MAX: exact
+                           everywhere, 0: binned everywhere) */
+    int threads;        /* build threads: 0 or 1 = the calling thread only
+                           (the default: the caller decides); N > 1 = the
+                           caller and up to N-1 threads it starts and joins
+                           (fewer on small scenes: about one per 4096
+                           triangles; at most 1024 in all). The tree is the
+                           same for every value. */
 } kdr_build_opts;
 
 void kdr_build_opts_default(kdr_build_opts *opts);
@@ -77,7 +87,10 @@ typedef struct kdr_tree_stats {
 typedef void (*kdr_log_fn)(void *user, const char *msg);
 
 /* Builds a scene from ntris triangles (9*ntris floats, copied). Non-finite
- * coordinates are KDR_EINVAL. ntris may be 0 (every ray misses). */
+ * coordinates are KDR_EINVAL. ntris may be 0 (every ray misses). With
+ * opts->threads > 1 the build starts threads of its own (POSIX threads) and
+ * joins them before returning; kdr_scene_build itself may be called from
+ * several threads at once. */
 int kdr_scene_build(const float *tris, size_t ntris, const kdr_build_opts *opts,
                     kdr_log_fn log, void *log_user, kdr_scene **out);
 void kdr_scene_free(kdr_scene *scene);

@@ -28,10 +28,16 @@ class Glb:
     def _view(self, data, target):
         while len(self.bin) % 4:
             self.bin.append(0)
-        self.gltf["bufferViews"].append(
-            {"buffer": 0, "byteOffset": len(self.bin), "byteLength": len(data), "target": target})
+        v = {"buffer": 0, "byteOffset": len(self.bin), "byteLength": len(data)}
+        if target is not None:
+            v["target"] = target
+        self.gltf["bufferViews"].append(v)
         self.bin += data
         return len(self.gltf["bufferViews"]) - 1
+
+    def add_view(self, data, target=None):
+        """Raw bytes as a new bufferView (4-byte aligned); returns its index."""
+        return self._view(data, target)
 
     def add_mesh(self, name, positions, indices):
         """positions: list of (x, y, z); indices: flat list, 3 per triangle."""

@@ -2,10 +2,12 @@
  * main.c — kdrayd: start-up order, signals, reloads and shutdown.
  *
  * Start-up opens the HTTP port first (health and queries answer 503), then
- * loads and builds every scene on the main thread, then flips the registry
- * to ready and tells systemd (READY=1 when run as a Type=notify unit). A
- * scene that fails to load ends the process with status 1: a daemon
- * silently serving fewer scenes than asked is worse than none.
+ * loads and builds the scenes, several at once (min(scenes, --threads)
+ * start-up threads, each build itself on --threads threads), then flips
+ * the registry to ready and tells systemd (READY=1 when run as a Type=notify
+ * unit). A scene that fails to load ends the process with status 1 (scenes
+ * not started yet are skipped): a daemon silently serving fewer scenes than
+ * asked is worse than none.
  *
  * Signals are taken by a dedicated sigwait() thread (blocked everywhere
  * else, so no handler ever runs on an HTTP or worker thread), which only
@@ -132,15 +134,47 @@ static void end_signals(sig_state *w) {
 
 /* ---- start-up, reloads ---------------------------------------------------- */
 
+/* The scenes still to build, shared by the start-up threads. */
+typedef struct build_queue {
+    kdr_server *srv;
+    atomic_size_t next;
+    atomic_int failed;
+} build_queue;
+
+/* Takes scenes from the queue until none is left, one fails, or a signal
+ * asks to stop. Each build uses every thread the daemon may use: when
+ * several run at once they share the cores, and the last large one still
+ * gets all of them. */
+static void *build_worker(void *arg) {
+    build_queue *q = arg;
+    const size_t n = kdr_registry_count(q->srv->registry);
+    for (;;) {
+        if (atomic_load(&q->failed) || atomic_load(&q->srv->stopping)) break;
+        const size_t i = atomic_fetch_add(&q->next, 1);
+        if (i >= n) break;
+        if (kdr_registry_build(q->srv->registry, i, (int)q->srv->threads) != 0)
+            atomic_store(&q->failed, 1);
+    }
+    return NULL;
+}
+
 /* Builds every scene; 1 if one failed, 0 otherwise (also when a signal
  * cut the start-up short). */
 static int build_scenes(kdr_server *srv) {
     double t0 = kdr_now();
     size_t n = kdr_registry_count(srv->registry);
-    for (size_t i = 0; i < n; i++) {
-        if (atomic_load(&srv->stopping)) return 0;
-        if (kdr_registry_build(srv->registry, i) != 0) return 1;
-    }
+    build_queue q = {.srv = srv};
+    atomic_init(&q.next, 0);
+    atomic_init(&q.failed, 0);
+    size_t helpers = (n < srv->threads ? n : srv->threads) - 1, started = 0;
+    pthread_t *th = helpers ? calloc(helpers, sizeof *th) : NULL;
+    for (; th && started < helpers; started++)
+        if (pthread_create(&th[started], NULL, build_worker, &q) != 0) break;
+    build_worker(&q);
+    for (size_t i = 0; i < started; i++) pthread_join(th[i], NULL);
+    free(th);
+    if (atomic_load(&q.failed)) return 1;
+    if (atomic_load(&srv->stopping)) return 0;
     kdr_registry_set_ready(srv->registry);
     kdr_log("ready: %zu scene%s built in %.1f ms", n, n == 1 ? "" : "s",
             (kdr_now() - t0) * 1e3);

@@ -1,7 +1,8 @@
 /*
  * registry.c — the scene table and its versions (see registry.h). The
  * table (names, paths) is written on the main thread only, before the HTTP
- * port opens. Each entry's current version pointer and its reload counters
+ * port opens; each entry is then built by one start-up thread, several at
+ * once. Each entry's current version pointer and its reload counters
  * change under the registry mutex; readers take the mutex just long enough
  * to copy the pointer and count a reference, so a reload's swap never waits
  * for a query and a query never waits for a build.
@@ -43,6 +44,7 @@ struct kdr_registry {
     pthread_mutex_t lock;
     atomic_size_t built;
     atomic_int ready;
+    atomic_int threads; /* build threads, for reloads too */
 };
 
 kdr_registry *kdr_registry_create(void) {
@@ -50,6 +52,7 @@ kdr_registry *kdr_registry_create(void) {
     if (!r) return NULL;
     pthread_mutex_init(&r->lock, NULL);
     atomic_init(&r->built, 0);
+    atomic_init(&r->threads, 1);
     atomic_init(&r->ready, 0);
     return r;
 }
@@ -160,8 +163,8 @@ static int same_file(const file_id *a, const file_id *b) {
 
 /* Loads and builds e's file as a new version (one reference, the caller's);
  * NULL with the reason in why. */
-static kdr_scene_version *load_version(entry *e, unsigned generation, char *why,
-                                       size_t why_len) {
+static kdr_scene_version *load_version(entry *e, unsigned generation, int threads,
+                                       char *why, size_t why_len) {
     kdr_gltf_scene g;
     char err[ERR_LEN] = "";
     if (kdr_gltf_load(e->path, &g, err, sizeof err) != 0) {
@@ -176,6 +179,7 @@ static kdr_scene_version *load_version(entry *e, unsigned generation, char *why,
     }
     kdr_build_opts opts;
     kdr_build_opts_default(&opts);
+    opts.threads = threads;
     double t0 = kdr_now();
     int rc = kdr_scene_build(g.tris, g.ntris, &opts, build_log, e, &v->scene);
     v->build_ms = (kdr_now() - t0) * 1e3;
@@ -197,12 +201,13 @@ static kdr_scene_version *load_version(entry *e, unsigned generation, char *why,
     return v;
 }
 
-int kdr_registry_build(kdr_registry *r, size_t i) {
+int kdr_registry_build(kdr_registry *r, size_t i, int threads) {
     entry *e = &r->s[i];
     char why[ERR_LEN];
     kdr_log("scene %s: loading %s", e->name, e->path);
     e->have_id = identify(e->path, &e->id) == 0;
-    kdr_scene_version *v = load_version(e, 1, why, sizeof why);
+    atomic_store(&r->threads, threads); /* the same from every start-up thread */
+    kdr_scene_version *v = load_version(e, 1, threads, why, sizeof why);
     if (!v) {
         kdr_log_error("scene %s: %s", e->name, why);
         return -1;
@@ -250,7 +255,7 @@ static int reload_one(kdr_registry *r, entry *e) {
         return 0;
     }
     kdr_log("scene %s: reloading %s", e->name, e->path);
-    kdr_scene_version *v = load_version(e, gen + 1, why, sizeof why);
+    kdr_scene_version *v = load_version(e, gen + 1, atomic_load(&r->threads), why, sizeof why);
     if (!v) {
         kdr_log_error("scene %s: reload failed, keeping generation %u: %s", e->name, gen,
                       why);

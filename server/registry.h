@@ -2,8 +2,9 @@
  * registry.h — the scenes kdrayd serves. Each name maps to its current
  * version: one load + kd-tree build of its file, reference-counted. The
  * table of names is filled from the command line before the HTTP port
- * opens and never changes afterwards; scenes are then built one by one
- * while the port already answers 503, and requests see them only once
+ * opens and never changes afterwards; scenes are then built, several at
+ * once (each entry by one start-up thread), while the port already answers
+ * 503, and requests see them only once
  * kdr_registry_ready() (a release/acquire flag) says all are built.
  *
  * Reload (SIGHUP): kdr_registry_reload() re-reads every scene file whose
@@ -51,9 +52,11 @@ const char *kdr_registry_name(const kdr_registry *r, size_t i);
 /* Index of the scene called name (length len), or -1. */
 long kdr_registry_index(const kdr_registry *r, const char *name, size_t len);
 
-/* Loads and builds scene i (start-up), logging its statistics. 0, or -1
- * after logging a one-line error. */
-int kdr_registry_build(kdr_registry *r, size_t i);
+/* Loads and builds scene i (start-up) with `threads` build threads
+ * (kdr_build_opts; reloads use the same count), logging its statistics. 0,
+ * or -1 after logging a one-line error. Different entries may be built by
+ * different threads at the same time. */
+int kdr_registry_build(kdr_registry *r, size_t i, int threads);
 /* Marks every scene built: queries may start. */
 void kdr_registry_set_ready(kdr_registry *r);
 int kdr_registry_ready(const kdr_registry *r);

@@ -13,7 +13,8 @@
  * reference (default): single-ray / per-pixel / per-sample core modes;
  * fast: the modes kdrayd uses (bundles, four frusta at a time, cones). T
  * workers split every request into the daemon's chunks (the answer does not
- * depend on T). With --repeat R the request runs R times and the best and
+ * depend on T), and the kd-tree is built on T threads (the same tree as on
+ * one). With --repeat R the request runs R times and the best and
  * mean tracing time (chunks only: no parse, no encode) are printed.
  * A file whose name ends in ".cbor" is read as application/cbor, any other
  * as application/json; --content-type and --accept take the values of the
@@ -170,7 +171,7 @@ static int parse_cli(cli *c, int argc, char **argv) {
     return 0;
 }
 
-static kdr_scene *load_scene(const char *path) {
+static kdr_scene *load_scene(const char *path, unsigned threads) {
     kdr_gltf_scene g;
     char err[512];
     if (kdr_gltf_load(path, &g, err, sizeof err)) {
@@ -180,6 +181,7 @@ static kdr_scene *load_scene(const char *path) {
     kdr_scene *s = NULL;
     kdr_build_opts opts;
     kdr_build_opts_default(&opts);
+    opts.threads = (int)threads;
     int rc = kdr_scene_build(g.tris, g.ntris, &opts, NULL, NULL, &s);
     kdr_gltf_free(&g);
     if (rc) fprintf(stderr, "kdray-trace: build: %s\n", kdr_strerror(rc));
@@ -257,7 +259,7 @@ int main(int argc, char **argv) {
     if (parse_cli(&c, argc, argv)) return usage();
     if (!c.scene_path)
         c.scene_path = kdr_default_scene_path(default_path, sizeof default_path);
-    kdr_scene *scene = load_scene(c.scene_path);
+    kdr_scene *scene = load_scene(c.scene_path, c.threads);
     kdr_exec_config cfg = {c.threads, (size_t)c.nrequests, 0, NULL, NULL};
     kdr_exec *ex = scene ? kdr_exec_create(&cfg) : NULL;
     int rc = !scene || !ex;

@@ -22,7 +22,49 @@ if(TARGET kdray_scenes AND TARGET embree)
   target_link_libraries(test_core_perf PRIVATE kdray_core kdray_scenes embree)
 endif()
 
+# The binned and parallel build: same tree for every thread count, binned
+# trees against brute force.
+add_executable(test_core_build ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c)
+target_link_libraries(test_core_build PRIVATE kdray_core)
+add_test(NAME test_core_build COMMAND test_core_build)
+
+# The same program under ThreadSanitizer: clang compiles it with every core
+# source and -fsanitize=thread (the project itself builds with gcc). Not in
+# the ASan/UBSan build (one run is enough). Without clang the test fails.
+find_program(KDRAY_CLANG NAMES clang clang-14)
+if(NOT KDRAY_SANITIZE)
+  if(KDRAY_CLANG)
+    file(GLOB KDRAY_TSAN_CORE ${CMAKE_SOURCE_DIR}/core/*.c ${CMAKE_SOURCE_DIR}/core/*.h)
+    list(FILTER KDRAY_TSAN_CORE INCLUDE REGEX "\\.c$")
+    set(KDRAY_TSAN_BIN ${CMAKE_CURRENT_BINARY_DIR}/test_core_build_tsan)
+    add_custom_command(
+      OUTPUT ${KDRAY_TSAN_BIN}
+      COMMAND ${KDRAY_CLANG} -std=c11 -g -O1 -fsanitize=thread -ffp-contract=off
+              -fno-strict-aliasing -I${CMAKE_SOURCE_DIR}/core
+              ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c ${KDRAY_TSAN_CORE}
+              -lm -lpthread -o ${KDRAY_TSAN_BIN}
+      DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c
+              ${CMAKE_CURRENT_SOURCE_DIR}/test_core_util.h ${KDRAY_TSAN_CORE}
+      COMMENT "Building test_core_build with clang -fsanitize=thread"
+      VERBATIM)
+    add_custom_target(test_core_build_tsan ALL DEPENDS ${KDRAY_TSAN_BIN})
+    add_test(NAME test_core_build_tsan COMMAND ${KDRAY_TSAN_BIN})
+    set_tests_properties(test_core_build_tsan PROPERTIES
+                         ENVIRONMENT "TSAN_OPTIONS=halt_on_error=1:exitcode=66")
+  else()
+    add_test(NAME test_core_build_tsan
+             COMMAND sh -c "echo 'test_core_build_tsan: clang not found (install clang, see scripts/dev)' >&2; exit 1")
+  endif()
+endif()
+
 # The four-triangle single-ray test against the scalar one, bit for bit.
 add_executable(test_core_tri4 ${CMAKE_CURRENT_SOURCE_DIR}/test_core_tri4.c)
 target_include_directories(test_core_tri4 PRIVATE ${CMAKE_SOURCE_DIR}/core)
 add_test(NAME test_core_tri4 COMMAND test_core_tri4)
+
+# kdray-tree-digest: a tool, not a test: per ladder scene the tree's
+# statistics, build time and digests of its node and reference arrays (equal
+# digests = byte-identical trees; used to check pure refactors of the build).
+add_executable(kdray_tree_digest ${CMAKE_CURRENT_SOURCE_DIR}/tree_digest.c)
+set_target_properties(kdray_tree_digest PROPERTIES OUTPUT_NAME kdray-tree-digest)
+target_link_libraries(kdray_tree_digest PRIVATE kdray_testsupport)

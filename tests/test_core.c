@@ -183,8 +183,11 @@ static size_t compare_many(const soup *sp, const kdr_scene *s, size_t nrays,
 }
 
 /* Leaf size for the scenes below: 1 gives the deepest trees and the most
- * straddler clipping; 0 means the defaults. */
-static int g_leaf_size;
+ * straddler clipping; 0 means the defaults. g_exact_max < 0 keeps the
+ * default (the exact sweep everywhere on scenes this small); 0 bins every
+ * node, a few dozen mixes binned tops with exact subtrees. g_threads goes
+ * to kdr_build_opts.threads. */
+static int g_leaf_size, g_exact_max = -1, g_threads;
 
 static kdr_scene *build_or_die(const soup *sp) {
     kdr_scene *s = NULL;
@@ -192,6 +195,9 @@ static kdr_scene *build_or_die(const soup *sp) {
     kdr_build_opts_default(&o);
     if (g_leaf_size > 0)
         o.leaf_size = g_leaf_size;
+    if (g_exact_max >= 0)
+        o.exact_max = g_exact_max;
+    o.threads = g_threads;
     int err = kdr_scene_build(sp->t, sp->n, &o, NULL, NULL, &s);
     CHECK(err == KDR_OK);
     if (err != KDR_OK) {
@@ -416,6 +422,12 @@ static void test_build_errors(void) {
     kdr_build_opts_default(&o);
     o.empty_bonus = 1.0f;
     CHECK(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
+    kdr_build_opts_default(&o);
+    o.threads = -1;
+    CHECK(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
+    kdr_build_opts_default(&o);
+    o.exact_max = -1;
+    CHECK(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
     CHECK(strcmp(kdr_strerror(KDR_ENOMEM), kdr_strerror(KDR_OK)) != 0);
 }
 
@@ -471,7 +483,15 @@ int main(void) {
     test_small_scenes();
     test_build_options();
     test_log_and_stats();
-    for (g_leaf_size = 0; g_leaf_size <= 1; g_leaf_size++) {
+    /* the exact sweep (default and 1-triangle leaves), then binned trees
+     * (every node binned, and binned tops over exact subtrees) built on
+     * several threads: every answer must still equal brute force */
+    static const struct { int exact_max, threads, leaf_size; } builds[] = {
+        {-1, 0, 0}, {-1, 0, 1}, {0, 3, 1}, {40, 2, 0}};
+    for (size_t i = 0; i < sizeof builds / sizeof *builds; i++) {
+        g_exact_max = builds[i].exact_max;
+        g_threads = builds[i].threads;
+        g_leaf_size = builds[i].leaf_size;
         test_random_soups();
         test_box_grid();
         test_huge_offsets();

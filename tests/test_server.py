@@ -529,16 +529,19 @@ def test_sigterm_in_flight(t):
 
 def test_startup_503_and_two_scenes(t, default_path):
     """The port answers 503 while a scene is still loading (its path is a
-    FIFO we have not written yet), then both scenes serve the same answers."""
+    FIFO we have not written yet); with two threads the other scene is built
+    meanwhile (scenes build at once, not one after the other); then both
+    scenes serve the same answers."""
     tmp = lib.tempfile.mkdtemp(prefix="kdray-fifo-")
     fifo = os.path.join(tmp, "scene.glb")
     os.mkfifo(fifo)
-    d = lib.Daemon(KDRAYD, ["--scene", "a=" + fifo, "--scene", "b=" + default_path],
+    d = lib.Daemon(KDRAYD, ["--scene", "a=" + fifo, "--scene", "b=" + default_path,
+                            "--threads", "2"],
                    wait_ready=False, default_scene=False)
     try:
         c = Client(d.url)
         p = expect_problem(t, c.request("GET", "/v1/health"), 503, "health while loading")
-        t.check("0 of 2" in p["detail"], "starting detail: " + p["detail"])
+        t.check(" of 2 scenes built" in p["detail"], "starting detail: " + p["detail"])
         try:
             c.ready()
             t.check(False, "client ready() raises while loading")
@@ -548,6 +551,16 @@ def test_startup_503_and_two_scenes(t, default_path):
         expect_problem(t, post(c, "/v1/scenes/b/bundle", {}), 503, "query while loading")
         expect_problem(t, c.request("GET", "/v1/scenes"), 503, "scenes while loading")
         t.eq(metric(c.metrics(), "kdray_ready"), 0.0, "metrics answer while loading")
+        deadline = time.time() + 60
+        while (metric(c.metrics(), "kdray_scene_build_seconds", scene="b") == 0
+               and time.time() < deadline):
+            time.sleep(0.05)
+        t.check(metric(c.metrics(), "kdray_scene_build_seconds", scene="b") > 0,
+                "b built while a still loads")
+        t.eq(metric(c.metrics(), "kdray_scene_build_seconds", scene="a"), 0.0,
+             "no gauge for a scene still loading")
+        p = expect_problem(t, c.request("GET", "/v1/health"), 503, "health, a loading")
+        t.check("1 of 2" in p["detail"], "starting detail: " + p["detail"])
         with open(default_path, "rb") as src, open(fifo, "wb") as dst:
             dst.write(src.read())
         d.wait_healthy()

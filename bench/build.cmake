@@ -1,0 +1,8 @@
+# Build benchmark (owner: core build): kd build on one and on all threads
+# against Embree's HIGH and MEDIUM builds with the same threads, and the
+# exact tree against the binned one on single rays, bundles and frusta, over
+# the scene ladder. Its own main (it times builds, which bench_main does
+# once per scene); ray workloads from kdray_bench_lib (bench.h), defined in
+# programs.cmake and linked by name. Not a test.
+add_executable(kdray_bench_build ${CMAKE_CURRENT_SOURCE_DIR}/bench_build.c)
+target_link_libraries(kdray_bench_build PRIVATE kdray_bench_lib)

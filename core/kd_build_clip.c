@@ -1,0 +1,157 @@
+/*
+ * kd_build_clip.c — "perfect splits" for the SAH build (kd_build.h): a
+ * triangle that straddles a split plane is clipped to the node's box and
+ * then to either side of the plane, and its events in each child are the
+ * bounds of what is left there. Clipping runs in double and rounds the
+ * bounds of computed points outward, so a triangle is never left out of a
+ * box it touches; when double clipping loses a sliver, the triangle's own
+ * bounds cut to the box stand in (still conservative).
+ */
+#include <float.h>
+#include <math.h>
+#include <string.h>
+
+#include "kd_build.h"
+
+typedef struct cvert {
+    double p[3];
+    unsigned exact; /* bit k: p[k] is exactly a float of the input */
+} cvert;
+
+/* Sutherland-Hodgman step: keeps the part where sign * (p[k] - c) >= 0. */
+static int clip_plane(const cvert *in, int n, cvert *out, int k, float c,
+                      double sign) {
+    int m = 0;
+    for (int i = 0; i < n; i++) {
+        const cvert *a = &in[i], *b = &in[(i + 1) % n];
+        double da = sign * (a->p[k] - c), db = sign * (b->p[k] - c);
+        if (da >= 0.0)
+            out[m++] = *a;
+        if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0)) {
+            cvert *v = &out[m++];
+            double t = da / (da - db);
+            v->exact = 1u << k;
+            for (int j = 0; j < 3; j++) {
+                v->p[j] = a->p[j] + t * (b->p[j] - a->p[j]);
+                if (j != k && a->p[j] == b->p[j])
+                    v->exact |= a->exact & b->exact & (1u << j);
+            }
+            v->p[k] = c;
+        }
+    }
+    return m;
+}
+
+/* The next float toward -infinity (finite input). */
+static inline float step_down(float f) {
+    uint32_t u;
+    if (f == 0.0f)
+        return -FLT_TRUE_MIN;
+    memcpy(&u, &f, sizeof u);
+    u = f > 0.0f ? u - 1 : u + 1;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+/* Clips tri to box (only against the planes its bounds cross) into out[];
+ * returns the vertex count, 0 when nothing is left. */
+static int clip_to_box(const float *tri, const kdr_bounds *box, cvert out[16]) {
+    cvert tmp[16];
+    cvert *buf[2] = {out, tmp};
+    int n = 3, cur = 0;
+    for (int i = 0; i < 3; i++) {
+        for (int k = 0; k < 3; k++)
+            out[i].p[k] = tri[3 * i + k];
+        out[i].exact = 7u;
+    }
+    for (int k = 0; k < 3 && n > 0; k++) {
+        if (min3(tri[k], tri[3 + k], tri[6 + k]) < box->min[k]) {
+            n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->min[k], 1.0);
+            cur ^= 1;
+        }
+        if (n > 0 && max3(tri[k], tri[3 + k], tri[6 + k]) > box->max[k]) {
+            n = clip_plane(buf[cur], n, buf[cur ^ 1], k, box->max[k], -1.0);
+            cur ^= 1;
+        }
+    }
+    if (cur)
+        memcpy(out, tmp, (size_t)n * sizeof *out);
+    return n;
+}
+
+/* Bounds of a clipped polygon, computed coordinates rounded outward, cut
+ * to box; 0 when empty. */
+static int poly_bounds(const cvert *v, int n, const kdr_bounds *box,
+                       kdr_bounds *out) {
+    if (n == 0)
+        return 0;
+    for (int k = 0; k < 3; k++) {
+        float lo = INFINITY, hi = -INFINITY;
+        for (int i = 0; i < n; i++) {
+            const float f = (float)v[i].p[k];
+            const int ex = (v[i].exact >> k) & 1u;
+            const float flo = ex ? f : step_down(f);
+            const float fhi = ex ? f : -step_down(-f);
+            lo = flo < lo ? flo : lo;
+            hi = fhi > hi ? fhi : hi;
+        }
+        out->min[k] = lo > box->min[k] ? lo : box->min[k];
+        out->max[k] = hi < box->max[k] ? hi : box->max[k];
+        if (out->min[k] > out->max[k])
+            return 0;
+    }
+    return 1;
+}
+
+/* Fallback when double clipping loses a sliver: the triangle's bounds cut
+ * to the box (still conservative). */
+static int tri_bounds_in_box(const float *tri, const kdr_bounds *box,
+                             kdr_bounds *out) {
+    for (int k = 0; k < 3; k++) {
+        float lo = min3(tri[k], tri[3 + k], tri[6 + k]);
+        float hi = max3(tri[k], tri[3 + k], tri[6 + k]);
+        out->min[k] = lo > box->min[k] ? lo : box->min[k];
+        out->max[k] = hi < box->max[k] ? hi : box->max[k];
+        if (out->min[k] > out->max[k])
+            return 0;
+    }
+    return 1;
+}
+
+/* The bounds of the parts of tri inside cbox[0] and cbox[1], the halves of
+ * box split at pos on axis; bit s of the result is set when side s keeps
+ * something. The triangle is clipped to the node's box once, then that
+ * polygon to either side of the plane. */
+unsigned kd_clip_tri(const float *tri, const kdr_bounds *box, int axis, float pos,
+                     const kdr_bounds cbox[2], kdr_bounds bb[2]) {
+    cvert poly[16], half[16];
+    const int n = clip_to_box(tri, box, poly);
+    unsigned sides = 0;
+    for (int side = 0; side < 2; side++) {
+        const int m = n ? clip_plane(poly, n, half, axis, pos, side ? 1.0 : -1.0) : 0;
+        if (poly_bounds(half, m, &cbox[side], &bb[side]) ||
+            tri_bounds_in_box(tri, &cbox[side], &bb[side]))
+            sides |= 1u << side;
+    }
+    return sides;
+}
+
+/* Clips the straddlers to both child boxes; their new events go to
+ * add[0..2] (left) and add[3..5] (right), sorted. */
+void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
+                  const kd_split *s, const kdr_bounds cbox[2], kd_event *add[6],
+                  size_t nadd[6], size_t ntri[2]) {
+    for (size_t i = 0; i < nboth; i++) {
+        const float *tri = b->tris + 9 * (size_t)b->both[i];
+        kdr_bounds bb[2];
+        const unsigned sides = kd_clip_tri(tri, box, s->axis, s->pos, cbox, bb);
+        for (int side = 0; side < 2; side++) {
+            if (sides & (1u << side)) {
+                ev_add(add + 3 * side, nadd + 3 * side, &bb[side], b->both[i]);
+                ntri[side]++;
+            }
+        }
+    }
+    for (int k = 0; k < 6; k++)
+        kd_sort_events(add[k], nadd[k]);
+}
