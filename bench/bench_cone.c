@@ -259,7 +259,7 @@ static int one_light(const bench_scene *s, const rival *robust, point_set *ps, i
     points_outside(ps, &li);
     kdr_shadow_query q = {.n = ps->count, .points = ps->p, .normals = ps->n,
                           .lights = &li, .nlights = 1, .seed = 0x5eed,
-                          .epsilon = CONE_EPSILON};
+                          .offset = KDR_OFFSET_DIAGONAL, .epsilon = CONE_EPSILON};
     float *ref = robust ? malloc(q.n * sizeof *ref) : NULL;
     printf("\n%s, %s light: %zu points", s->name, lname, q.n);
     if (ref) {

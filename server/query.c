@@ -177,7 +177,9 @@ static void answer_frustum(kdr_server *srv, const kdr_served_scene *s,
     if (out->status == 200) kdr_metrics_rays(KDR_RAYS_FRUSTUM, fr.rays);
 }
 
-/* kdr_shadow_trace refuses a point inside a light; name the first one. */
+/* kdr_shadow_trace refuses a point whose offset start lies inside a light
+ * (kdr_proto_check_shadow_scene has already refused an offset that is not
+ * finite); name the first one. */
 static void shadow_invalid(const kdr_scene *scene, const kdr_shadow_query *q,
                            kdr_response *out) {
     kdr_ray ray;
@@ -186,8 +188,8 @@ static void shadow_invalid(const kdr_scene *scene, const kdr_shadow_query *q,
             if (kdr_shadow_ray(scene, q, i, l, 0, &ray) == KDR_EINVAL) {
                 char detail[128];
                 snprintf(detail, sizeof detail,
-                         "points[%zu]: inside lights[%zu] (distance to the center "
-                         "<= radius)",
+                         "points[%zu]: inside lights[%zu] once offset (distance to "
+                         "the center <= radius)",
                          i, l);
                 kdr_route_problem(out, 400, detail);
                 return;
@@ -248,7 +250,8 @@ static void answer_shadow(kdr_server *srv, const kdr_served_scene *s,
     kdr_shadow_request sr;
     kdr_proto_error err = {0};
     if (kdr_proto_parse_shadow_as(body_media(req), req->body, req->len, srv->max_rays, &sr,
-                                  &err) != 0) {
+                                  &err) != 0 ||
+        kdr_proto_check_shadow_scene(&sr, kdr_scene_diagonal(s->scene), &err) != 0) {
         kdr_shadow_request_free(&sr);
         problem_from(out, &err);
         return;

@@ -177,7 +177,8 @@ static int do_frustum(kdr_pool *pool, job *j, const char *body, size_t len, cons
 static int do_shadow(kdr_pool *pool, job *j, const char *body, size_t len, const cli *c,
                      kdr_buf *out, kdr_proto_error *err) {
     kdr_shadow_request sr;
-    if (kdr_proto_parse_shadow(body, len, (size_t)1 << 32, &sr, err)) {
+    if (kdr_proto_parse_shadow(body, len, (size_t)1 << 32, &sr, err) ||
+        kdr_proto_check_shadow_scene(&sr, kdr_scene_diagonal(j->scene), err)) {
         kdr_shadow_request_free(&sr);
         return err->status;
     }

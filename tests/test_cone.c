@@ -113,7 +113,7 @@ static kdr_shadow_query make_query(const float *pts, size_t n,
     q.nlights = nl;
     q.samples = samples;
     q.seed = 7;
-    q.epsilon = 1e-5f;
+    q.offset = KDR_OFFSET_AUTO; /* the contract's default (API v1.1) */
     return q;
 }
 
@@ -196,8 +196,22 @@ static void test_invalid(void) {
     CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
           "radius NaN");
     li.radius = 1.0f;
+    q.offset = KDR_OFFSET_DIAGONAL;
     q.epsilon = -1.0f;
     CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "negative epsilon");
+    q.epsilon = NAN;
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "NaN epsilon");
+    q.epsilon = 3e38f; /* the diagonal is 2.8: epsilon * diagonal overflows */
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "overflowing offset");
+    CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
+          "overflowing offset, trace");
+    q.epsilon = 1e-4f;
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_OK, "diagonal offset");
+    q.offset = (kdr_shadow_offset)2;
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "unknown offset mode");
+    q.offset = KDR_OFFSET_AUTO;
+    q.epsilon = NAN; /* ignored by "auto" */
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_OK, "auto ignores epsilon");
     kdr_scene_free(s);
     free(b.v);
 }
@@ -334,9 +348,13 @@ static void test_analytic(void) {
     }
 }
 
-/* Normals: the start moves off the surface toward the light's side, so a
- * single-sided floor whose normal points away from the light does not
- * shadow its own points. */
+/* Normals (API v1.1): the start moves along the normal AS GIVEN. On a
+ * single-sided floor lit from above, points whose normal faces the light
+ * are lit and points whose normal faces away are shadowed by the floor
+ * itself (the caller says the point is on the floor's underside). v1 turned
+ * every normal toward the light and found both lit; this test asserted
+ * that and now asserts the contract's answer. Without normals the start
+ * moves along each ray, and the floor does not shadow its own points. */
 static void test_normals(void) {
     tri_buf b = {0};
     tb_rect(&b, 1, 0.0f, -10, 10, -10, 10); /* floor y = 0 */
@@ -346,18 +364,66 @@ static void test_normals(void) {
     const float up[6] = {0, 1, 0, 0, 1, 0};
     const kdr_sphere_light li = {{1, 5, 1}, 1.0f};
     kdr_shadow_query q = make_query(pts, 2, &li, 1, 32);
-    q.epsilon = 1e-4f;
-    float vis[2];
     const float *nrm[3] = {down, up, NULL};
-    for (int c = 0; c < 3; c++) {
-        q.normals = nrm[c];
-        for (int m = 0; m < 2; m++) {
-            kdr_shadow_trace(s, &q, 0, 2, (kdr_shadow_mode)m, vis, NULL);
-            CHECK(vis[0] == 1.0f && vis[1] == 1.0f, "floor self-shadow c=%d m=%d: %g %g",
-                  c, m, vis[0], vis[1]);
+    const float want[3] = {0.0f, 1.0f, 1.0f};
+    for (int off = 0; off < 2; off++) {
+        q.offset = off ? KDR_OFFSET_DIAGONAL : KDR_OFFSET_AUTO;
+        q.epsilon = 1e-4f;
+        for (int c = 0; c < 3; c++) {
+            float vis[2];
+            q.normals = nrm[c];
+            for (int m = 0; m < 2; m++) {
+                kdr_shadow_trace(s, &q, 0, 2, (kdr_shadow_mode)m, vis, NULL);
+                CHECK(vis[0] == want[c] && vis[1] == want[c],
+                      "floor, normals %s, offset %s, mode %d: %g %g (want %g)",
+                      c == 0 ? "down" : c == 1 ? "up" : "none", off ? "diagonal" : "auto",
+                      m, vis[0], vis[1], want[c]);
+            }
+            check_modes("normals on floor", s, &b, &q);
         }
-        check_modes("normals on floor", s, &b, &q);
     }
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+/* The offset itself: "auto" moves KDR_OFFSET_AUTO_ULPS ulps of the point's
+ * largest coordinate along the normal as given, at the origin as 1e5 away;
+ * a numeric epsilon moves epsilon * diagonal; rounding never shortens it. */
+static void test_offsets(void) {
+    tri_buf b = {0};
+    tb_rect(&b, 1, 0.0f, -1e5f, 1e5f, -1e5f, 1e5f);
+    kdr_scene *s = build(&b);
+    const float pts[9] = {1e5f, 0.5f, 3.0f, 0.25f, 0.0f, -0.75f, 0.0f, 0.0f, 0.0f};
+    const float nrm[9] = {0, 1, 0, 0, -2, 0, 1, 1, 0};
+    const kdr_sphere_light li = {{0, 1e4f, 0}, 10.0f};
+    kdr_shadow_query q = make_query(pts, 3, &li, 1, 4);
+    q.normals = nrm;
+    kdr_ray r;
+    /* 1e5 is in [2^16, 2^17): ulp 2^-7, so 16 ulps are 0.125 */
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 1, &r) == KDR_OK && r.org[0] == 1e5f &&
+              r.org[1] == 0.625f && r.org[2] == 3.0f,
+          "auto at 1e5: %.9g %.9g %.9g", r.org[0], r.org[1], r.org[2]);
+    /* 0.75 is in [2^-1, 2^0): ulp 2^-24, 16 ulps 2^-20; down, as given */
+    CHECK(kdr_shadow_ray(s, &q, 1, 0, 1, &r) == KDR_OK && r.org[0] == 0.25f &&
+              r.org[1] == -0x1p-20f && r.org[2] == -0.75f,
+          "auto near 0, normal down: %.9g %.9g %.9g", r.org[0], r.org[1], r.org[2]);
+    /* at the origin: 16 ulps of FLT_MIN along (1,1,0)/sqrt(2), each
+     * coordinate rounded away from the point (never to 0) */
+    CHECK(kdr_shadow_ray(s, &q, 2, 0, 1, &r) == KDR_OK && r.org[0] > 0.0f &&
+              r.org[1] > 0.0f && r.org[2] == 0.0f &&
+              (double)r.org[0] + r.org[1] >= 16 * 0x1p-149 * sqrt(2.0),
+          "auto at 0: %g %g %g", r.org[0], r.org[1], r.org[2]);
+    q.offset = KDR_OFFSET_DIAGONAL;
+    q.epsilon = 1e-6f;
+    const double want = 1e-6f * kdr_scene_diagonal(s);
+    CHECK(kdr_shadow_ray(s, &q, 1, 0, 1, &r) == KDR_OK && -(double)r.org[1] >= want &&
+              -(double)r.org[1] < want * (1 + 1e-6),
+          "diagonal: %.9g want %.9g", -r.org[1], want);
+    q.normals = NULL; /* along each ray: the origin moves, the apex does not */
+    q.offset = KDR_OFFSET_AUTO;
+    CHECK(kdr_shadow_ray(s, &q, 1, 0, 1, &r) == KDR_OK &&
+              fabs(r.org[1] - 0x1p-20 * r.dir[1]) <= 0x1p-44,
+          "auto along the ray: %.9g", r.org[1]);
     kdr_scene_free(s);
     free(b.v);
 }
@@ -610,6 +676,7 @@ int main(int argc, char **argv) {
     test_ray_definition();
     test_analytic();
     test_normals();
+    test_offsets();
     test_soup_vs_embree();
     test_adversarial();
     test_packets();
