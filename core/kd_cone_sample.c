@@ -166,6 +166,11 @@ static double near_surface(const kd_shadow_frame *f, const float dir[3]) {
     return c / (b + sqrt(disc));
 }
 
+double kd_shadow_frame_phase(const kd_shadow_frame *f, uint32_t s) {
+    const double phi = (double)s * GOLDEN_FRACTION + f->phi_shift;
+    return phi - floor(phi);
+}
+
 void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
                          uint32_t nsamples, kdr_ray *out) {
     const uint64_t h = mix64(f->key ^ ((uint64_t)s * SAMPLE_KEY_SAMPLE));
@@ -173,8 +178,7 @@ void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
     const double one_minus_ct = u * f->one_minus_cos;
     const double ct = 1.0 - one_minus_ct;
     const double st = sqrt(one_minus_ct * (2.0 - one_minus_ct));
-    double phi = (double)s * GOLDEN_FRACTION + f->phi_shift;
-    phi = TWO_PI * (phi - floor(phi));
+    const double phi = TWO_PI * kd_shadow_frame_phase(f, s);
     const double cp = cos(phi) * st, sp = sin(phi) * st;
     double d[3], len2 = 0.0;
     for (int k = 0; k < 3; k++) {

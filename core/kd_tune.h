@@ -102,4 +102,10 @@
  * 2 spp: bundles 0.0018 s vs single rays 0.0015 s on default/small). */
 #define TREE_MIN_RAYS 3u
 
+/* A sub-cone holding at most this many samples traces them rather than
+ * splitting again (kd_cone_cells.c). */
+#define CELL_LEAF_SAMPLES 8u
+/* 1: every cell below a root walk over budget walks its own cone. */
+#define CELL_WALK_BELOW_OVER 0
+
 #endif /* KD_TUNE_H */
