@@ -315,6 +315,22 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
     return lit;
 }
 
+/* The whole light's candidate budget for this point: a full one, a couple
+ * at few samples, or none (the walk then only looks for an empty cone,
+ * stopping at the first candidate) below CONE_RAYS_BELOW samples and while
+ * the light backs off after busy cones. Every point walks at least that
+ * far: a cone that reaches no occluder is decided without samples, as the
+ * contract requires. */
+static size_t cand_budget(uint32_t nsamples, light_state *ls) {
+    if (ls->skip > 0) {
+        ls->skip--;
+        return 0;
+    }
+    if (nsamples < CONE_RAYS_BELOW)
+        return 0;
+    return nsamples < CONE_WALK_MIN_SAMPLES ? CONE_FEW_CANDS : CONE_MAX_CANDS;
+}
+
 static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
                               uint32_t nsamples, shadow_ws *ws, light_state *ls,
                               float *vis) {
@@ -323,25 +339,21 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     int rc = ws_reserve(ws, nsamples);
     if (rc != KDR_OK)
         return rc;
-    if (ls->skip > 0) {
-        ls->skip--;
-        rc = KD_CONE_OVER;
-    } else {
-        kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
-                           .proofs = f->along == 0.0f, .last = ls->last};
-        /* every tmax is the float of (near side - along) >= D - r - along */
-        pr.tmax_lo = ((f->dist - f->radius) - (double)f->along) * (1.0 - 0x1p-22);
-        rc = kd_cells_lit(&ws->cells, &pr, &lit);
-        ls->last = pr.last;
-        ws->st.rays_traced += pr.st.rays_traced;
-        ws->st.nodes_visited += pr.st.nodes_visited;
-        if (rc == KD_CONE_OVER) {
-            ls->backoff = ls->backoff * 2 + 1 > WALK_BACKOFF_MAX ? WALK_BACKOFF_MAX
-                                                                 : ls->backoff * 2 + 1;
-            ls->skip = ls->backoff;
-        } else {
-            ls->backoff = 0;
-        }
+    kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
+                       .proofs = f->along == 0.0f, .last = ls->last,
+                       .max_cands = cand_budget(nsamples, ls)};
+    /* every tmax is the float of (near side - along) >= D - r - along */
+    pr.tmax_lo = ((f->dist - f->radius) - (double)f->along) * (1.0 - 0x1p-22);
+    rc = kd_cells_lit(&ws->cells, &pr, &lit);
+    ls->last = pr.last;
+    ws->st.rays_traced += pr.st.rays_traced;
+    ws->st.nodes_visited += pr.st.nodes_visited;
+    if (rc == KD_CONE_OVER && pr.max_cands == CONE_MAX_CANDS) {
+        ls->backoff = ls->backoff * 2 + 1 > WALK_BACKOFF_MAX ? WALK_BACKOFF_MAX
+                                                             : ls->backoff * 2 + 1;
+        ls->skip = ls->backoff;
+    } else if (rc == KDR_OK && pr.max_cands == CONE_MAX_CANDS) {
+        ls->backoff = 0;
     }
     if (rc == KD_CONE_OVER) {
         lit = lit_busy(scene, f, ws, nsamples, &ls->last);

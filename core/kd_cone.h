@@ -150,6 +150,8 @@ typedef struct kd_cone_pair {
     int wide;            /* 8-wide (AVX2) packets */
     int proofs;          /* fixed origin (normals given): kd_cone_proof applies */
     double tmax_lo;      /* least tmax of any sample */
+    size_t max_cands;    /* a walk with more candidates is over budget
+                            (<= CONE_MAX_CANDS) */
     uint32_t last;       /* last blocker (in and out) */
     kdr_shadow_stats st; /* added to */
     int rc;

@@ -17,8 +17,8 @@
  * minimum, and it has no maximum inside), widened by CELL_SLACK for the
  * rounding of the float directions (~1e-7 rad).
  *
- * Per cell, the candidates are the parent's, filtered, or (the parent's
- * list being incomplete, over its budget) those of its own walk. A
+ * Per cell, the candidates are the parent's, filtered (the root's: those
+ * of the whole light's walk, which judges them as it goes). A
  * candidate whose proof (kd_cone_proof.c) says it misses every segment of
  * the cell is dropped; one that covers them all puts the cell in umbra;
  * none left: lit. Without a fixed origin (no normals: each ray starts
@@ -27,8 +27,9 @@
  * into four (twice the longer of its radial and azimuthal sides on the
  * light's disc, so cells stay square-ish) while it holds more than
  * CELL_LEAF_SAMPLES samples; a leaf tests its samples against its list in
- * packets of 8 or 4, or walks its cone with them when the list is
- * incomplete.
+ * packets of 8 or 4. Only the whole light walks the tree: when that walk
+ * is over budget, nothing is decided here (kd_cone.c traces a busy cone
+ * otherwise).
  */
 #include <stdlib.h>
 #include <string.h>
@@ -44,7 +45,7 @@ static inline double dmin(double a, double b) { return a < b ? a : b; }
 #define TWO_PI 6.283185307179586477
 /* Angular slack of a cell's cone over its exact directions (radians). */
 #define CELL_SLACK 1e-6
-#define WALK_LIST ((const uint32_t *)0) /* "walk the tree for this cell" */
+#define WALK_LIST ((const uint32_t *)0) /* the root: walk the tree */
 
 typedef struct cell {
     uint32_t i0, i1;     /* its samples: c->idx[i0 .. i1) */
@@ -207,35 +208,6 @@ static uint32_t trace_list(kd_cells *c, kd_cone_pair *pr, const cell *ce,
     return lit;
 }
 
-/* Lit samples of the cell when its list is incomplete: packets walk the
- * cell's cone; lanes still open after GROUP_MAX_NODES go through the tree. */
-static uint32_t trace_walk(kd_cells *c, kd_cone_pair *pr, const cell *ce,
-                           const kd_cone *kc) {
-    uint32_t lit = 0;
-    const uint32_t width = pr->wide ? 8u : 4u;
-    for (uint32_t g = ce->i0; g < ce->i1; g += width) {
-        const int m = (int)(ce->i1 - g < width ? ce->i1 - g : width);
-        const kdr_ray *lanes[8];
-        for (int j = 0; j < m; j++) {
-            kd_shadow_frame_ray(pr->f, c->idx[g + j], pr->n, &c->rays[j]);
-            lanes[j] = &c->rays[j];
-        }
-        int open = 0;
-        const int blocked = kd_cone_packet_walk(pr->scene, kc, lanes, m, GROUP_MAX_NODES,
-                                                &pr->last, &pr->st.nodes_visited, &open,
-                                                pr->wide);
-        lit += popcount8(((1 << m) - 1) & ~blocked & ~open);
-        for (int j = 0; j < m; j++)
-            if ((open >> j) & 1) {
-                kdr_trav_stats ts = {0};
-                lit += kdr_occluded1(pr->scene, lanes[j], &ts) ? 0u : 1u;
-                pr->st.nodes_visited += ts.nodes_visited;
-            }
-    }
-    pr->st.rays_traced += ce->i1 - ce->i0;
-    return lit;
-}
-
 static uint32_t process(kd_cells *c, kd_cone_pair *pr, const cell *ce,
                         const uint32_t *plist, size_t np, int depth);
 
@@ -273,6 +245,27 @@ static int seen_before(kd_cells *c, uint32_t prim) {
     }
 }
 
+/* Judges triangle prim for the cell (a view, then its verdict): listed
+ * (as a view index) unless it misses; KD_CONE_OVER past CONE_MAX_CANDS. */
+static int judge(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
+                 uint32_t *out, size_t *nl, int *covered) {
+    uint32_t at;
+    if (push_view(c, pr, prim, &at) != KDR_OK)
+        return KDR_ENOMEM;
+    const kd_verdict v = kd_tri_view_classify(&c->views[at], dc);
+    if (v == KD_TRI_COVERS) {
+        *covered = 1;
+        pr->last = prim;
+    } else if (v == KD_TRI_MISSES) {
+        c->nviews--; /* the view was the last one made */
+    } else if (*nl == pr->max_cands) {
+        return KD_CONE_OVER;
+    } else {
+        out[(*nl)++] = at;
+    }
+    return KDR_OK;
+}
+
 /* The cell's own walk with proofs: every triangle the walk's cull keeps
  * gets a view; those that miss every segment of dc are dropped, the others
  * are listed (as view indices) until more than CONE_MAX_CANDS remain
@@ -296,23 +289,9 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
             if (seen_before(c, prim) ||
                 !kd_cone_tri_may_block(kc, pr->scene->tris + 9 * (size_t)prim))
                 continue;
-            uint32_t at;
-            if (push_view(c, pr, prim, &at) != KDR_OK) {
-                rc = KDR_ENOMEM;
+            rc = judge(c, pr, dc, prim, out, nl, covered);
+            if (*covered)
                 break;
-            }
-            const kd_verdict v = kd_tri_view_classify(&c->views[at], dc);
-            if (v == KD_TRI_COVERS) {
-                *covered = 1;
-                pr->last = prim;
-                break;
-            }
-            if (v == KD_TRI_MISSES)
-                c->nviews--; /* the view was the last one made */
-            else if (*nl == CONE_MAX_CANDS)
-                rc = KD_CONE_OVER;
-            else
-                out[(*nl)++] = at;
         }
         if (*covered)
             break;
@@ -377,45 +356,38 @@ static uint32_t process(kd_cells *c, kd_cone_pair *pr, const cell *ce,
     if (count == 0 || pr->rc != KDR_OK)
         return 0;
     kd_dir_cone dc;
-    kd_cone kc;
+    kd_cone kc; /* for the walk and the walk's cull */
     if (depth == 0) {
         light_cone(c, pr, &dc);
         kd_cone_init(&kc, pr->scene, pr->f, NULL, 0.0);
     } else {
         cell_cone(c, pr, ce, &dc);
-        kd_cone_init(&kc, pr->scene, pr->f, dc.axis, dc.sin_b);
+        if (!pr->proofs)
+            kd_cone_init(&kc, pr->scene, pr->f, dc.axis, dc.sin_b);
     }
     size_t nl = 0, nviews = c->nviews;
     int covered = 0;
-    /* below a root walk over budget, cells do not walk until they are
-     * leaves: the leaves' packet walks cost about what a walk of their own
-     * would, and the walks in between seldom end within budget */
-    const uint32_t *list =
-        depth > 0 && plist == WALK_LIST && CELL_WALK_BELOW_OVER == 0
-            ? NULL
-            : cell_list(c, pr, &dc, &kc, plist, np, depth, &nl, &covered);
+    const uint32_t *list = cell_list(c, pr, &dc, &kc, plist, np, depth, &nl, &covered);
     uint32_t lit = 0;
     cell kids[4];
     int nk = 0;
     const int leaf = count <= CELL_LEAF_SAMPLES || depth + 1 >= KD_CELL_MAX_DEPTH;
     if (pr->rc != KDR_OK) {
         lit = 0;
-    } else if (depth == 0 && !list) {
-        pr->rc = KD_CONE_OVER; /* a busy cone: kd_cone.c traces it otherwise */
+    } else if (!list) {
+        pr->rc = KD_CONE_OVER; /* the whole light's walk: a busy cone */
     } else if (covered) {
         lit = 0; /* umbra: every sample blocked */
-    } else if (list && nl == 0) {
+    } else if (nl == 0) {
         lit = count; /* lit: no candidate left */
     } else if (!leaf && children(c, pr, ce, kids, &nk)) {
         for (int k = 0; k < nk; k++)
             lit += process(c, pr, &kids[k], list, nl, depth + 1);
-    } else if (list) {
+    } else {
         uint32_t prims[CONE_MAX_CANDS];
         for (size_t j = 0; j < nl; j++)
             prims[j] = pr->proofs ? c->views[list[j]].prim : list[j];
         lit = trace_list(c, pr, ce, prims, nl);
-    } else {
-        lit = trace_walk(c, pr, ce, &kc);
     }
     c->nviews = nviews; /* views made here are not needed any more */
     return lit;
