@@ -1,11 +1,13 @@
 /*
  * bench_cone.c — the "cone" section (kdray_bench_cone; default scenes
- * "default" and "engine"): soft-shadow visibility toward a sphere light,
- * run time against error.
+ * "default", "engine" and the 1.09M-triangle "engine9"): soft-shadow
+ * visibility toward a sphere light, run time against error.
  *
- * Points are the primary hits of a --res x --res camera; each scene gets a
- * small light (points mostly lit or in umbra) and a large close one
- * (penumbra-heavy). For each sample count (--samples), in the same run:
+ * Points are the primary hits of a --res x --res camera, with the normal
+ * of the triangle hit turned toward the viewer, and shadow rays start at
+ * the contract's default ("auto") offset; each scene gets a small light
+ * (points mostly lit or in umbra) and a large close one (penumbra-heavy).
+ * For each sample count (--samples), in the same run:
  *   kd_cone   kdr_shadow_trace KDR_SHADOW_CONE, as the daemon calls it;
  *   kd_rays   kdr_shadow_trace KDR_SHADOW_RAYS (every sample walks the tree);
  *   embree_*  every rival API for shadow samples: rtcOccluded1 per sample,

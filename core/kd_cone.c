@@ -66,27 +66,6 @@ typedef struct shadow_ws {
 
 /* ---- testing samples ----------------------------------------------------- */
 
-/* Of the samples idx[0..n), keeps in idx those the candidates do not block
- * (packets of 8); returns how many are kept. */
-static uint32_t filter_by_list(const kdr_scene *scene, shadow_ws *ws,
-                               uint32_t *idx, uint32_t n, const uint32_t *cands,
-                               size_t ncand, uint32_t *last) {
-    uint32_t kept = 0;
-    for (uint32_t g = 0; g < n; g += 8) {
-        const kdr_ray *lanes[8];
-        const int m = (int)(n - g < 8 ? n - g : 8);
-        for (int j = 0; j < m; j++)
-            lanes[j] = &ws->rays[idx[g + j]];
-        const int blocked = kd_cone_packet_blocked(scene, lanes, m, cands, ncand,
-                                                   last, ws->wide);
-        for (int j = 0; j < m; j++)
-            if (!((blocked >> j) & 1))
-                idx[kept++] = idx[g + j];
-    }
-    ws->st.rays_traced += n;
-    return kept;
-}
-
 /* Lit samples among idx[0..n), each traced alone through the whole tree
  * with kdr_occluded1 (the reference mode). */
 static uint32_t lit_by_rays(const kdr_scene *scene, shadow_ws *ws,
@@ -132,9 +111,18 @@ static uint32_t filter_by_last(const kdr_scene *scene, shadow_ws *ws,
                                uint32_t *idx, uint32_t n, uint32_t *last) {
     if (*last == NO_PRIM || n == 0)
         return n;
-    const uint32_t cand = *last;
-    const uint32_t kept = filter_by_list(scene, ws, idx, n, &cand, 1, last);
-    ws->st.rays_traced -= n; /* counted when they are decided */
+    /* one triangle: the scalar test; a packet's set-up (shears of 8 rays
+     * transposed into lanes) costs several times one test */
+    const float *tri = scene->tris + 9 * (size_t)*last;
+    uint32_t kept = 0;
+    for (uint32_t j = 0; j < n; j++) {
+        const kdr_ray *r = &ws->rays[idx[j]];
+        kd_ray_pre pre;
+        float t, u, v;
+        kd_ray_precompute(r->org, r->dir, &pre);
+        if (!kd_tri_intersect(&pre, tri, r->tmin, r->tmax, &t, &u, &v))
+            idx[kept++] = idx[j];
+    }
     return kept;
 }
 

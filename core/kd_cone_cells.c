@@ -312,6 +312,17 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
     uint32_t *out = list_at(c, depth);
     *nl = 0;
     *covered = 0;
+    if (plist == WALK_LIST && pr->proofs && pr->last != UINT32_MAX) {
+        /* in umbra the light's last blocker often covers the next cone too
+         * (points arrive in image order): a view of it before any walk */
+        kd_tri_view v;
+        kd_tri_view_init(&v, pr->scene->tris + 9 * (size_t)pr->last, pr->last,
+                         pr->f->apex);
+        if (kd_tri_view_classify(&v, dc) == KD_TRI_COVERS) {
+            *covered = 1;
+            return out;
+        }
+    }
     if (plist == WALK_LIST && pr->proofs) {
         const int rc = walk_with_proofs(c, pr, dc, kc, out, nl, covered);
         if (rc == KDR_ENOMEM)
