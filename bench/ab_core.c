@@ -244,7 +244,8 @@ static void cone_query(const scene_in *s, size_t npts, int large, uint32_t spp,
     memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
     *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
                             .lights = li, .nlights = 1, .samples = spp,
-                            .seed = 7, .epsilon = 1e-4f};
+                            .seed = 7, .offset = KDR_OFFSET_DIAGONAL,
+                            .epsilon = 1e-4f};
 }
 
 /* ---- one ray set, traced by A, B and Embree -------------------------------- */

@@ -1,11 +1,13 @@
 /*
  * bench_cone.c — the "cone" section (kdray_bench_cone; default scenes
- * "default" and "engine"): soft-shadow visibility toward a sphere light,
- * run time against error.
+ * "default", "engine" and the 1.09M-triangle "engine9"): soft-shadow
+ * visibility toward a sphere light, run time against error.
  *
- * Points are the primary hits of a --res x --res camera; each scene gets a
- * small light (points mostly lit or in umbra) and a large close one
- * (penumbra-heavy). For each sample count (--samples), in the same run:
+ * Points are the primary hits of a --res x --res camera, with the normal
+ * of the triangle hit turned toward the viewer, and shadow rays start at
+ * the contract's default ("auto") offset; each scene gets a small light
+ * (points mostly lit or in umbra) and a large close one (penumbra-heavy).
+ * For each sample count (--samples), in the same run:
  *   kd_cone   kdr_shadow_trace KDR_SHADOW_CONE, as the daemon calls it;
  *   kd_rays   kdr_shadow_trace KDR_SHADOW_RAYS (every sample walks the tree);
  *   embree_*  every rival API for shadow samples: rtcOccluded1 per sample,
@@ -27,6 +29,11 @@
 #include "bench.h"
 #include "rival.h"
 
+/* The contract's default offset ("auto", API v1.1); CONE_OFFSET
+ * KDR_OFFSET_DIAGONAL with CONE_EPSILON is v1's (1e-4 x diagonal). */
+#ifndef CONE_OFFSET
+#define CONE_OFFSET KDR_OFFSET_AUTO
+#endif
 #define CONE_EPSILON 1e-4f
 #define CONE_MIN_MS 150.0 /* passes are short: keep each sample count this long */
 #define CONE_QUICK_MIN_MS 40.0
@@ -69,13 +76,19 @@ static int camera_points(const kdr_scene *s, int res, point_set *ps) {
             const float *t = kdr_scene_triangle(s, (size_t)h.prim);
             float *p = ps->p + 3 * ps->count, *n = ps->n + 3 * ps->count, e1[3], e2[3];
             for (int k = 0; k < 3; k++) {
-                p[k] = r.org[k] + h.t * r.dir[k];
+                /* in double: the hit point's own error stays that of t */
+                p[k] = (float)((double)r.org[k] + (double)h.t * r.dir[k]);
                 e1[k] = t[3 + k] - t[k];
                 e2[k] = t[6 + k] - t[k];
             }
             n[0] = e1[1] * e2[2] - e1[2] * e2[1];
             n[1] = e1[2] * e2[0] - e1[0] * e2[2];
             n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+            /* facing the viewer, as a renderer shades the side it sees
+             * (API v1.1 uses normals as given) */
+            if (n[0] * r.dir[0] + n[1] * r.dir[1] + n[2] * r.dir[2] > 0.0f)
+                for (int k = 0; k < 3; k++)
+                    n[k] = -n[k];
             ps->count++;
         }
     return 0;
@@ -259,7 +272,7 @@ static int one_light(const bench_scene *s, const rival *robust, point_set *ps, i
     points_outside(ps, &li);
     kdr_shadow_query q = {.n = ps->count, .points = ps->p, .normals = ps->n,
                           .lights = &li, .nlights = 1, .seed = 0x5eed,
-                          .epsilon = CONE_EPSILON};
+                          .offset = CONE_OFFSET, .epsilon = CONE_EPSILON};
     float *ref = robust ? malloc(q.n * sizeof *ref) : NULL;
     printf("\n%s, %s light: %zu points", s->name, lname, q.n);
     if (ref) {

@@ -4,30 +4,36 @@
  * whose segment reaches the light.
  *
  * KDR_SHADOW_RAYS traces every sample through the kd-tree (the reference).
- * KDR_SHADOW_CONE, per (point, light):
- *  1. if the light's last blocker blocks sample 0 (umbra likely), every
- *     sample is first tested against that one triangle;
- *  below CONE_WALK_MIN_SAMPLES samples a cone that reaches no candidate
- *  (a walk stopped at the first one) is decided (visibility 1, no rays),
- *  else the rest go straight to
- *  the tree in one shared-origin batch (the full walk with its per-triangle
- *  cull costs more than it saves there); else
- *  2. the cone of the whole light walks the tree (kd_cone_trav.c) with a
- *     budget: no candidate gives visibility 1 with no rays (a decided cone),
- *     a short list is tested by packets of samples (kd_cone_packet.c);
- *  3. over budget, with sub-cones narrow enough: the samples are sorted
- *     along a Morton curve of the light's disc and packets of 4/8
- *     neighbours walk their own cones, testing leaves on the way;
- *  4. otherwise: a few closest hits learn blockers, the rest go through
- *     the tree in bundles (kdr_trace_batch).
- * A walk over budget makes the next points of that light skip step 2 for a
- * while (back-off): neighbouring points see the same busy cone.
+ * KDR_SHADOW_CONE decides a (point, light) by cones, from the whole light
+ * down to small groups of samples, and traces only what no cone decides:
+ *  1. Candidates: the cone of the whole light walks the kd-tree with a
+ *     budget (kd_cone_trav.c); every triangle its cull keeps is judged by
+ *     a proof against the float triangle test (kd_cone_proof.c, which needs
+ *     the fixed start a normal gives): it misses every sample segment
+ *     (dropped: a point's own surface, a triangle beside the cone), covers
+ *     them all (umbra: visibility 0, no samples), or may do either (a
+ *     candidate).
+ *  2. No candidate left: visibility 1, no samples (the contract's decided
+ *     cone).
+ *  3. Refinement (kd_cone_cells.c): the samples split into four cells of
+ *     their parameters, each with its own cone, judged against the parent's
+ *     candidates the same way: lit, umbra, or split again; cells of a few
+ *     samples test them in packets against their candidates.
+ *  4. A busy cone (the walk over budget): the samples are sorted along a
+ *     Morton curve of the light's disc and packets of 4/8 neighbours walk
+ *     their own cones, or, where those would be wide, a few closest hits
+ *     learn blockers and the rest go through the tree in bundles
+ *     (kdr_trace_batch). A busy cone makes the next points of that light
+ *     skip step 1 for a while (back-off): neighbours see the same busy
+ *     cone.
  *
- * Exactness: every list holds all triangles any of its samples can touch,
- * every test is kd_tri_intersect over [tmin, tmax], and a hit on any
- * triangle is an occlusion whichever way it was found (so a blocker
- * learned at one point may be tried at any other). The visibility equals
- * KDR_SHADOW_RAYS bit for bit, whichever path was taken.
+ * Exactness: a cell is decided only by proofs made against the float
+ * arithmetic of kd_tri_intersect (or, without normals, by the walk's cull,
+ * which keeps every triangle a segment could touch); every list holds all
+ * triangles its samples can touch; every test is kd_tri_intersect over
+ * [tmin, tmax]; and a hit on any triangle is an occlusion however it was
+ * found. The visibility equals KDR_SHADOW_RAYS bit for bit, whichever path
+ * was taken.
  */
 #include <stdlib.h>
 
@@ -55,30 +61,10 @@ typedef struct shadow_ws {
     uint8_t *bhit;
     int wide;       /* AVX2 packets */
     kdr_shadow_stats st;
+    kd_cells cells;
 } shadow_ws;
 
 /* ---- testing samples ----------------------------------------------------- */
-
-/* Of the samples idx[0..n), keeps in idx those the candidates do not block
- * (packets of 8); returns how many are kept. */
-static uint32_t filter_by_list(const kdr_scene *scene, shadow_ws *ws,
-                               uint32_t *idx, uint32_t n, const uint32_t *cands,
-                               size_t ncand, uint32_t *last) {
-    uint32_t kept = 0;
-    for (uint32_t g = 0; g < n; g += 8) {
-        const kdr_ray *lanes[8];
-        const int m = (int)(n - g < 8 ? n - g : 8);
-        for (int j = 0; j < m; j++)
-            lanes[j] = &ws->rays[idx[g + j]];
-        const int blocked = kd_cone_packet_blocked(scene, lanes, m, cands, ncand,
-                                                   last, ws->wide);
-        for (int j = 0; j < m; j++)
-            if (!((blocked >> j) & 1))
-                idx[kept++] = idx[g + j];
-    }
-    ws->st.rays_traced += n;
-    return kept;
-}
 
 /* Lit samples among idx[0..n), each traced alone through the whole tree
  * with kdr_occluded1 (the reference mode). */
@@ -125,9 +111,18 @@ static uint32_t filter_by_last(const kdr_scene *scene, shadow_ws *ws,
                                uint32_t *idx, uint32_t n, uint32_t *last) {
     if (*last == NO_PRIM || n == 0)
         return n;
-    const uint32_t cand = *last;
-    const uint32_t kept = filter_by_list(scene, ws, idx, n, &cand, 1, last);
-    ws->st.rays_traced -= n; /* counted when they are decided */
+    /* one triangle: the scalar test; a packet's set-up (shears of 8 rays
+     * transposed into lanes) costs several times one test */
+    const float *tri = scene->tris + 9 * (size_t)*last;
+    uint32_t kept = 0;
+    for (uint32_t j = 0; j < n; j++) {
+        const kdr_ray *r = &ws->rays[idx[j]];
+        kd_ray_pre pre;
+        float t, u, v;
+        kd_ray_precompute(r->org, r->dir, &pre);
+        if (!kd_tri_intersect(&pre, tri, r->tmin, r->tmax, &t, &u, &v))
+            idx[kept++] = idx[j];
+    }
     return kept;
 }
 
@@ -285,123 +280,74 @@ static void make_samples(const kd_shadow_frame *f, uint32_t n, shadow_ws *ws) {
     }
 }
 
-/* 1 if the last blocker also blocks sample 0: the point is probably in
- * umbra, and testing every sample against it first is worth it. */
-static int umbra_likely(const kdr_scene *scene, const kd_shadow_frame *f,
-                        uint32_t n, uint32_t last) {
-    kdr_ray r;
-    kd_ray_pre pre;
-    float t, u, v;
-    if (last == NO_PRIM)
-        return 0;
-    kd_shadow_frame_ray(f, 0, n, &r);
-    kd_ray_precompute(r.org, r.dir, &pre);
-    return kd_tri_intersect(&pre, scene->tris + 9 * (size_t)last, r.tmin, r.tmax,
-                            &t, &u, &v);
-}
-
-/* Lit samples once the whole-light cone was walked (rc, ws->cl). */
-static int lit_after_walk(const kdr_scene *scene, const kd_shadow_frame *f,
-                          shadow_ws *ws, int rc, uint32_t n, uint32_t *last,
-                          uint32_t *lit) {
-    const uint32_t n0 = n;
-    if (rc == KDR_OK) {
-        *lit = filter_by_list(scene, ws, ws->idx, n, ws->cl.v, ws->cl.n, last);
-        return KDR_OK;
-    }
+/* A cone too busy to decide (its walk went over budget): the samples are
+ * sorted along a Morton curve of the light's disc and packets of 4/8
+ * neighbours walk their own narrow cones; when those would be wide, a few
+ * closest hits learn blockers and the rest go through the tree in bundles
+ * (kdr_trace_batch). */
+static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
+                         shadow_ws *ws, uint32_t n, uint32_t *last) {
+    uint32_t lit = 0;
+    make_samples(f, n, ws);
     const uint32_t width = ws->wide ? 8u : 4u;
     /* a packet covers about width/n of the light's disc */
     if (asin(f->sin_a) * sqrt((double)width / n) > GROUP_MAX_ANGLE) {
-        *lit = 0;
-        n = filter_by_last(scene, ws, ws->idx, n, last);
-        ws->st.rays_traced += n0 - n;
-        n = learn_blockers(scene, ws, ws->idx, n, last, lit);
-        *lit += lit_by_tree(scene, ws, ws->idx, n);
-        return KDR_OK;
+        uint32_t m = filter_by_last(scene, ws, ws->idx, n, last);
+        ws->st.rays_traced += n - m;
+        m = learn_blockers(scene, ws, ws->idx, m, last, &lit);
+        return lit + lit_by_tree(scene, ws, ws->idx, m);
     }
     sort_pending(f, ws, n);
-    *lit = 0;
     for (uint32_t g = 0; g < n; g += width)
-        lit_group(scene, f, ws, ws->idx + g, n - g < width ? n - g : width, last,
-                  lit);
-    return KDR_OK;
+        lit_group(scene, f, ws, ws->idx + g, n - g < width ? n - g : width, last, &lit);
+    return lit;
 }
 
-/* The whole-light walk, unless the back-off says it would fail again. */
-static int walk_light(const kdr_scene *scene, const kd_shadow_frame *f,
-                      shadow_ws *ws, uint32_t pending, light_state *ls) {
+/* The whole light's candidate budget for this point: a full one, a couple
+ * at few samples, or none (the walk then only looks for an empty cone,
+ * stopping at the first candidate) below CONE_RAYS_BELOW samples and while
+ * the light backs off after busy cones. Every point walks at least that
+ * far: a cone that reaches no occluder is decided without samples, as the
+ * contract requires. */
+static size_t cand_budget(uint32_t nsamples, light_state *ls) {
     if (ls->skip > 0) {
         ls->skip--;
-        return KD_CONE_OVER;
+        return 0;
     }
-    kd_cone c;
-    kd_cone_init(&c, scene, f, NULL, 0.0);
-    const int rc = kd_cone_collect(scene, &c, &ws->cl, CONE_MAX_CANDS,
-                                   CONE_NODES_BASE + CONE_NODES_PER_SAMPLE * pending,
-                                   &ws->st.nodes_visited);
-    if (rc == KD_CONE_OVER) {
-        ls->backoff = ls->backoff * 2 + 1 > WALK_BACKOFF_MAX ? WALK_BACKOFF_MAX
-                                                             : ls->backoff * 2 + 1;
-        ls->skip = ls->backoff;
-    } else {
-        ls->backoff = 0;
-    }
-    return rc;
-}
-
-/* Below CONE_WALK_MIN_SAMPLES: the whole-light cone walks the tree only
- * until its first candidate (max_cands 0: the walk stops at the first
- * triangle the cull keeps). A cone that reaches none is decided, visibility
- * exactly 1 with no rays, as the contract requires of a point whose cone
- * reaches no occluder. Returns 1 for such a cone, 0 otherwise (and
- * KDR_ENOMEM through *rc). */
-static int cone_in_empty_space(const kdr_scene *scene, const kd_shadow_frame *f,
-                               shadow_ws *ws, uint64_t max_nodes, int *rc) {
-    kd_cone c;
-    kd_cone_init(&c, scene, f, NULL, 0.0);
-    const int r = kd_cone_collect(scene, &c, &ws->cl, 0, max_nodes,
-                                  &ws->st.nodes_visited);
-    *rc = r == KDR_ENOMEM ? KDR_ENOMEM : KDR_OK;
-    return r == KDR_OK && ws->cl.n == 0; /* over budget: not decided */
+    if (nsamples < CONE_RAYS_BELOW)
+        return 0;
+    return nsamples < CONE_WALK_MIN_SAMPLES ? CONE_FEW_CANDS : CONE_MAX_CANDS;
 }
 
 static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
                               uint32_t nsamples, shadow_ws *ws, light_state *ls,
                               float *vis) {
-    uint32_t pending = nsamples, lit = 0;
-    int made = 0, rc = ws_reserve(ws, nsamples);
+    uint32_t lit = 0;
+    const uint64_t traced = ws->st.rays_traced;
+    int rc = ws_reserve(ws, nsamples);
     if (rc != KDR_OK)
         return rc;
-    if (umbra_likely(scene, f, nsamples, ls->last)) {
-        make_samples(f, nsamples, ws);
-        made = 1;
-        pending = filter_by_last(scene, ws, ws->idx, nsamples, &ls->last);
-        ws->st.rays_traced += nsamples - pending;
+    kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
+                       .proofs = f->along == 0.0f, .last = ls->last,
+                       .max_cands = cand_budget(nsamples, ls)};
+    /* every tmax is the float of (near side - along) >= D - r - along */
+    pr.tmax_lo = ((f->dist - f->radius) - (double)f->along) * (1.0 - 0x1p-22);
+    rc = kd_cells_lit(&ws->cells, &pr, &lit);
+    ls->last = pr.last;
+    ws->st.rays_traced += pr.st.rays_traced;
+    ws->st.nodes_visited += pr.st.nodes_visited;
+    if (rc == KD_CONE_OVER && pr.max_cands == CONE_MAX_CANDS) {
+        ls->backoff = ls->backoff * 2 + 1 > WALK_BACKOFF_MAX ? WALK_BACKOFF_MAX
+                                                             : ls->backoff * 2 + 1;
+        ls->skip = ls->backoff;
+    } else if (rc == KDR_OK && pr.max_cands == CONE_MAX_CANDS) {
+        ls->backoff = 0;
     }
-    if (pending > 0 && nsamples < CONE_WALK_MIN_SAMPLES) {
-        if (cone_in_empty_space(scene, f, ws,
-                                CONE_NODES_BASE + CONE_NODES_PER_SAMPLE * pending,
-                                &rc)) {
-            ws->st.cones_decided += !made;
-            lit = pending;
-        } else if (rc == KDR_OK) {
-            if (!made)
-                make_samples(f, nsamples, ws);
-            lit = lit_by_tree(scene, ws, ws->idx, pending);
-        }
-    } else if (pending > 0) {
-        rc = walk_light(scene, f, ws, pending, ls);
-        if (rc == KDR_ENOMEM)
-            return rc;
-        if (rc == KDR_OK && ws->cl.n == 0) {
-            ws->st.cones_decided += !made;
-            lit = pending;
-        } else {
-            if (!made)
-                make_samples(f, nsamples, ws);
-            rc = lit_after_walk(scene, f, ws, rc, pending, &ls->last, &lit);
-        }
+    if (rc == KD_CONE_OVER) {
+        lit = lit_busy(scene, f, ws, nsamples, &ls->last);
+        rc = KDR_OK;
     }
+    ws->st.cones_decided += rc == KDR_OK && ws->st.rays_traced == traced;
     *vis = (float)lit / (float)nsamples;
     return rc;
 }
@@ -471,5 +417,6 @@ int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
     free(ws.btmax);
     free(ws.bhit);
     free(ws.lights);
+    kd_cells_free(&ws.cells);
     return rc;
 }

@@ -33,9 +33,16 @@ typedef struct kd_shadow_frame {
 int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
                          size_t i, size_t l, kd_shadow_frame *f);
 
-/* Sample s of nsamples of the frame (direction unit length, tmin 0). */
+/* Sample s of nsamples of the frame (direction unit length, tmin 0).
+ * Its direction makes the angle theta with the axis, 1 - cos(theta) =
+ * u * one_minus_cos with u in [s, s+1) / nsamples (stratum s), and the
+ * azimuth 2 pi kd_shadow_frame_phase(f, s) around it from b1 toward b2. */
 void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
                          uint32_t nsamples, kdr_ray *out);
+/* The azimuth of sample s in turns, in [0, 1): the very value the ray is
+ * built from, so a region of (stratum, phase) holds exactly the samples
+ * whose parameters lie in it. */
+double kd_shadow_frame_phase(const kd_shadow_frame *f, uint32_t s);
 
 /* ---- cone traversal (kd_cone_trav.c) ------------------------------------ */
 
@@ -89,6 +96,95 @@ typedef struct kd_cand_list {
  * list is then incomplete). Adds the nodes visited to *nodes. */
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
                     size_t max_cands, uint64_t max_nodes, uint64_t *nodes);
+
+/* ---- proofs about one triangle (kd_cone_proof.c) -------------------------- */
+
+/* What one triangle does to every sample segment of a cone. */
+typedef enum kd_verdict {
+    KD_TRI_UNKNOWN = 0, /* some may hit it, some may not: trace them */
+    KD_TRI_MISSES = 1,  /* the triangle test rejects every one */
+    KD_TRI_COVERS = 2,  /* the triangle test accepts every one */
+} kd_verdict;
+
+/* A triangle as seen from a fixed apex (every ray starts exactly there),
+ * with the margins the float triangle test needs (kd_cone_proof.c). */
+typedef struct kd_tri_view {
+    double edge[3][3];            /* unit normals of the planes (apex, edge) */
+    double edge_sin[3], edge_cos[3]; /* margin angle of each edge sign */
+    double plane[3];              /* unit normal, from the plane to the apex */
+    double plane_sin, plane_cos;  /* grazing margin of the plane */
+    double lo[3], hi[3];          /* range of the vertices minus the apex */
+    uint32_t prim;
+    int det_sign;                 /* side of the apex (sign of det(A)) */
+    int det_ok;                   /* the computed t has the sign of the exact one */
+} kd_tri_view;
+
+/* A cone of directions: unit axis, half-angle b (covering the float
+ * rounding of every direction it stands for), the range of each world
+ * component of its directions, and the least tmax of its rays. */
+typedef struct kd_dir_cone {
+    double axis[3];
+    double cos_b, sin_b;
+    double dmin[3], dmax[3];
+    double tmax_lo;
+} kd_dir_cone;
+
+void kd_tri_view_init(kd_tri_view *v, const float *tri, uint32_t prim,
+                      const float apex[3]);
+void kd_dir_cone_set(kd_dir_cone *c, const double axis[3], double cos_b, double sin_b,
+                     double tmax_lo);
+kd_verdict kd_tri_view_classify(const kd_tri_view *v, const kd_dir_cone *c);
+
+/* ---- adaptive sub-cones (kd_cone_cells.c) --------------------------------- */
+
+#define KD_CELL_MAX_DEPTH 8  /* levels of 4-way splits below the whole light */
+#define KD_CELL_MAX_LEVEL 40 /* halvings of the phase */
+#define KD_SEEN_BITS 9       /* one walk remembers up to 2^8 triangles judged */
+
+/* One (point, light) being decided: set by kd_cone.c, read and updated by
+ * kd_cells_lit. */
+typedef struct kd_cone_pair {
+    const kdr_scene *scene;
+    const kd_shadow_frame *f;
+    uint32_t n;          /* samples */
+    int wide;            /* 8-wide (AVX2) packets */
+    int proofs;          /* fixed origin (normals given): kd_cone_proof applies */
+    double tmax_lo;      /* least tmax of any sample */
+    size_t max_cands;    /* a walk with more candidates is over budget
+                            (<= CONE_MAX_CANDS) */
+    uint32_t last;       /* last blocker (in and out) */
+    kdr_shadow_stats st; /* added to */
+    int rc;
+} kd_cone_pair;
+
+/* Workspace, reused across pairs (zero-initialise; kd_cells_free). */
+typedef struct kd_cells {
+    uint32_t *idx;       /* samples, partitioned cell by cell */
+    double *phase;       /* kd_shadow_frame_phase of every sample */
+    uint32_t cap_samples;
+    kd_tri_view *views;
+    size_t nviews, cap_views;
+    uint32_t *lists;     /* KD_CELL_MAX_DEPTH lists of CONE_MAX_CANDS */
+    kd_cand_list cl;
+    kdr_ray rays[8];
+    double hw_cos[KD_CELL_MAX_LEVEL], hw_sin[KD_CELL_MAX_LEVEL];
+    double slack_cos, slack_sin;
+    int hw_ready;
+    uint32_t seen_prim[1 << KD_SEEN_BITS], seen_stamp[1 << KD_SEEN_BITS];
+    uint32_t stamp;      /* of the current walk */
+    uint32_t nseen;      /* entries marked by it */
+} kd_cells;
+
+int kd_cells_reserve(kd_cells *c, uint32_t nsamples);
+void kd_cells_free(kd_cells *c);
+/* The pair's lit samples, found by the whole light's cone and its
+ * sub-cones (kd_cone_cells.c). KDR_OK, KDR_ENOMEM, or KD_CONE_OVER when
+ * the whole light's walk went over budget (nothing decided). */
+int kd_cells_lit(kd_cells *c, kd_cone_pair *pr, uint32_t *lit);
+
+/* The cull of kd_cone_collect for one triangle (kd_cone_trav.c): 0 only if
+ * it provably misses every segment of the cone. */
+int kd_cone_tri_may_block(const kd_cone *c, const float *tri);
 
 /* ---- packets (kd_cone_packet.c) ------------------------------------------ */
 

@@ -12,11 +12,18 @@
  * squares. All randomness is a counter-based hash of (seed, point, light,
  * sample): no state, thread-safe, reproducible.
  *
- * Offset (API.md: "epsilon * diagonal along the normal"): the normal is
- * flipped to the light's side first, because glTF normals of single-sided
- * or flipped geometry would otherwise push the start behind the very surface
- * it lies on and shadow every point of it. Without normals (or with a zero
- * normal) each ray's origin moves the same distance along the ray itself.
+ * Offset (shared/API.md v1.1): the distance is a bound on the float error
+ * of the point itself (KDR_OFFSET_AUTO: a few ulps of its largest
+ * coordinate, as renderers offset spawned rays, so far-flung parts of a
+ * scene get starts as close to their surfaces as parts near the origin) or
+ * epsilon times the scene diagonal (v1). With a normal the start moves
+ * along the normal AS GIVEN: the caller says which side of the surface the
+ * point is on, and a normal facing away from the light means the surface
+ * itself is between them (v1 turned normals toward the light; the contract
+ * does not). Each coordinate is rounded away from the point (pbrt-v3 does
+ * the same), so the start lies at least the offset off the plane through
+ * the point. Without normals (or with a zero normal) each ray's origin
+ * moves the same distance along the ray itself.
  */
 #include <math.h>
 
@@ -59,20 +66,37 @@ static void basis_around(const double n[3], double b1[3], double b2[3]) {
     b2[2] = -n[1];
 }
 
-/* Moves the apex along the (light-facing) normal; returns 0 when there is no
- * usable normal and the offset must go along each ray instead. */
-static int offset_along_normal(const float *nrm, const double *center,
-                               float off, float apex[3]) {
+/* The offset distance of point p (kdr_shadow_offset); not finite only for
+ * an epsilon * diagonal that overflows. */
+static float offset_of(const kdr_scene *scene, const kdr_shadow_query *q,
+                       const float *p) {
+    if (q->offset == KDR_OFFSET_DIAGONAL)
+        return q->epsilon * kdr_scene_diagonal(scene);
+    float m = FLT_MIN; /* ulp(FLT_MIN) = 2^-149 for points nearer 0 */
+    for (int k = 0; k < 3; k++)
+        m = fmaxf(m, fabsf(p[k]));
+    int e;
+    frexpf(m, &e); /* m = f * 2^e, f in [0.5, 1): ulp(m) = 2^(e-24) */
+    return ldexpf((float)KDR_OFFSET_AUTO_ULPS, e - 24);
+}
+
+/* Moves the apex off along the normal as given, each coordinate rounded
+ * away from the point; returns 0 when there is no usable normal and the
+ * offset must go along each ray instead. */
+static int offset_along_normal(const float *nrm, float off, float apex[3]) {
     double n[3] = {nrm[0], nrm[1], nrm[2]};
     double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     if (!(len > 0.0))
         return 0;
-    double facing = 0.0;
-    for (int k = 0; k < 3; k++)
-        facing += n[k] * (center[k] - apex[k]);
-    const double scale = (facing < 0.0 ? -1.0 : 1.0) * (double)off / len;
-    for (int k = 0; k < 3; k++)
-        apex[k] = (float)((double)apex[k] + n[k] * scale);
+    for (int k = 0; k < 3; k++) {
+        const double want = (double)apex[k] + n[k] * ((double)off / len);
+        float a = (float)want;
+        if ((double)a < want && want > apex[k])
+            a = nextafterf(a, INFINITY);
+        else if ((double)a > want && want < apex[k])
+            a = nextafterf(a, -INFINITY);
+        apex[k] = a;
+    }
     return 1;
 }
 
@@ -81,19 +105,25 @@ int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
     const float *p = q->points + 3 * i;
     const kdr_sphere_light *light = &q->lights[l];
     if (!finite3(p) || !finite3(light->center) || !isfinite(light->radius) ||
-        !(light->radius > 0.0f) || !isfinite(q->epsilon) || q->epsilon < 0.0f)
+        !(light->radius > 0.0f))
+        return KDR_EINVAL;
+    if (q->offset != KDR_OFFSET_AUTO &&
+        (q->offset != KDR_OFFSET_DIAGONAL || !isfinite(q->epsilon) || q->epsilon < 0.0f))
         return KDR_EINVAL;
     if (q->normals && !finite3(q->normals + 3 * i))
         return KDR_EINVAL;
-    const float off = q->epsilon * kdr_scene_diagonal(scene);
+    const float off = offset_of(scene, q, p);
+    if (!isfinite(off))
+        return KDR_EINVAL;
     for (int k = 0; k < 3; k++) {
         f->apex[k] = p[k];
         f->center[k] = light->center[k];
     }
     f->along = off;
-    if (q->normals && offset_along_normal(q->normals + 3 * i, f->center, off,
-                                          f->apex))
+    if (q->normals && offset_along_normal(q->normals + 3 * i, off, f->apex))
         f->along = 0.0f;
+    if (!finite3(f->apex))
+        return KDR_EINVAL;
     double w[3], d2 = 0.0;
     for (int k = 0; k < 3; k++) {
         w[k] = f->center[k] - (double)f->apex[k];
@@ -136,6 +166,11 @@ static double near_surface(const kd_shadow_frame *f, const float dir[3]) {
     return c / (b + sqrt(disc));
 }
 
+double kd_shadow_frame_phase(const kd_shadow_frame *f, uint32_t s) {
+    const double phi = (double)s * GOLDEN_FRACTION + f->phi_shift;
+    return phi - floor(phi);
+}
+
 void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
                          uint32_t nsamples, kdr_ray *out) {
     const uint64_t h = mix64(f->key ^ ((uint64_t)s * SAMPLE_KEY_SAMPLE));
@@ -143,8 +178,7 @@ void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
     const double one_minus_ct = u * f->one_minus_cos;
     const double ct = 1.0 - one_minus_ct;
     const double st = sqrt(one_minus_ct * (2.0 - one_minus_ct));
-    double phi = (double)s * GOLDEN_FRACTION + f->phi_shift;
-    phi = TWO_PI * (phi - floor(phi));
+    const double phi = TWO_PI * kd_shadow_frame_phase(f, s);
     const double cp = cos(phi) * st, sp = sin(phi) * st;
     double d[3], len2 = 0.0;
     for (int k = 0; k < 3; k++) {

@@ -197,6 +197,10 @@ static int tri_may_block(const kd_cone *cc, const float *tri) {
     return perp * cc->cos_p - proj * cc->sin_p <= rad;
 }
 
+int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
+    return tri_may_block(c, tri);
+}
+
 static int cmp_u32(const void *a, const void *b) {
     const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
     return (x > y) - (x < y);

@@ -83,17 +83,41 @@
 #define KB_CHUNK 256
 #define KB_SORT_SPREAD 0.5f
 
-/* ---- cone shadows (kd_cone.c) ---------------------------------------------- */
+/* ---- cone shadows (kd_cone.c, kd_cone_cells.c) ------------------------------
+ * Measured with kdray_bench_cone (default scene and 2CylinderEngine, a small
+ * and a large light each, auto offsets, kd_cone time against the strongest
+ * Embree API in the same run), at 10b8208 and after. */
 
-/* Tuning (bench/bench_cone.c): the whole-light cone gives up beyond
- * CONE_MAX_CANDS candidates or CONE_NODES_BASE + CONE_NODES_PER_SAMPLE *
- * samples nodes (a wasted walk then costs a fraction of a ray per sample).
- * The samples are then cut into packets of 4 or 8 neighbours on the light's
- * disc, each walking its own narrow cone; a packet's lanes still undecided
- * after GROUP_MAX_NODES nodes go through the tree one by one. */
+/* Below this many samples per point no cone walks: the samples go through
+ * the tree (bundles, or one by one under TREE_MIN_RAYS), after the light's
+ * last blocker. A walk with its proofs costs about what 8 rays do, and below
+ * 9 samples it decides too little to repay it: rays only at 1-8 spp
+ * 0.36-0.62x against walks 0.11-0.49x; at 16 spp walks win on three of the
+ * four views (0.50-0.68x against 0.38-0.55x). */
+#define CONE_RAYS_BELOW 9u
+/* The whole light's walk is over budget past CONE_MAX_CANDS candidates (the
+ * triangles its cull keeps that no proof dismisses) or CONE_NODES_BASE +
+ * CONE_NODES_PER_SAMPLE * samples nodes: the cone is then "busy" and its
+ * samples are traced otherwise. Below CONE_WALK_MIN_SAMPLES samples the
+ * candidate budget is CONE_FEW_CANDS: a walk that meets more than a couple
+ * of candidates seldom decides the point, and stopping early halves its
+ * cost (16 spp: 2 candidates 0.35-0.66x, 4: 0.34-0.65x, 32: 0.26-0.64x).
+ * 64 candidates instead of 32 lost 2-15% at 64 and 256 spp. */
 #define CONE_MAX_CANDS 32u
+#define CONE_FEW_CANDS 2u
+#define CONE_WALK_MIN_SAMPLES 32u
 #define CONE_NODES_BASE 24u
 #define CONE_NODES_PER_SAMPLE 6u
+/* A cell (sub-cone) holding at most this many samples tests them against
+ * its candidates instead of splitting again. Splitting further costs more
+ * than it saves: at 256 spp, leaves of 8 / 16 / 32 / 64 / 128 samples ran
+ * 1.90 / 2.06 / 2.07 / 2.27 / 2.33x (default, small light), 2.42 / 2.90 /
+ * 2.99 / 3.20 / 3.18x (engine, small light); large lights 0.76-0.86x
+ * whatever the size. */
+#define CELL_LEAF_SAMPLES 64u
+/* Busy cones: the samples are cut into packets of 4 or 8 neighbours on the
+ * light's disc, each walking its own narrow cone; a packet's lanes still
+ * undecided after GROUP_MAX_NODES nodes go through the tree one by one. */
 #define GROUP_MAX_NODES 512u
 /* A packet whose cone is wider than this (radians) is traced as rays: a wide
  * cone reaches far more leaves than its rays do (measured on 2CylinderEngine:
@@ -107,14 +131,6 @@
  * spent to learn blockers first (learn_blockers), and how many. */
 #define LEARN_MIN 8u
 #define LEARN_ROUNDS 3u
-/* Below this many samples per point the whole-light walk is not tried and
- * the samples go through the tree as bundles (kdr_trace_batch, shared
- * origin): the walk culls every triangle of every leaf it reaches (leaves
- * hold ~12 refs) and only a decided cone repays it. bench_cone, Embree time /
- * cone time, walk -> bundles: at 8 spp 0.64-1.02x -> 0.73-1.58x, at 16 spp
- * 0.51-1.17x -> 0.66-1.55x on all four configurations; at 32 spp the walk
- * wins where most points are lit (default, small light: 1.3-1.4x vs 0.9-1.0x). */
-#define CONE_WALK_MIN_SAMPLES 32u
 /* Fewer pending samples than this go through the tree one by one: a batch's
  * set-up (grouping, sorting) costs more than a bundle saves (bench_cone at
  * 2 spp: bundles 0.0018 s vs single rays 0.0015 s on default/small). */

@@ -183,6 +183,20 @@ typedef struct kdr_sphere_light {
     float radius; /* > 0 */
 } kdr_sphere_light;
 
+/* How far each shadow ray's start moves off the surface (shared/API.md
+ * v1.1, "epsilon"). */
+typedef enum kdr_shadow_offset {
+    /* KDR_OFFSET_AUTO_ULPS units in the last place of the point's largest
+     * |coordinate| (of FLT_MIN for a point nearer 0): a bound on the float
+     * error of the point itself, as renderers offset spawned rays; the
+     * same start relative to the point wherever it lies in the scene. */
+    KDR_OFFSET_AUTO = 0,
+    /* epsilon * the scene's bounding-box diagonal (API v1's only meaning). */
+    KDR_OFFSET_DIAGONAL = 1,
+} kdr_shadow_offset;
+
+#define KDR_OFFSET_AUTO_ULPS 16
+
 typedef struct kdr_shadow_query {
     size_t n;                 /* points */
     const float *points;      /* 3*n */
@@ -191,7 +205,8 @@ typedef struct kdr_shadow_query {
     size_t nlights;
     uint32_t samples;         /* 1..4096 */
     uint64_t seed;
-    float epsilon;            /* offset = epsilon * scene diagonal */
+    kdr_shadow_offset offset; /* 0 (a zeroed query): KDR_OFFSET_AUTO */
+    float epsilon;            /* KDR_OFFSET_DIAGONAL: finite, >= 0 */
 } kdr_shadow_query;
 
 typedef struct kdr_shadow_stats {
@@ -221,12 +236,16 @@ typedef enum kdr_shadow_mode {
  * asin(r/D): cos(theta) stratified into `samples` strata with a hashed
  * jitter, the azimuth on a golden-ratio lattice rotated per (point, light);
  * all of it a counter-based hash of (seed, i, l, s): no state, thread-safe.
- * Offset: with a normal, the start moves epsilon * diagonal along the normal
- * FLIPPED TO THE LIGHT'S SIDE (normals of single-sided or flipped meshes
- * must not push the start behind its own surface); the offset point is the
- * cone's apex and must itself lie outside the light. Without normals (or
- * with a zero normal) each ray's origin moves that distance along the ray
- * itself. Non-finite inputs, radius <= 0 and epsilon < 0 are KDR_EINVAL. */
+ * Offset (q->offset): with a normal, the start moves that distance along
+ * the normal AS GIVEN (API v1.1: the caller says which side of the surface
+ * the point is on; a normal facing away from the light puts the surface
+ * between them), each coordinate rounded away from the point so that the
+ * move is never shortened by rounding; the offset point is the cone's apex
+ * and must itself lie outside the light. Without normals (or with a zero
+ * normal) each ray's origin moves that distance along the ray itself.
+ * Non-finite inputs, radius <= 0, an unknown offset mode and, with
+ * KDR_OFFSET_DIAGONAL, epsilon < 0 or a non-finite epsilon * diagonal are
+ * KDR_EINVAL. */
 int kdr_shadow_ray(const kdr_scene *scene, const kdr_shadow_query *q, size_t i,
                    size_t l, uint32_t s, kdr_ray *out);
 

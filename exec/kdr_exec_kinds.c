@@ -176,7 +176,8 @@ static int shadow_parse(kdr_exec_job *j) {
     kdr_proto_error err = {0};
     kdr_shadow_request *r = &j->k.shadow.req;
     if (kdr_proto_parse_shadow_as(j->q->media, j->q->body, j->q->len, j->q->max_rays, r,
-                                  &err) != 0) {
+                                  &err) != 0 ||
+        kdr_proto_check_shadow_scene(r, kdr_scene_diagonal(j->q->scene), &err) != 0) {
         kdr_exec_fail_proto(j, &err);
         return -1;
     }
@@ -218,7 +219,8 @@ static void shadow_chunk(kdr_exec_job *j, size_t c) {
 }
 
 /* The core refuses a point whose offset start lies inside a light (the
- * protocol checked the point itself): name the first such point. */
+ * protocol checked the point itself, and kdr_proto_check_shadow_scene that
+ * the offset is finite): name the first such point. */
 static void shadow_name_invalid(kdr_exec_job *j) {
     const kdr_shadow_query *q = &j->k.shadow.req.query;
     kdr_ray ray;
@@ -226,8 +228,8 @@ static void shadow_name_invalid(kdr_exec_job *j) {
         for (size_t l = 0; l < q->nlights; l++)
             if (kdr_shadow_ray(j->q->scene, q, i, l, 0, &ray) == KDR_EINVAL) {
                 kdr_exec_fail(j, 400,
-                              "points[%zu]: inside lights[%zu] (distance to the center "
-                              "<= radius)",
+                              "points[%zu]: inside lights[%zu] once offset (distance to "
+                              "the center <= radius)",
                               i, l);
                 return;
             }

@@ -60,7 +60,6 @@ extern "C" {
 #define KDR_PROTO_DEFAULT_SAMPLES 64
 #define KDR_PROTO_MAX_SAMPLES 4096
 #define KDR_PROTO_DEFAULT_SEED 1
-#define KDR_PROTO_DEFAULT_EPSILON 1e-4f
 #define KDR_PROTO_DEFAULT_TILE 8
 #define KDR_PROTO_MIN_TILE 4
 #define KDR_PROTO_MAX_TILE 64
@@ -208,6 +207,11 @@ int kdr_proto_parse_shadow_as(kdr_media media, const char *body, size_t len,
                               size_t max_rays, kdr_shadow_request *out,
                               kdr_proto_error *err);
 void kdr_shadow_request_free(kdr_shadow_request *req);
+/* The checks that need the scene, made once its name is resolved: a
+ * numeric epsilon whose offset (epsilon * the scene's diagonal, the core's
+ * float product) is not finite is a 400 naming "epsilon". 0 or 400. */
+int kdr_proto_check_shadow_scene(const kdr_shadow_request *req, float diagonal,
+                                 kdr_proto_error *err);
 
 /* POST /v1/scenes/{name}/frustum (owns nothing: no free function) */
 typedef struct kdr_frustum_request {

@@ -220,7 +220,8 @@ static int shadow_options(const cJSON *root, kdr_shadow_request *out,
     uint64_t v;
     q->samples = KDR_PROTO_DEFAULT_SAMPLES;
     q->seed = KDR_PROTO_DEFAULT_SEED;
-    q->epsilon = KDR_PROTO_DEFAULT_EPSILON;
+    q->offset = KDR_OFFSET_AUTO; /* API v1.1: "epsilon": "auto" by default */
+    q->epsilon = 0.0f;
     if ((it = field(root, "samples"))) {
         if (kdr_pf_int(it, "samples", 1, KDR_PROTO_MAX_SAMPLES, "1..4096", &v, err))
             return err->status;
@@ -230,9 +231,12 @@ static int shadow_options(const cJSON *root, kdr_shadow_request *out,
         if (kdr_pf_int(it, "seed", 0, 0x1p53, "0..2^53", &q->seed, err))
             return err->status;
     }
-    if ((it = field(root, "epsilon"))) {
+    if ((it = field(root, "epsilon")) &&
+        !(cJSON_IsString(it) && !strcmp(it->valuestring, "auto"))) {
+        q->offset = KDR_OFFSET_DIAGONAL;
         if (kdr_pf_float(it, "epsilon", &q->epsilon, err) || !(q->epsilon >= 0.0f))
-            return kdr_proto_error_set(err, 400, "epsilon: must be a finite number >= 0");
+            return kdr_proto_error_set(err, 400,
+                                       "epsilon: must be \"auto\" or a finite number >= 0");
     }
     if ((it = field(root, "stats"))) {
         if (!cJSON_IsBool(it))
@@ -317,6 +321,18 @@ int kdr_proto_parse_shadow_as(kdr_media media, const char *body, size_t len,
     if (st)
         kdr_shadow_request_free(out);
     return st;
+}
+
+int kdr_proto_check_shadow_scene(const kdr_shadow_request *req, float diagonal,
+                                 kdr_proto_error *err) {
+    const kdr_shadow_query *q = &req->query;
+    /* the core's own product, in float: it refuses exactly these */
+    if (q->offset == KDR_OFFSET_DIAGONAL && !isfinite(q->epsilon * diagonal))
+        return kdr_proto_error_set(err, 400,
+                                   "epsilon: %g times the scene diagonal %g is not a "
+                                   "finite offset",
+                                   (double)q->epsilon, (double)diagonal);
+    return 0;
 }
 
 void kdr_shadow_request_free(kdr_shadow_request *req) {

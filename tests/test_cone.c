@@ -113,7 +113,7 @@ static kdr_shadow_query make_query(const float *pts, size_t n,
     q.nlights = nl;
     q.samples = samples;
     q.seed = 7;
-    q.epsilon = 1e-5f;
+    q.offset = KDR_OFFSET_AUTO; /* the contract's default (API v1.1) */
     return q;
 }
 
@@ -196,8 +196,22 @@ static void test_invalid(void) {
     CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
           "radius NaN");
     li.radius = 1.0f;
+    q.offset = KDR_OFFSET_DIAGONAL;
     q.epsilon = -1.0f;
     CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "negative epsilon");
+    q.epsilon = NAN;
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "NaN epsilon");
+    q.epsilon = 3e38f; /* the diagonal is 2.8: epsilon * diagonal overflows */
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "overflowing offset");
+    CHECK(kdr_shadow_trace(s, &q, 0, 1, KDR_SHADOW_CONE, vis, NULL) == KDR_EINVAL,
+          "overflowing offset, trace");
+    q.epsilon = 1e-4f;
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_OK, "diagonal offset");
+    q.offset = (kdr_shadow_offset)2;
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_EINVAL, "unknown offset mode");
+    q.offset = KDR_OFFSET_AUTO;
+    q.epsilon = NAN; /* ignored by "auto" */
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 0, &r) == KDR_OK, "auto ignores epsilon");
     kdr_scene_free(s);
     free(b.v);
 }
@@ -334,9 +348,13 @@ static void test_analytic(void) {
     }
 }
 
-/* Normals: the start moves off the surface toward the light's side, so a
- * single-sided floor whose normal points away from the light does not
- * shadow its own points. */
+/* Normals (API v1.1): the start moves along the normal AS GIVEN. On a
+ * single-sided floor lit from above, points whose normal faces the light
+ * are lit and points whose normal faces away are shadowed by the floor
+ * itself (the caller says the point is on the floor's underside). v1 turned
+ * every normal toward the light and found both lit; this test asserted
+ * that and now asserts the contract's answer. Without normals the start
+ * moves along each ray, and the floor does not shadow its own points. */
 static void test_normals(void) {
     tri_buf b = {0};
     tb_rect(&b, 1, 0.0f, -10, 10, -10, 10); /* floor y = 0 */
@@ -346,18 +364,66 @@ static void test_normals(void) {
     const float up[6] = {0, 1, 0, 0, 1, 0};
     const kdr_sphere_light li = {{1, 5, 1}, 1.0f};
     kdr_shadow_query q = make_query(pts, 2, &li, 1, 32);
-    q.epsilon = 1e-4f;
-    float vis[2];
     const float *nrm[3] = {down, up, NULL};
-    for (int c = 0; c < 3; c++) {
-        q.normals = nrm[c];
-        for (int m = 0; m < 2; m++) {
-            kdr_shadow_trace(s, &q, 0, 2, (kdr_shadow_mode)m, vis, NULL);
-            CHECK(vis[0] == 1.0f && vis[1] == 1.0f, "floor self-shadow c=%d m=%d: %g %g",
-                  c, m, vis[0], vis[1]);
+    const float want[3] = {0.0f, 1.0f, 1.0f};
+    for (int off = 0; off < 2; off++) {
+        q.offset = off ? KDR_OFFSET_DIAGONAL : KDR_OFFSET_AUTO;
+        q.epsilon = 1e-4f;
+        for (int c = 0; c < 3; c++) {
+            float vis[2];
+            q.normals = nrm[c];
+            for (int m = 0; m < 2; m++) {
+                kdr_shadow_trace(s, &q, 0, 2, (kdr_shadow_mode)m, vis, NULL);
+                CHECK(vis[0] == want[c] && vis[1] == want[c],
+                      "floor, normals %s, offset %s, mode %d: %g %g (want %g)",
+                      c == 0 ? "down" : c == 1 ? "up" : "none", off ? "diagonal" : "auto",
+                      m, vis[0], vis[1], want[c]);
+            }
+            check_modes("normals on floor", s, &b, &q);
         }
-        check_modes("normals on floor", s, &b, &q);
     }
+    kdr_scene_free(s);
+    free(b.v);
+}
+
+/* The offset itself: "auto" moves KDR_OFFSET_AUTO_ULPS ulps of the point's
+ * largest coordinate along the normal as given, at the origin as 1e5 away;
+ * a numeric epsilon moves epsilon * diagonal; rounding never shortens it. */
+static void test_offsets(void) {
+    tri_buf b = {0};
+    tb_rect(&b, 1, 0.0f, -1e5f, 1e5f, -1e5f, 1e5f);
+    kdr_scene *s = build(&b);
+    const float pts[9] = {1e5f, 0.5f, 3.0f, 0.25f, 0.0f, -0.75f, 0.0f, 0.0f, 0.0f};
+    const float nrm[9] = {0, 1, 0, 0, -2, 0, 1, 1, 0};
+    const kdr_sphere_light li = {{0, 1e4f, 0}, 10.0f};
+    kdr_shadow_query q = make_query(pts, 3, &li, 1, 4);
+    q.normals = nrm;
+    kdr_ray r;
+    /* 1e5 is in [2^16, 2^17): ulp 2^-7, so 16 ulps are 0.125 */
+    CHECK(kdr_shadow_ray(s, &q, 0, 0, 1, &r) == KDR_OK && r.org[0] == 1e5f &&
+              r.org[1] == 0.625f && r.org[2] == 3.0f,
+          "auto at 1e5: %.9g %.9g %.9g", r.org[0], r.org[1], r.org[2]);
+    /* 0.75 is in [2^-1, 2^0): ulp 2^-24, 16 ulps 2^-20; down, as given */
+    CHECK(kdr_shadow_ray(s, &q, 1, 0, 1, &r) == KDR_OK && r.org[0] == 0.25f &&
+              r.org[1] == -0x1p-20f && r.org[2] == -0.75f,
+          "auto near 0, normal down: %.9g %.9g %.9g", r.org[0], r.org[1], r.org[2]);
+    /* at the origin: 16 ulps of FLT_MIN along (1,1,0)/sqrt(2), each
+     * coordinate rounded away from the point (never to 0) */
+    CHECK(kdr_shadow_ray(s, &q, 2, 0, 1, &r) == KDR_OK && r.org[0] > 0.0f &&
+              r.org[1] > 0.0f && r.org[2] == 0.0f &&
+              (double)r.org[0] + r.org[1] >= 16 * 0x1p-149 * sqrt(2.0),
+          "auto at 0: %g %g %g", r.org[0], r.org[1], r.org[2]);
+    q.offset = KDR_OFFSET_DIAGONAL;
+    q.epsilon = 1e-6f;
+    const double want = 1e-6f * kdr_scene_diagonal(s);
+    CHECK(kdr_shadow_ray(s, &q, 1, 0, 1, &r) == KDR_OK && -(double)r.org[1] >= want &&
+              -(double)r.org[1] < want * (1 + 1e-6),
+          "diagonal: %.9g want %.9g", -r.org[1], want);
+    q.normals = NULL; /* along each ray: the origin moves, the apex does not */
+    q.offset = KDR_OFFSET_AUTO;
+    CHECK(kdr_shadow_ray(s, &q, 1, 0, 1, &r) == KDR_OK &&
+              fabs(r.org[1] - 0x1p-20 * r.dir[1]) <= 0x1p-44,
+          "auto along the ray: %.9g", r.org[1]);
     kdr_scene_free(s);
     free(b.v);
 }
@@ -572,6 +638,170 @@ static void test_packets(void) {
     free(b.v);
 }
 
+/* ---- proofs about one triangle (kd_cone_proof.c) ------------------------- */
+
+static double rnd_log(double lo, double hi) { return lo * pow(hi / lo, rnd()); }
+
+static void unit_basis(const double a[3], double b1[3], double b2[3]) {
+    const double t[3] = {fabs(a[0]) < 0.6 ? 1.0 : 0.0, fabs(a[0]) < 0.6 ? 0.0 : 1.0, 0.0};
+    b1[0] = a[1] * t[2] - a[2] * t[1];
+    b1[1] = a[2] * t[0] - a[0] * t[2];
+    b1[2] = a[0] * t[1] - a[1] * t[0];
+    const double l = sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2]);
+    for (int k = 0; k < 3; k++)
+        b1[k] /= l;
+    b2[0] = a[1] * b1[2] - a[2] * b1[1];
+    b2[1] = a[2] * b1[0] - a[0] * b1[2];
+    b2[2] = a[0] * b1[1] - a[1] * b1[0];
+}
+
+static void rnd_unit(double d[3]) {
+    double l;
+    do {
+        for (int k = 0; k < 3; k++)
+            d[k] = 2.0 * rnd() - 1.0;
+        l = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    } while (l < 0.1 || l > 1.0);
+    for (int k = 0; k < 3; k++)
+        d[k] /= l;
+}
+
+/* A float direction within angle b of axis (on the rim half the time). */
+static void rnd_in_cone(const double a[3], double b, float d[3]) {
+    double b1[3], b2[3], v[3];
+    unit_basis(a, b1, b2);
+    const double th = rnd() < 0.5 ? b : b * sqrt(rnd()), ph = 6.283185307179586 * rnd();
+    for (int k = 0; k < 3; k++)
+        v[k] = cos(th) * a[k] + sin(th) * (cos(ph) * b1[k] + sin(ph) * b2[k]);
+    const double l = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    for (int k = 0; k < 3; k++)
+        d[k] = (float)(v[k] / l);
+}
+
+/* Random triangles and cones aimed at the proofs' edges: a point's own
+ * surface with the apex 1 to 1e4 ulps of the triangle's size above it
+ * (acne territory) and cones leaving it at any angle, and triangles across
+ * the cone near its rim, near tmax and at grazing angles; every verdict
+ * other than UNKNOWN is checked with float rays through the cone (half of
+ * them on its rim) against kd_tri_intersect. */
+static void test_proofs(void) {
+    rng_state = 2024;
+    long verdicts[3] = {0, 0, 0}, rays = 0, wrong = 0;
+    for (int trial = 0; trial < 40000 && wrong < 5; trial++) {
+        const double L = rnd_log(1e-2, 1e5);
+        float apex[3], tri[9];
+        double axis[3], nrm[3], b1[3], b2[3];
+        for (int k = 0; k < 3; k++)
+            apex[k] = (float)((2.0 * rnd() - 1.0) * L);
+        const int own = trial % 2 == 0;
+        if (rnd() < 0.3) { /* an axis-aligned plane */
+            nrm[0] = nrm[1] = nrm[2] = 0.0;
+            nrm[trial % 3] = rnd() < 0.5 ? 1.0 : -1.0;
+        } else {
+            rnd_unit(nrm);
+        }
+        unit_basis(nrm, b1, b2);
+        const double M = own ? L * rnd_log(1e-3, 10.0) : L * rnd_log(1e-3, 1.0);
+        double tmax_lo;
+        if (own) { /* a plane just below the apex, the apex over the triangle */
+            const double h = M * 0x1p-24 * rnd_log(1.0, 1e4);
+            const double ph = 6.283185307179586 * rnd();
+            for (int i = 0; i < 3; i++) {
+                const double an = ph + 2.0944 * i + 0.5 * (rnd() - 0.5);
+                const double r = M * (0.3 + rnd());
+                for (int k = 0; k < 3; k++)
+                    tri[3 * i + k] = (float)(apex[k] - h * nrm[k] +
+                                             r * (cos(an) * b1[k] + sin(an) * b2[k]));
+            }
+            for (int k = 0; k < 3; k++) /* mostly leaving the plane */
+                axis[k] = nrm[k] * (rnd() * 1.3 - 0.3) + (rnd() - 0.5);
+            tmax_lo = L * rnd_log(1e-3, 10.0);
+        } else { /* a triangle ahead, the cone through it, near it or grazing */
+            double c[3], dir[3];
+            rnd_unit(dir);
+            const double dist = M * rnd_log(0.5, 100.0);
+            for (int k = 0; k < 3; k++)
+                c[k] = apex[k] + dist * dir[k];
+            for (int i = 0; i < 3; i++) {
+                const double an = 2.0944 * i + 0.7 * (rnd() - 0.5);
+                const double r = M * (0.3 + rnd());
+                for (int k = 0; k < 3; k++)
+                    tri[3 * i + k] =
+                        (float)(c[k] + r * (cos(an) * b1[k] + sin(an) * b2[k]));
+            }
+            const double off = M / dist * (rnd() * 1.5);
+            double e1[3], e2[3];
+            unit_basis(dir, e1, e2);
+            for (int k = 0; k < 3; k++)
+                axis[k] = dir[k] + off * (rnd() < 0.5 ? e1[k] : e2[k]);
+            tmax_lo = dist * rnd_log(0.7, 3.0);
+        }
+        const double al = sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
+        if (!(al > 1e-6))
+            continue;
+        for (int k = 0; k < 3; k++)
+            axis[k] /= al;
+        double bgeo = rnd_log(1e-6, 0.8);
+        kd_tri_view v;
+        kd_dir_cone dc;
+        kd_tri_view_init(&v, tri, 0, apex);
+        /* a quarter of the triangles ahead: a cone touching one edge's plane
+         * from either side, its tangent ray among the rays fired */
+        double touch[3] = {0, 0, 0};
+        if (!own && trial % 4 == 1) {
+            const int e = (int)(rnd() * 3) % 3, j = (e + 1) % 3;
+            double m[3], ml = 0.0, side = rnd() < 0.5 ? 1.0 : -1.0;
+            for (int k = 0; k < 3; k++) { /* a point of the edge, seen from the apex */
+                const double f = 0.1 + 0.8 * rnd();
+                m[k] = (1 - f) * tri[3 * j + k] + f * tri[3 * ((j + 1) % 3) + k] - apex[k];
+                ml += m[k] * m[k];
+            }
+            ml = sqrt(ml);
+            bgeo = rnd_log(1e-6, 0.3);
+            for (int k = 0; k < 3; k++) {
+                touch[k] = m[k] / ml;
+                axis[k] = cos(bgeo) * touch[k] + side * sin(bgeo) * v.edge[e][k];
+            }
+        }
+        const double b = bgeo + 2e-7; /* the test's float directions: 1e-7 */
+        kd_dir_cone_set(&dc, axis, cos(b), sin(b), tmax_lo);
+        const kd_verdict vd = kd_tri_view_classify(&v, &dc);
+        verdicts[vd]++;
+        if (vd == KD_TRI_UNKNOWN)
+            continue;
+        float tmax = (float)tmax_lo;
+        if ((double)tmax > tmax_lo)
+            tmax = nextafterf(tmax, 0.0f);
+        for (int r = 0; r < 100; r++) {
+            float d[3], t = -1.0f, u, w;
+            kd_ray_pre pre;
+            rnd_in_cone(axis, bgeo, d);
+            if (touch[0] != 0 || touch[1] != 0 || touch[2] != 0) {
+                if (r < 8) /* the tangent direction and float neighbours */
+                    for (int k = 0; k < 3; k++)
+                        d[k] = (float)touch[k];
+                if (r > 0 && r < 8)
+                    d[r % 3] = nextafterf(d[r % 3], r < 4 ? INFINITY : -INFINITY);
+            }
+            kd_ray_precompute(apex, d, &pre);
+            const int hit = kd_tri_intersect(&pre, tri, 0.0f,
+                                             vd == KD_TRI_COVERS ? tmax : INFINITY, &t, &u, &w);
+            rays++;
+            if (hit != (vd == KD_TRI_COVERS)) {
+                wrong++;
+                CHECK(0, "trial %d: verdict %d but ray (%.9g %.9g %.9g) %s (t %g, tmax_lo %g)",
+                      trial, (int)vd, d[0], d[1], d[2], hit ? "hits" : "misses", t,
+                      tmax_lo);
+                break;
+            }
+        }
+    }
+    printf("proofs: %ld unknown, %ld misses, %ld covers; %ld rays checked\n", verdicts[0],
+           verdicts[1], verdicts[2], rays);
+    CHECK(verdicts[1] > 5000 && verdicts[2] > 1000 && verdicts[0] > 1000,
+          "the trials must reach every verdict");
+}
+
 /* Any split of the point range gives the same visibilities (the per-light
  * state carried between points only changes the path, never the answer). */
 static void test_ranges(void) {
@@ -610,9 +840,11 @@ int main(int argc, char **argv) {
     test_ray_definition();
     test_analytic();
     test_normals();
+    test_offsets();
     test_soup_vs_embree();
     test_adversarial();
     test_packets();
+    test_proofs();
     test_ranges();
     if (failures) {
         fprintf(stderr, "test_cone: %d failures\n", failures);

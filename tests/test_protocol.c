@@ -310,9 +310,16 @@ static const struct err_case {
     {SHADOW, "{" LIGHT ",\"seed\":-1}", 0, 400, "seed: must be an integer in 0..2^53"},
     {SHADOW, "{" LIGHT ",\"seed\":9007199254740994}", 0, 400,
      "seed: must be an integer in 0..2^53"},
-    {SHADOW, "{" LIGHT ",\"epsilon\":-1}", 0, 400, "epsilon: must be a finite number >= 0"},
-    {SHADOW, "{" LIGHT ",\"epsilon\":\"x\"}", 0, 400, "epsilon: must be a finite number >= 0"},
-    {SHADOW, "{" LIGHT ",\"epsilon\":1e39}", 0, 400, "epsilon: must be a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":-1}", 0, 400,
+     "epsilon: must be \"auto\" or a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":\"x\"}", 0, 400,
+     "epsilon: must be \"auto\" or a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":\"AUTO\"}", 0, 400,
+     "epsilon: must be \"auto\" or a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":null}", 0, 400,
+     "epsilon: must be \"auto\" or a finite number >= 0"},
+    {SHADOW, "{" LIGHT ",\"epsilon\":1e39}", 0, 400,
+     "epsilon: must be \"auto\" or a finite number >= 0"},
     {SHADOW, "{" LIGHT ",\"stats\":1}", 0, 400, "stats: must be true or false"},
     {SHADOW, "{" LIGHT ",\"encoding\":\"hex\"}", 0, 400,
      "encoding: must be \"json\" or \"base64\""},
@@ -530,8 +537,8 @@ static void test_shadow_ok(void) {
         const kdr_shadow_query *q = &r.query;
         CHECK(q->n == 2 && q->nlights == 2 && q->normals == NULL, "shape");
         CHECK(q->samples == KDR_PROTO_DEFAULT_SAMPLES && q->seed == 1 &&
-                  q->epsilon == 1e-4f && !r.want_stats,
-              "defaults");
+                  q->offset == KDR_OFFSET_AUTO && !r.want_stats,
+              "defaults (API v1.1: epsilon \"auto\")");
         CHECK(q->lights[1].center[1] == 10.0f && q->lights[1].radius == 2.0f, "light 1");
         CHECK(q->points[3] == 1.0f, "points");
     }
@@ -544,9 +551,31 @@ static void test_shadow_ok(void) {
     if (!st) {
         const kdr_shadow_query *q = &r.query;
         CHECK(q->normals && q->samples == 4096 && q->seed == 9007199254740992ull &&
-                  q->epsilon == 0.0f && r.want_stats && r.encoding == KDR_ENCODING_BASE64 &&
-                  r.deadline_ms == 0.5,
+                  q->offset == KDR_OFFSET_DIAGONAL && q->epsilon == 0.0f &&
+                  r.want_stats && r.encoding == KDR_ENCODING_BASE64 && r.deadline_ms == 0.5,
               "options");
+    }
+    kdr_shadow_request_free(&r);
+    /* "auto" spelled out; then the scene checks: a numeric epsilon whose
+     * offset epsilon * diagonal overflows float is a 400 naming epsilon (v1
+     * blamed points[0] through the core's refusal) */
+    body = "{\"points\":[0,0,0],\"lights\":[{\"center\":[0,10,0],\"radius\":0.5}],"
+           "\"epsilon\":\"auto\"}";
+    st = kdr_proto_parse_shadow(body, strlen(body), 0, &r, &err);
+    CHECK(st == 0 && r.query.offset == KDR_OFFSET_AUTO, "epsilon auto: %s", err.detail);
+    CHECK(st || kdr_proto_check_shadow_scene(&r, 3e38f, &err) == 0,
+          "auto never overflows: %s", err.detail);
+    kdr_shadow_request_free(&r);
+    body = "{\"points\":[0,0,0],\"lights\":[{\"center\":[0,10,0],\"radius\":0.5}],"
+           "\"epsilon\":1e30}";
+    st = kdr_proto_parse_shadow(body, strlen(body), 0, &r, &err);
+    CHECK(st == 0 && r.query.offset == KDR_OFFSET_DIAGONAL, "epsilon 1e30: %s", err.detail);
+    if (!st) {
+        CHECK(kdr_proto_check_shadow_scene(&r, 100.0f, &err) == 0, "1e30 * 100 is finite");
+        const int cs = kdr_proto_check_shadow_scene(&r, 1e9f, &err);
+        CHECK(cs == 400 && !strncmp(err.detail, "epsilon: ", 9) &&
+                  strstr(err.detail, "not a finite offset"),
+              "overflowing offset: %d \"%s\"", cs, err.detail);
     }
     kdr_shadow_request_free(&r);
 }

@@ -175,6 +175,7 @@ static void test_shadow_twins(int form) {
         CHECK(x->nlights == 2 && !memcmp(x->lights, y->lights, 2 * sizeof *x->lights),
               "lights");
         CHECK(x->samples == 33 && x->seed == 1ull << 40 && x->epsilon == y->epsilon &&
+                  x->offset == y->offset && x->offset == KDR_OFFSET_DIAGONAL &&
                   rc.want_stats && rj.want_stats,
               "options");
     }

@@ -226,7 +226,15 @@ def test_shadow_equals_core(t, c, d):
     t.eq(b64["visibility"], f32, "base64 visibility")
     inside = dict(p, points=p["lights"][0]["center"] + p["points"][3:])
     expect_problem(t, post(c, "/v1/scenes/%s/cone-shadow" % SCENE, inside), 400,
-                   "point inside a light")
+                   "point inside a light", "points[0]: inside lights[0]")
+    # API v1.1: "auto" is the default offset; a numeric epsilon whose offset
+    # (epsilon * diagonal) overflows float is a 400 naming epsilon, not a point
+    auto = dict(plain, epsilon="auto")
+    code, _, body = post(c, sp, auto)
+    t.eq((code, body), (200, core), "epsilon \"auto\" is the default")
+    huge = dict(plain, epsilon=3e38)
+    expect_problem(t, post(c, sp, huge), 400, "overflowing epsilon offset",
+                   "epsilon: ")
 
 
 def camera_payload(bounds, w, h, tile, query="closest", encoding="base64"):

@@ -127,7 +127,8 @@ static void fuzz_shadow(kdr_media media, const char *body, size_t len) {
         check(q->n >= 1 && q->nlights >= 1 && q->nlights <= KDR_PROTO_MAX_LIGHTS);
         check(q->samples >= 1 && q->samples <= KDR_PROTO_MAX_SAMPLES);
         check((uint64_t)q->n * q->nlights * q->samples <= FUZZ_MAX_RAYS);
-        check(finite_n(q->points, 3 * q->n) && isfinite(q->epsilon) && q->epsilon >= 0);
+        check(finite_n(q->points, 3 * q->n) && isfinite(q->epsilon) && q->epsilon >= 0 &&
+              (q->offset == KDR_OFFSET_AUTO || q->offset == KDR_OFFSET_DIAGONAL));
         check(!q->normals || finite_n(q->normals, 3 * q->n));
         for (size_t l = 0; l < q->nlights; l++)
             check(q->lights[l].radius > 0 && finite_n(q->lights[l].center, 3));

@@ -252,7 +252,7 @@ int acc_run_cone(const stress_scene *s, const kdr_scene *kd, const oracle *o,
     }
     make_points(s, opt, pts, nrm);
     kdr_shadow_query q = {opt->points, pts, nrm, lights, 2, opt->samples,
-                          opt->seed, 1e-4f};
+                          opt->seed, KDR_OFFSET_DIAGONAL, 1e-4f};
     trace_pairs(s, kd, o, &q, res, 0);
     /* inside closed regions: no offset, every sample must be blocked */
     float in[3 * MAX_INSIDE];
@@ -261,7 +261,7 @@ int acc_run_cone(const stress_scene *s, const kdr_scene *kd, const oracle *o,
         memcpy(in + 3 * nin, s->closed[nin].inside, 3 * sizeof(float));
     if (nin) {
         kdr_shadow_query qi = {nin, in, NULL, lights, 2, opt->samples,
-                               opt->seed, 0.0f};
+                               opt->seed, KDR_OFFSET_DIAGONAL, 0.0f};
         trace_pairs(s, kd, o, &qi, res, 1);
     }
     free(pts);
