@@ -5,7 +5,12 @@
 # `--target bench_service_soak` runs only the 60 s mixed-query soak (errors,
 # RSS growth, /metrics agreement).
 find_package(Python3 COMPONENTS Interpreter)
-if(Python3_Interpreter_FOUND AND TARGET kdrayd AND TARGET kdray_trace)
+if(NOT Python3_Interpreter_FOUND)
+  message(FATAL_ERROR "bench/service.cmake: python3 is missing; bench_service and "
+    "bench_service_soak need it (Debian package python3; ./scripts/dev deps), or "
+    "configure with -DBUILD_TESTING=OFF to build without tests and benchmarks.")
+endif()
+if(TARGET kdrayd AND TARGET kdray_trace)
   add_custom_target(bench_service
     COMMAND ${Python3_EXECUTABLE} ${CMAKE_CURRENT_SOURCE_DIR}/bench_service.py
             $<TARGET_FILE:kdrayd> $<TARGET_FILE:kdray_trace>

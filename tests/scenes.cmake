@@ -6,6 +6,10 @@
 add_test(NAME scenes_fetch COMMAND ${CMAKE_SOURCE_DIR}/scenes/fetch ${KDRAY_SCENE_DIR})
 set_tests_properties(scenes_fetch PROPERTIES FIXTURES_SETUP "scenes;scenes_fetch"
                      ENVIRONMENT "KDRAY_ASSIMP_MODELS=${KDRAY_ASSIMP_MODELS}")
+# A ladder missing rungs fails scenes/fetch unless --partial.
+add_test(NAME scenes_fetch_partial
+         COMMAND ${CMAKE_CURRENT_SOURCE_DIR}/test_fetch_partial.sh
+                 ${CMAKE_SOURCE_DIR}/scenes/fetch ${KDRAY_ASSIMP_MODELS})
 
 # Synthetic files written by the test: every feature and error path.
 add_executable(test_scenes ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes.c)
