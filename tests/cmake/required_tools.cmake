@@ -67,3 +67,8 @@ if(KDRAY_FUZZ)
       libclang-rt-14-dev "protocol_fuzz and scenes_fuzz (-DKDRAY_FUZZ=ON)")
   endif()
 endif()
+
+# The cluster test: replicas behind HAProxy (deploy/haproxy/kdray.cfg)
+# under wrk load.
+kdray_require_program(KDRAY_HAPROXY haproxy "cluster (tests/test_cluster.py)" haproxy)
+kdray_require_program(KDRAY_WRK wrk "cluster (tests/test_cluster.py)" wrk)
