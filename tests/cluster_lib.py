@@ -41,7 +41,8 @@ function init(args)
 end
 function response(status, headers, body)
   codes[status] = (codes[status] or 0) + 1
-  if status == 503 and headers["Retry-After"] then
+  -- header names are case-insensitive; HAProxy sends them lower-case
+  if status == 503 and (headers["Retry-After"] or headers["retry-after"]) then
     retry_after = retry_after + 1
   end
 end
@@ -202,6 +203,13 @@ class Balancer:
     def log_text(self):
         self.log.seek(0)
         return self.log.read()[-4000:]
+
+
+def cpu_seconds(pid):
+    """User + system CPU time of a process so far (from /proc)."""
+    with open("/proc/%d/stat" % pid) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def wrk(url, body_path, seconds, conns, threads=1, timeout_s=30):

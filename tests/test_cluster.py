@@ -12,11 +12,16 @@ is killed with SIGKILL and restarted on its port mid-run, and every client
 request still gets a 200 (no other status, no socket error): requests that
 were on the killed replica are retried once on another (HAProxy's retry
 counters must show it). The restarted replica is back in rotation before
-the load ends.
+the load ends. A client that hangs up mid-query through the balancer has
+its query cancelled (the replica's worker comes free, its cancellation
+counter grows). With no replica of a group alive, HAProxy's own answer
+is a 503 problem+json with Retry-After.
 """
 
 import json
 import os
+import re
+import socket
 import sys
 import tempfile
 import time
@@ -44,8 +49,25 @@ def bundle_body(n):
                        "encoding": "base64"}).encode()
 
 
+def metric(url, name):
+    _, _, body = cl.get(url + "/metrics")
+    m = re.search(r"^%s(?:\{[^}]*\})? ([\d.e+-]+)$" % name, body.decode(), re.M)
+    return float(m.group(1)) if m else -1.0
+
+
+def long_shadow(points):
+    """A cone-shadow query of several seconds of one core."""
+    pts = []
+    for i in range(points):
+        pts += [(i % 97) / 9.7 - 5, 0.02, (i % 89) / 8.9 - 5]
+    return json.dumps({"points": pts, "samples": 4096,
+                       "lights": [{"center": [x, 9, z], "radius": 2.5}
+                                  for x, z in ((0, 0), (4, 4), (-4, 4), (4, -4))]}).encode()
+
+
 def main():
-    main_reps = [cl.Replica(KDRAYD, [("default", SCENE)]) for _ in range(3)]
+    many = ["--max-rays", str(3000 * 4 * 4096)]
+    main_reps = [cl.Replica(KDRAYD, [("default", SCENE)], extra=many) for _ in range(3)]
     big = cl.Replica(KDRAYD, [("big", SCENE)])
     lb = None
     body = tempfile.NamedTemporaryFile(suffix=".json", delete=False)
@@ -97,6 +119,44 @@ def main():
         check(retr1[0] + retr1[1] > retr0[0] + retr0[1],
               "the kill was felt: HAProxy retried requests on another replica")
         check(lb.wait_status(up, 10), "all replicas UP at the end")
+
+        # a client that hangs up through the balancer frees its worker
+        # (HAProxy's abortonclose: without it the query ran to its end)
+        rep = main_reps[0]
+        c0 = metric(rep.url, "kdray_cancellations_total")
+        long = long_shadow(3000)
+        lb2 = cl.Balancer(HAPROXY, [rep.addr], [])
+        try:
+            check(lb2.wait_status({("kdray_main", "main1"): "UP"}), "one-replica balancer")
+            s = socket.create_connection(("127.0.0.1", lb2.port))
+            s.sendall(b"POST /v1/scenes/default/cone-shadow HTTP/1.1\r\nHost: x\r\n"
+                      b"Content-Type: application/json\r\nContent-Length: %d\r\n\r\n"
+                      % len(long) + long)
+            t0 = time.time()
+            while metric(rep.url, "kdray_workers_busy") < 1 and time.time() - t0 < 60:
+                time.sleep(0.01)
+            check(metric(rep.url, "kdray_workers_busy") == 1, "the long query runs")
+            s.close()
+            t1 = time.time()
+            while metric(rep.url, "kdray_workers_busy") > 0 and time.time() - t1 < 60:
+                time.sleep(0.01)
+            freed = time.time() - t1
+            check(freed < 5.0 and metric(rep.url, "kdray_cancellations_total") == c0 + 1,
+                  "hang-up through HAProxy cancelled the query (worker free in %.3f s)" %
+                  freed)
+        finally:
+            lb2.stop()
+
+        # no replica of a group alive: HAProxy's own 503, problem+json with
+        # Retry-After like the replicas'
+        big.kill()
+        check(lb.wait_status({("kdray_big_alive", "big1"): "DOWN"}, 10), "big1 DOWN")
+        code, hdrs, body = cl.post(lb.url + "/v1/scenes/big/bundle", bundle_body(8))
+        hdrs = {k.lower(): v for k, v in hdrs.items()}
+        check(code == 503 and hdrs.get("retry-after") == "1" and
+              hdrs.get("content-type") == "application/problem+json" and
+              json.loads(body)["status"] == 503,
+              "no replica: 503 problem+json with Retry-After (%d %r)" % (code, hdrs))
     finally:
         if lb:
             lb.stop()
