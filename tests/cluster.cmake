@@ -14,3 +14,10 @@ add_test(NAME deploy_haproxy_config
          COMMAND ${CMAKE_COMMAND} -E env
                  KDRAY_SCENE_MAP=${PROJECT_SOURCE_DIR}/deploy/haproxy/kdray-scenes.map
                  ${KDRAY_HAPROXY} -c -f ${PROJECT_SOURCE_DIR}/deploy/haproxy/kdray.cfg)
+
+# Kubernetes manifests (deploy/kubernetes) against the Kubernetes API
+# schemas (npm kubernetes-models, installed by ./scripts/dev deps; offline)
+# plus cross checks; --self-test breaks copies in 14 ways, each must fail.
+add_test(NAME k8s_manifests
+         COMMAND ${KDRAY_NODE} ${CMAKE_CURRENT_SOURCE_DIR}/k8s/validate.mjs --self-test
+                 ${PROJECT_SOURCE_DIR}/deploy/kubernetes/kdray.yaml)

@@ -60,6 +60,10 @@ run("haproxy hidden" 1 "the program haproxy;package haproxy;cluster"
     -DKDRAY_HAPROXY=/nonexistent/haproxy -P ${tools})
 run("wrk hidden" 1 "the program wrk;package wrk;cluster"
     -DKDRAY_WRK=/nonexistent/wrk -P ${tools})
+run("node hidden" 1 "the program node;package nodejs;k8s_manifests"
+    -DKDRAY_NODE=/nonexistent/node -P ${tools})
+run("k8s npm packages hidden" 1 "kubernetes-models;npm install;k8s_manifests"
+    -DKDRAY_K8S_MODULES=/nonexistent/node_modules -P ${tools})
 run("models hidden" 1 "package assimp-testmodels;test_core_scene;scenes_fuzz"
     -DKDRAY_ASSIMP_MODELS=/nonexistent/models -P ${tools})
 run("clang hidden" 1 "the program clang;package clang;protocol_fuzz"
