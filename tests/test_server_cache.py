@@ -11,7 +11,8 @@ many offsets (head, mesh ranges, image head, statistics, triangles, nodes,
 leaf lists) is refused with a logged reason, the tree is rebuilt, the
 answers are unchanged and the file is replaced by a good one. A file under
 another key's name (stale) is refused; a changed scene file gets a new
-key. Two daemons started together on an empty directory both publish
+key, at a restart and at a SIGHUP reload (a reload back to bytes seen
+before maps their tree). Two daemons started together on an empty directory both publish
 whole files and leave no temporary file. A --cache-dir that is a file is
 a clear start-up error.
 """
@@ -19,6 +20,7 @@ a clear start-up error.
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -143,26 +145,53 @@ def test_damage(t, tmp):
     t.check(not [f for f in cache_files(cache) if f.startswith(".tmp")], "no temp files")
 
 
-def test_changed_scene(t, tmp):
-    cache = os.path.join(tmp, "cache")
-    scene = os.path.join(tmp, "scene.glb")
-    shutil.copy(SCENE, scene)
-    d = start(cache, scene)
-    d.stop()
+def write_quad(path):
     sys.path.insert(0, os.path.join(HERE, "..", "scenes"))
     from glbutil import Glb
     g = Glb("test_server_cache")
     m = g.add_mesh("quad", [(-20, 0, -20), (20, 0, -20), (20, 0, 20), (-20, 0, 20)],
                    [0, 1, 2, 0, 2, 3])
     g.add_node("quad", mesh=m, root=True)
-    g.write(scene)
+    g.write(path + ".tmp")
+    os.replace(path + ".tmp", path)
+
+
+def count(d, text):
+    return sum(text in line for line in d.log)
+
+
+def test_changed_scene(t, tmp):
+    """A changed file has another key, at a restart and at a SIGHUP reload;
+    a reload back to bytes seen before maps their tree."""
+    cache = os.path.join(tmp, "cache")
+    scene = os.path.join(tmp, "scene.glb")
+    shutil.copy(SCENE, scene)
     d = start(cache, scene)
     try:
-        t.check(d.wait_log("tree cache: not cached"), "a changed file has another key")
+        t.check(d.wait_log("tree stored in cache"), "first tree stored")
+        write_quad(scene)
+        d.signal(signal.SIGHUP)
+        t.check(d.wait_log("generation 2 serving"), "reloaded")
+        t.eq(count(d, "tree cache: not cached"), 2, "the changed file has another key")
+        t.eq(count(d, "tree stored in cache"), 2, "its tree is stored too")
         t.eq(Client(d.url).scene("s")["triangles"], 2, "the new scene is served")
+        shutil.copy(SCENE, scene + ".tmp")
+        os.replace(scene + ".tmp", scene)
+        d.signal(signal.SIGHUP)
+        t.check(d.wait_log("generation 3 serving"), "reloaded again")
+        t.eq(count(d, "tree mapped from cache"), 1, "the first bytes' tree is mapped")
+        t.eq(lib.metric(Client(d.url).metrics(), "kdray_scene_from_cache", scene="s"), 1.0,
+             "served from the cache")
     finally:
         d.stop()
     t.eq(len(cache_files(cache)), 2, "one file per key")
+    write_quad(scene)
+    d = start(cache, scene)
+    try:
+        t.check(d.wait_log("tree mapped from cache"), "a restart maps the quad's tree")
+        t.eq(Client(d.url).scene("s")["triangles"], 2, "and serves it")
+    finally:
+        d.stop()
 
 
 def test_concurrent_writers(t, tmp):
