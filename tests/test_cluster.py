@@ -151,11 +151,11 @@ def main():
         # Retry-After like the replicas'
         big.kill()
         check(lb.wait_status({("kdray_big_alive", "big1"): "DOWN"}, 10), "big1 DOWN")
-        code, hdrs, body = cl.post(lb.url + "/v1/scenes/big/bundle", bundle_body(8))
+        code, hdrs, answer = cl.post(lb.url + "/v1/scenes/big/bundle", bundle_body(8))
         hdrs = {k.lower(): v for k, v in hdrs.items()}
         check(code == 503 and hdrs.get("retry-after") == "1" and
               hdrs.get("content-type") == "application/problem+json" and
-              json.loads(body)["status"] == 503,
+              json.loads(answer)["status"] == 503,
               "no replica: 503 problem+json with Retry-After (%d %r)" % (code, hdrs))
     finally:
         if lb:
