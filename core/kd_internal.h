@@ -71,7 +71,17 @@ struct kdr_scene {
                              request a leaf's triangles before testing them
                              (kd_layout, KD_PREFETCH_MIN_BYTES) */
     kdr_tree_stats stats;
+    int borrowed;         /* tris, nodes and refs point into a caller's
+                             tree image (kd_image.c): kdr_scene_free leaves
+                             them alone */
 };
+
+/* sizeof(struct kdr_scene) on LP64 as core/kd_image.c knows it. Whoever adds
+ * a field to the struct above must carry it in the tree image (write and
+ * open in kd_image.c, or derive it there as kd_layout_derive does), bump
+ * KD_IMAGE_FORMAT if the image changes, and then update this constant;
+ * kd_image.c refuses to compile until they do. */
+#define KD_SCENE_STRUCT_SIZE 192
 
 /* Requests the rows of triangles refs[0..count) (two lines may hold a
  * 36-byte row); walks call it at a leaf when scene->prefetch_leaves. Kept
@@ -84,6 +94,9 @@ __attribute__((noinline)) void kd_prefetch_tris(const kdr_scene *s,
  * above (core/kd_layout.c). KDR_ERANGE when the tree has KD_LAYOUT_MAX_NODES
  * nodes or more. */
 int kd_layout(kdr_scene *s);
+/* The part of kd_layout() that is derived from the finished tree and not
+ * stored in it (root_mag, prefetch_leaves); kd_image.c calls it too. */
+void kd_layout_derive(kdr_scene *s);
 
 /*
  * Termination bound: a subtree entered at distance t_near can be skipped

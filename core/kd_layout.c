@@ -14,11 +14,7 @@ static int empty_leaf(const kd_node *n) {
     return kd_is_leaf(n) && kd_count(n) == 0;
 }
 
-int kd_layout(kdr_scene *s) {
-    if (!s->nodes)
-        return KDR_OK;
-    if (s->nnodes >= KD_LAYOUT_MAX_NODES)
-        return KDR_ERANGE;
+void kd_layout_derive(kdr_scene *s) {
     /* kd_ray_slack's scene part, once per scene instead of once per ray */
     float m = 0.0f;
     for (int k = 0; k < 3; k++) {
@@ -29,6 +25,14 @@ int kd_layout(kdr_scene *s) {
     const size_t bytes = s->nnodes * sizeof(kd_node) + s->nrefs * sizeof(uint32_t) +
                          9 * s->ntris * sizeof(float);
     s->prefetch_leaves = bytes >= KD_PREFETCH_MIN_BYTES;
+}
+
+int kd_layout(kdr_scene *s) {
+    if (!s->nodes)
+        return KDR_OK;
+    if (s->nnodes >= KD_LAYOUT_MAX_NODES)
+        return KDR_ERANGE;
+    kd_layout_derive(s);
     /* a child's emptiness reads only leaf bits, which are never rewritten */
     for (size_t i = 0; i < s->nnodes; i++) {
         kd_node *n = &s->nodes[i];

@@ -19,6 +19,8 @@ const char *kdr_strerror(int status) {
         return "invalid argument";
     case KDR_ERANGE:
         return "size over a hard limit";
+    case KDR_EIMAGE:
+        return "invalid tree image";
     default:
         return "unknown error";
     }
@@ -39,9 +41,11 @@ void kdr_build_opts_default(kdr_build_opts *opts) {
 void kdr_scene_free(kdr_scene *scene) {
     if (!scene)
         return;
-    free(scene->tris);
-    free(scene->nodes);
-    free(scene->refs);
+    if (!scene->borrowed) {
+        free(scene->tris);
+        free(scene->nodes);
+        free(scene->refs);
+    }
     free(scene);
 }
 

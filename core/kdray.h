@@ -37,6 +37,7 @@ typedef enum kdr_status {
     KDR_ENOMEM = -1,   /* allocation failed */
     KDR_EINVAL = -2,   /* invalid argument (NULL, bad count, non-finite) */
     KDR_ERANGE = -3,   /* a size over a hard limit (e.g. > 2^30 triangles) */
+    KDR_EIMAGE = -4,   /* a tree image that is truncated, corrupt or stale */
 } kdr_status;
 
 const char *kdr_strerror(int status);
@@ -287,6 +288,39 @@ int kdr_frustum_trace(const kdr_scene *scene, const kdr_camera *cam,
                       uint32_t tile, size_t first_tile, size_t count,
                       kdr_query query, kdr_frustum_mode mode, kdr_hits *out,
                       kdr_trav_stats *stats);
+
+/* ---- tree images (core/kd_image.c) ---------------------------------------
+ * A built scene as one flat, position-independent buffer: the triangles,
+ * nodes, leaf lists, bounds and statistics, with a header naming the format
+ * and layout versions, the build options and a checksum. The core does no
+ * I/O: callers store the buffer (e.g. a tree cache file) and later hand it
+ * back, e.g. memory-mapped, to kdr_scene_image_open, which validates every
+ * byte a traversal could read before trusting any of it. */
+
+/* Bytes kdr_scene_image_write needs for scene (0 if scene is NULL). */
+size_t kdr_scene_image_size(const kdr_scene *scene);
+
+/* Writes the image of scene, built with opts (NULL: defaults), into buf
+ * (len >= kdr_scene_image_size(scene); bytes past the image are left as
+ * they are). */
+int kdr_scene_image_write(const kdr_scene *scene, const kdr_build_opts *opts,
+                          void *buf, size_t len);
+
+/* Builds a scene that reads its arrays from buf in place (buf must be
+ * 64-byte aligned, e.g. from mmap, and outlive the scene; kdr_scene_free
+ * then frees only the scene's own record). The image must have exactly len
+ * bytes and have been written with build options equal to opts (NULL:
+ * defaults) by this version of the core. Anything else (wrong magic,
+ * version, options, size or checksum, an index out of range, a tree deeper
+ * than the walks' stacks, a non-finite coordinate) is KDR_EIMAGE, with a
+ * static one-line reason in *why (why may be NULL). */
+int kdr_scene_image_open(const void *buf, size_t len, const kdr_build_opts *opts,
+                         kdr_scene **out, const char **why);
+
+/* The 64-bit checksum the images use (not cryptographic: it catches torn
+ * writes and flipped bits, not an adversary); seed chains calls. Exposed so
+ * that callers can key caches by file contents with the same function. */
+uint64_t kdr_hash64(const void *data, size_t len, uint64_t seed);
 
 #ifdef __cplusplus
 }

@@ -35,6 +35,7 @@
 #include "notify.h"
 #include "options.h"
 #include "server.h"
+#include "tree_cache.h"
 
 #ifndef KDRAY_VERSION
 #define KDRAY_VERSION "0.0.0"
@@ -316,6 +317,15 @@ int main(int argc, char **argv) {
         fprintf(stderr, "kdrayd: --access-log %s: %s (see kdrayd --help)\n", o.access_log,
                 strerror(errno));
         rc = 2;
+    }
+    if (rc < 0 && o.cache_dir) {
+        char why[512];
+        if (kdr_tree_cache_prepare(o.cache_dir, why, sizeof why) != 0) {
+            fprintf(stderr, "kdrayd: --cache-dir %s (see kdrayd --help)\n", why);
+            rc = 2;
+        } else {
+            kdr_registry_set_cache_dir(srv.registry, o.cache_dir);
+        }
     }
     if (rc < 0) {
         kdr_log_set_level((kdr_log_level)o.log_level);

@@ -79,6 +79,12 @@ static void usage(FILE *f) {
         "                        a request's \"deadline_ms\" can only shorten it)\n"
         "  --shutdown-grace-s N  on SIGTERM, let requests in flight run this long,\n"
         "                        then stop their queries with a 503 (default %zu)\n"
+        "Trees:\n"
+        "  --cache-dir DIR       keep built kd-trees in DIR (created if missing) and\n"
+        "                        map them at the next start or reload instead of\n"
+        "                        building; keyed by the scene file's bytes and the\n"
+        "                        build options; a damaged file is rebuilt; replicas\n"
+        "                        may share DIR (default: no cache)\n"
         "Logs:\n"
         "  --access-log FILE|-   one line per request: time, client, method, path,\n"
         "                        status, rays, bytes in, bytes out, ms (\"-\": stdout;\n"
@@ -140,6 +146,7 @@ static const char *const FLAGS[] = {"--scene",
                                     "--log-level",
                                     "--shutdown-grace-s",
                                     "--worker-nice",
+                                    "--cache-dir",
                                     NULL};
 
 static int known(const char *a, size_t len) {
@@ -197,6 +204,9 @@ static int take(kdr_options *o, const char *flag, const char *v) {
         if (parse_size(v, 0, MAX_GRACE_S, &n))
             return bad_flag("--shutdown-grace-s %s: expected 0..3600", v);
         o->grace_s = (double)n;
+    } else if (!strcmp(flag, "--cache-dir")) {
+        if (!*v) return bad_flag("--cache-dir %s: expected a directory", v);
+        o->cache_dir = v;
     } else if (!strcmp(flag, "--access-log")) {
         if (!*v) return bad_flag("--access-log %s: expected a file name or -", v);
         o->access_log = v;

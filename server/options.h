@@ -18,6 +18,7 @@ typedef struct kdr_options {
     int worker_nice;        /* added to the workers' nice value */
     const char *access_log; /* NULL: off; "-": stdout */
     int log_level;          /* kdr_log_level */
+    const char *cache_dir;  /* NULL: build every tree at every start */
     char **scene_args;      /* NAME=PATH, pointing into argv */
     size_t nscenes;
 } kdr_options;

@@ -18,6 +18,7 @@
 #include <sys/stat.h>
 
 #include "log.h"
+#include "tree_cache.h"
 
 enum { NAME_MAX_LEN = 64, ERR_LEN = 512 };
 
@@ -42,6 +43,7 @@ struct kdr_registry {
     entry *s;
     size_t n, cap;
     pthread_mutex_t lock;
+    const char *cache_dir; /* NULL: no tree cache */
     atomic_size_t built;
     atomic_int ready;
     atomic_int threads; /* build threads, for reloads too */
@@ -57,9 +59,12 @@ kdr_registry *kdr_registry_create(void) {
     return r;
 }
 
+void kdr_registry_set_cache_dir(kdr_registry *r, const char *dir) { r->cache_dir = dir; }
+
 static void version_free(kdr_scene_version *v) {
     if (!v) return;
-    kdr_scene_free(v->scene);
+    kdr_scene_free(v->scene); /* before the mapping it may read from */
+    kdr_tree_cache_unmap(v->map, v->map_len);
     free(v->ranges);
     free(v);
 }
@@ -138,11 +143,12 @@ static void log_stats(const entry *e, const kdr_scene_version *v) {
     kdr_bounds b;
     kdr_scene_tree_stats(v->scene, &st);
     kdr_scene_bounds(v->scene, &b);
-    kdr_log("scene %s: %zu triangles, %zu meshes, loaded in %.1f ms; kd-tree built "
+    kdr_log("scene %s: %zu triangles, %zu meshes, loaded in %.1f ms; kd-tree %s "
             "in %.1f ms: %llu nodes, %llu leaves (%llu empty), max depth %llu, "
             "%.2f refs/leaf, SAH cost %.2f, %.1f MiB; bounds [%g %g %g]..[%g %g %g]",
             e->name, kdr_scene_triangle_count(v->scene), v->nranges, v->load_ms,
-            v->build_ms, (unsigned long long)st.nodes, (unsigned long long)st.leaves,
+            v->from_cache ? "mapped from the tree cache" : "built", v->build_ms,
+            (unsigned long long)st.nodes, (unsigned long long)st.leaves,
             (unsigned long long)st.empty_leaves, (unsigned long long)st.max_depth,
             st.refs_per_leaf, st.sah_cost, (double)st.bytes / (1024.0 * 1024.0), b.min[0],
             b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]);
@@ -161,35 +167,111 @@ static int same_file(const file_id *a, const file_id *b) {
            a->mtime_s == b->mtime_s && a->mtime_ns == b->mtime_ns;
 }
 
-/* Loads and builds e's file as a new version (one reference, the caller's);
- * NULL with the reason in why. */
-static kdr_scene_version *load_version(entry *e, unsigned generation, int threads,
-                                       char *why, size_t why_len) {
+static kdr_scene_version *new_version(unsigned generation) {
+    kdr_scene_version *v = calloc(1, sizeof *v);
+    if (!v) return NULL;
+    v->generation = generation;
+    atomic_init(&v->refs, 1);
+    for (int k = 0; k < 3; k++)
+        atomic_init(&v->ns_per_ray[k], 0);
+    return v;
+}
+
+/* The tree of e's file from the cache, or NULL (logged) to build it. */
+static kdr_scene_version *from_cache(kdr_registry *r, entry *e,
+                                     const kdr_build_opts *opts, const kdr_tree_key *key,
+                                     unsigned generation) {
+    char why[ERR_LEN];
+    int refused = 0;
+    kdr_cached_tree t;
+    double t0 = kdr_now();
+    if (!kdr_tree_cache_load(r->cache_dir, key, opts, &t, &refused, why, sizeof why)) {
+        if (refused)
+            kdr_log_warn("scene %s: tree cache file refused, rebuilding: %s", e->name,
+                         why);
+        else
+            kdr_log("scene %s: tree cache: %s", e->name, why);
+        return NULL;
+    }
+    kdr_scene_version *v = new_version(generation);
+    if (!v) {
+        kdr_cached_tree_free(&t);
+        return NULL;
+    }
+    v->scene = t.scene;
+    v->ranges = t.ranges;
+    v->nranges = t.nranges;
+    v->map = t.map;
+    v->map_len = t.map_len;
+    v->from_cache = 1;
+    v->build_ms = (kdr_now() - t0) * 1e3;
+    char path[4096];
+    kdr_tree_cache_path(r->cache_dir, key, path, sizeof path);
+    kdr_log("scene %s: tree mapped from cache %s (%.1f MiB) in %.1f ms, not built",
+            e->name, path, (double)t.map_len / (1024.0 * 1024.0), v->build_ms);
+    return v;
+}
+
+/* Stores v's tree under key unless the file changed while it was loaded
+ * (then the tree belongs to no key we know). Failures are only logged. */
+static void to_cache(kdr_registry *r, entry *e, const kdr_build_opts *opts,
+                     const kdr_tree_key *key, const kdr_scene_version *v) {
+    char why[ERR_LEN], path[4096];
+    kdr_tree_key again;
+    if (kdr_tree_cache_key(e->path, opts, &again, why, sizeof why) != 0 ||
+        again.h[0] != key->h[0] || again.h[1] != key->h[1]) {
+        kdr_log_warn("scene %s: %s changed while it was loaded; tree not cached", e->name,
+                     e->path);
+        return;
+    }
+    size_t bytes = 0;
+    double t0 = kdr_now();
+    kdr_tree_cache_path(r->cache_dir, key, path, sizeof path);
+    if (kdr_tree_cache_store(r->cache_dir, key, opts, v->scene, v->ranges, v->nranges,
+                             &bytes, why, sizeof why) != 0)
+        kdr_log_warn("scene %s: tree not cached: %s", e->name, why);
+    else
+        kdr_log("scene %s: tree stored in cache %s (%.1f MiB) in %.1f ms", e->name, path,
+                (double)bytes / (1024.0 * 1024.0), (kdr_now() - t0) * 1e3);
+}
+
+/* Loads and builds e's file as a new version (one reference, the caller's),
+ * or maps it from the tree cache; NULL with the reason in why. */
+static kdr_scene_version *load_version(kdr_registry *r, entry *e, unsigned generation,
+                                       int threads, char *why, size_t why_len) {
+    kdr_build_opts opts;
+    kdr_build_opts_default(&opts);
+    opts.threads = threads; /* not part of the cache key: same tree on any count */
+    kdr_tree_key key;
+    int keyed = 0;
+    if (r->cache_dir) {
+        char kwhy[ERR_LEN];
+        keyed = kdr_tree_cache_key(e->path, &opts, &key, kwhy, sizeof kwhy) == 0;
+        if (!keyed) {
+            snprintf(why, why_len, "%s", kwhy);
+            return NULL;
+        }
+        kdr_scene_version *v = from_cache(r, e, &opts, &key, generation);
+        if (v) return v;
+    }
     kdr_gltf_scene g;
     char err[ERR_LEN] = "";
     if (kdr_gltf_load(e->path, &g, err, sizeof err) != 0) {
         snprintf(why, why_len, "%s", err[0] ? err : "load failed");
         return NULL;
     }
-    kdr_scene_version *v = calloc(1, sizeof *v);
+    kdr_scene_version *v = new_version(generation);
     if (!v) {
         kdr_gltf_free(&g);
         snprintf(why, why_len, "out of memory");
         return NULL;
     }
-    kdr_build_opts opts;
-    kdr_build_opts_default(&opts);
-    opts.threads = threads;
     double t0 = kdr_now();
     int rc = kdr_scene_build(g.tris, g.ntris, &opts, build_log, e, &v->scene);
     v->build_ms = (kdr_now() - t0) * 1e3;
     v->load_ms = g.load_ms;
     v->ranges = g.ranges;
     v->nranges = g.nranges;
-    v->generation = generation;
-    atomic_init(&v->refs, 1);
-    for (int k = 0; k < 3; k++)
-        atomic_init(&v->ns_per_ray[k], 0);
     g.ranges = NULL;
     g.nranges = 0;
     kdr_gltf_free(&g);
@@ -198,6 +280,7 @@ static kdr_scene_version *load_version(entry *e, unsigned generation, int thread
         version_free(v);
         return NULL;
     }
+    if (keyed) to_cache(r, e, &opts, &key, v);
     return v;
 }
 
@@ -207,7 +290,7 @@ int kdr_registry_build(kdr_registry *r, size_t i, int threads) {
     kdr_log("scene %s: loading %s", e->name, e->path);
     e->have_id = identify(e->path, &e->id) == 0;
     atomic_store(&r->threads, threads); /* the same from every start-up thread */
-    kdr_scene_version *v = load_version(e, 1, threads, why, sizeof why);
+    kdr_scene_version *v = load_version(r, e, 1, threads, why, sizeof why);
     if (!v) {
         kdr_log_error("scene %s: %s", e->name, why);
         return -1;
@@ -255,7 +338,8 @@ static int reload_one(kdr_registry *r, entry *e) {
         return 0;
     }
     kdr_log("scene %s: reloading %s", e->name, e->path);
-    kdr_scene_version *v = load_version(e, gen + 1, atomic_load(&r->threads), why, sizeof why);
+    kdr_scene_version *v =
+        load_version(r, e, gen + 1, atomic_load(&r->threads), why, sizeof why);
     if (!v) {
         kdr_log_error("scene %s: reload failed, keeping generation %u: %s", e->name, gen,
                       why);
@@ -298,6 +382,7 @@ typedef struct scene_row {
     double build_s, load_s;
     size_t triangles;
     unsigned generation;
+    int from_cache;
     unsigned long ok, unchanged, failed;
 } scene_row;
 
@@ -305,10 +390,14 @@ static int row_of(kdr_registry *r, size_t i, scene_row *row) {
     kdr_scene_version *v = kdr_registry_acquire(r, i);
     if (!v) return 0;
     pthread_mutex_lock(&r->lock);
-    *row = (scene_row){
-        v->build_ms * 1e-3,    v->load_ms * 1e-3,  kdr_scene_triangle_count(v->scene),
-        v->generation,         r->s[i].reloads_ok, r->s[i].reloads_unchanged,
-        r->s[i].reloads_failed};
+    *row = (scene_row){v->build_ms * 1e-3,
+                       v->load_ms * 1e-3,
+                       kdr_scene_triangle_count(v->scene),
+                       v->generation,
+                       v->from_cache,
+                       r->s[i].reloads_ok,
+                       r->s[i].reloads_unchanged,
+                       r->s[i].reloads_failed};
     pthread_mutex_unlock(&r->lock);
     kdr_registry_release(v);
     return 1;
@@ -340,6 +429,9 @@ void kdr_registry_render_metrics(kdr_registry *r, kdr_tb *tb) {
           "Version of the scene being served (1 at start-up, +1 "
           "per successful reload).",
           "%u", rows[i].generation);
+    GAUGE("kdray_scene_from_cache",
+          "1 if the served tree was mapped from --cache-dir instead of built.", "%d",
+          rows[i].from_cache);
 #undef GAUGE
     kdr_tb_printf(tb, "# HELP kdray_scene_reloads_total SIGHUP reloads per scene, by "
                       "result.\n# TYPE kdray_scene_reloads_total counter\n");

@@ -32,6 +32,9 @@ typedef struct kdr_scene_version {
     size_t nranges;
     double load_ms, build_ms;
     unsigned generation; /* 1 for the start-up build, +1 per reload */
+    int from_cache;      /* mapped from --cache-dir instead of built */
+    void *map;           /* the cache file scene reads from, or NULL */
+    size_t map_len;
     atomic_long refs;
     /* Running mean cost of one ray of work, in ns of one thread, per query
      * kind (bundle, cone-shadow, frustum; 0 = not measured yet): how much a
@@ -42,6 +45,10 @@ typedef struct kdr_scene_version {
 typedef struct kdr_registry kdr_registry;
 
 kdr_registry *kdr_registry_create(void);
+/* Keeps built trees in dir (--cache-dir, see tree_cache.h) and maps them
+ * from there when a scene file's bytes and the build options match; dir
+ * must outlive the registry. Set before the first build. */
+void kdr_registry_set_cache_dir(kdr_registry *r, const char *dir);
 /* Frees the table and the current versions; none may still be acquired. */
 void kdr_registry_free(kdr_registry *r);
 /* Adds an unbuilt scene; -1 if the name is a duplicate or invalid. name and
@@ -53,9 +60,9 @@ const char *kdr_registry_name(const kdr_registry *r, size_t i);
 long kdr_registry_index(const kdr_registry *r, const char *name, size_t len);
 
 /* Loads and builds scene i (start-up) with `threads` build threads
- * (kdr_build_opts; reloads use the same count), logging its statistics. 0,
- * or -1 after logging a one-line error. Different entries may be built by
- * different threads at the same time. */
+ * (kdr_build_opts; reloads use the same count), or maps it from the tree
+ * cache, logging its statistics. 0, or -1 after logging a one-line error.
+ * Different entries may be built by different threads at the same time. */
 int kdr_registry_build(kdr_registry *r, size_t i, int threads);
 /* Marks every scene built: queries may start. */
 void kdr_registry_set_ready(kdr_registry *r);

@@ -56,3 +56,10 @@ add_test(NAME server_install
          COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_install.py
                  ${CMAKE_BINARY_DIR} "${KDRAY_SYSTEMD_ANALYZE}" ${PROJECT_SOURCE_DIR}/clients)
 set_tests_properties(server_install PROPERTIES TIMEOUT 300)
+
+# --cache-dir: store, map, damaged files rebuilt, concurrent writers.
+add_test(NAME server_cache
+         COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_server_cache.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients
+                 ${PROJECT_SOURCE_DIR}/scenes/default.glb)
+set_tests_properties(server_cache PROPERTIES TIMEOUT 600)

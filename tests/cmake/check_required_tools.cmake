@@ -56,6 +56,14 @@ run("curl hidden" 1 "the program curl;package curl;server_curl_examples"
     -DKDRAY_CURL=/nonexistent/curl -P ${tools})
 run("assimp hidden" 1 "the program assimp;package assimp-utils;scenes_vs_assimp"
     -DKDRAY_ASSIMP=/nonexistent/assimp -P ${tools})
+run("haproxy hidden" 1 "the program haproxy;package haproxy;cluster"
+    -DKDRAY_HAPROXY=/nonexistent/haproxy -P ${tools})
+run("wrk hidden" 1 "the program wrk;package wrk;cluster"
+    -DKDRAY_WRK=/nonexistent/wrk -P ${tools})
+run("node hidden" 1 "the program node;package nodejs;k8s_manifests"
+    -DKDRAY_NODE=/nonexistent/node -P ${tools})
+run("k8s npm packages hidden" 1 "kubernetes-models;npm install;k8s_manifests"
+    -DKDRAY_K8S_MODULES=/nonexistent/node_modules -P ${tools})
 run("models hidden" 1 "package assimp-testmodels;test_core_scene;scenes_fuzz"
     -DKDRAY_ASSIMP_MODELS=/nonexistent/models -P ${tools})
 run("clang hidden" 1 "the program clang;package clang;protocol_fuzz"

@@ -67,3 +67,20 @@ if(KDRAY_FUZZ)
       libclang-rt-14-dev "protocol_fuzz and scenes_fuzz (-DKDRAY_FUZZ=ON)")
   endif()
 endif()
+
+# The cluster test: replicas behind HAProxy (deploy/haproxy/kdray.cfg)
+# under wrk load.
+kdray_require_program(KDRAY_HAPROXY haproxy "cluster (tests/test_cluster.py)" haproxy)
+kdray_require_program(KDRAY_WRK wrk "cluster (tests/test_cluster.py)" wrk)
+
+# The k8s_manifests test: Node.js and the npm packages of tests/k8s
+# (kubernetes-models, yaml), which ./scripts/dev deps installs.
+kdray_require_program(KDRAY_NODE "nodejs" "k8s_manifests (tests/k8s/validate.mjs)" node)
+set(KDRAY_K8S_MODULES ${CMAKE_CURRENT_LIST_DIR}/../k8s/node_modules CACHE PATH
+    "npm packages of the Kubernetes manifest validator (tests/k8s)")
+if(NOT EXISTS "${KDRAY_K8S_MODULES}/kubernetes-models/package.json" OR
+   NOT EXISTS "${KDRAY_K8S_MODULES}/yaml/package.json")
+  kdray_tool_missing("the npm packages kubernetes-models and yaml in ${KDRAY_K8S_MODULES}"
+                     "nodejs/npm (then: cd tests/k8s && npm install)"
+                     "k8s_manifests")
+endif()
