@@ -184,7 +184,7 @@ static kdr_scene_version *load_version(entry *e, unsigned generation, char *why,
     v->nranges = g.nranges;
     v->generation = generation;
     atomic_init(&v->refs, 1);
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 4; k++)
         atomic_init(&v->ns_per_ray[k], 0);
     g.ranges = NULL;
     g.nranges = 0;
