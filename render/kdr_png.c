@@ -51,7 +51,8 @@ static void quiet(png_structp png, png_const_charp msg) {
 int kdr_render_png(const kdr_render_image *img, unsigned char **out, size_t *len,
                    size_t *cap) {
     sink *volatile s = calloc(1, sizeof *s);
-    png_bytep *volatile rows = malloc((img->height ? img->height : 1) * sizeof(png_bytep));
+    png_bytep *volatile rows =
+        malloc((img->height ? img->height : 1) * sizeof(png_bytep));
     png_structp png = NULL;
     png_infop info = NULL;
     volatile int rc = KDR_ENOMEM;
@@ -63,7 +64,8 @@ int kdr_render_png(const kdr_render_image *img, unsigned char **out, size_t *len
     if (setjmp(png_jmpbuf(png))) goto done;
     png_set_write_fn(png, s, put, flush);
     png_set_IHDR(png, info, img->width, img->height, 8, PNG_COLOR_TYPE_RGB,
-                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
+                 PNG_FILTER_TYPE_DEFAULT);
     png_set_compression_level(png, 1);
     png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_NONE);
     for (uint32_t y = 0; y < img->height; y++)

@@ -60,9 +60,9 @@ size_t kdr_render_png_max(const kdr_render_params *p) {
 
 size_t kdr_render_scratch_bytes(const kdr_render_params *p) {
     size_t dirs = (size_t)p->cam.width * 3 * sizeof(float);
-    size_t ao = p->mode == KDR_RENDER_AO
-                    ? AO_BATCH_RAYS * (6 * sizeof(float) + 1) + AO_BATCH_RAYS * sizeof(float)
-                    : 0;
+    size_t ao = p->mode == KDR_RENDER_AO ? AO_BATCH_RAYS * (6 * sizeof(float) + 1) +
+                                               AO_BATCH_RAYS * sizeof(float)
+                                         : 0;
     return dirs + ao;
 }
 
@@ -169,8 +169,10 @@ static int shadow_rows(const kdr_scene *scene, const kdr_render_params *p,
             for (size_t k = x; rc == KDR_EINVAL && k < x1; k++) {
                 int r1 = kdr_shadow_trace(scene, &q, row + k, 1, KDR_SHADOW_CONE,
                                           img->visibility, st);
-                if (r1 == KDR_EINVAL) img->visibility[row + k] = 1.0f;
-                else if (r1 != KDR_OK) return r1;
+                if (r1 == KDR_EINVAL)
+                    img->visibility[row + k] = 1.0f;
+                else if (r1 != KDR_OK)
+                    return r1;
                 if (k + 1 == x1) rc = KDR_OK;
             }
             if (rc != KDR_OK) return rc;
@@ -194,8 +196,8 @@ static float hash01(uint64_t a, uint64_t b) {
 /* Cosine-weighted direction s of `samples` about unit normal n. */
 static void ao_dir(const float n[3], size_t pixel, uint32_t s, uint32_t samples,
                    float out[3]) {
-    const float a[3] = {fabsf(n[0]) > 0.5f ? 0.0f : 1.0f, fabsf(n[0]) > 0.5f ? 1.0f : 0.0f,
-                        0.0f};
+    const float a[3] = {fabsf(n[0]) > 0.5f ? 0.0f : 1.0f,
+                        fabsf(n[0]) > 0.5f ? 1.0f : 0.0f, 0.0f};
     float t[3] = {a[1] * n[2] - a[2] * n[1], a[2] * n[0] - a[0] * n[2],
                   a[0] * n[1] - a[1] * n[0]};
     const float tl = sqrtf(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
@@ -221,8 +223,14 @@ typedef struct ao_batch {
 static int ao_flush(const kdr_scene *scene, ao_batch *b, kdr_render_image *img,
                     kdr_render_stats *st) {
     if (b->n == 0) return KDR_OK;
-    kdr_ray_batch rb = {.n = b->n, .org = b->org, .org_stride = 3, .dir = b->dir,
-                        .tmin = NULL, .tmin_stride = 0, .tmax = b->tmax, .tmax_stride = 1};
+    kdr_ray_batch rb = {.n = b->n,
+                        .org = b->org,
+                        .org_stride = 3,
+                        .dir = b->dir,
+                        .tmin = NULL,
+                        .tmin_stride = 0,
+                        .tmax = b->tmax,
+                        .tmax_stride = 1};
     static const float zero = 0.0f;
     rb.tmin = &zero;
     kdr_hits h = {.hit = b->hit};
@@ -291,7 +299,8 @@ static void shade_pixel(const kdr_render_params *p, const kdr_render_image *img,
         float d[3];
         kdr_camera_row_dirs(&p->cam, (uint32_t)(i / p->cam.width),
                             (uint32_t)(i % p->cam.width), 1, d);
-        const float dist = img->hits.t[i] * sqrtf((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]);
+        const float dist =
+            img->hits.t[i] * sqrtf((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]);
         float g = (p->far_d - dist) / (p->far_d - p->near_d);
         g = g < 0.0f ? 0.0f : g > 1.0f ? 1.0f : g;
         out[0] = out[1] = out[2] = to8(g);
@@ -353,9 +362,9 @@ int kdr_render_band(const kdr_scene *scene, const kdr_render_params *p,
     const size_t r0 = band * rows, r1 = r0 + rows < tiles_y(p) ? r0 + rows : tiles_y(p);
     if (r0 >= r1) return KDR_EINVAL;
     const uint32_t y0 = (uint32_t)(r0 * KDR_RENDER_TILE);
-    const uint32_t y1 = (uint32_t)(r1 * KDR_RENDER_TILE < p->cam.height
-                                       ? r1 * KDR_RENDER_TILE
-                                       : p->cam.height);
+    const uint32_t y1 =
+        (uint32_t)(r1 * KDR_RENDER_TILE < p->cam.height ? r1 * KDR_RENDER_TILE
+                                                        : p->cam.height);
     double t0 = now ? now() : 0;
     kdr_trav_stats ts = {0};
     int rc = kdr_frustum_trace(scene, &p->cam, KDR_RENDER_TILE, r0 * tx, (r1 - r0) * tx,

@@ -68,9 +68,9 @@ typedef struct kdr_render_params {
     kdr_sphere_light light;
     uint32_t samples;
     kdr_render_mode mode;
-    unsigned set;           /* KDR_RP_* given by the caller */
-    float near_d, far_d;    /* depth mode's range (set by kdr_render_frame) */
-    float ao_radius;        /* ao rays' length (set by kdr_render_frame) */
+    unsigned set;        /* KDR_RP_* given by the caller */
+    float near_d, far_d; /* depth mode's range (set by kdr_render_frame) */
+    float ao_radius;     /* ao rays' length (set by kdr_render_frame) */
 } kdr_render_params;
 
 /* Everything unset, defaults for what has no scene-dependent value. */
@@ -79,8 +79,8 @@ void kdr_render_params_init(kdr_render_params *p);
  * width, height; light: "x,y,z,radius"; samples; mode). 0 on success; -1
  * with err naming the parameter and what it expects; 1 for an unknown name
  * (err says so too). */
-int kdr_render_param(kdr_render_params *p, const char *name, const char *value,
-                     char *err, size_t errlen);
+int kdr_render_param(kdr_render_params *p, const char *name, const char *value, char *err,
+                     size_t errlen);
 /* Fills what the caller left unset from the scene's bounds (a view that
  * frames the whole scene, a light above it) and checks the result. 0, or -1
  * with err naming the parameter at fault. */
@@ -90,9 +90,9 @@ int kdr_render_frame(const kdr_scene *scene, kdr_render_params *p, char *err,
 /* Statistics and stage times of one band, summed over bands by the caller. */
 typedef struct kdr_render_stats {
     uint64_t pixels, hits;
-    uint64_t primary_nodes;   /* frustum traversal nodes over all primary rays */
-    kdr_shadow_stats shadow;  /* cone-shadow statistics */
-    uint64_t ao_rays;         /* ao hemisphere rays traced */
+    uint64_t primary_nodes;  /* frustum traversal nodes over all primary rays */
+    kdr_shadow_stats shadow; /* cone-shadow statistics */
+    uint64_t ao_rays;        /* ao hemisphere rays traced */
     uint64_t ao_nodes;
     double primary_s, shadow_s, shade_s; /* wall time of each stage */
 } kdr_render_stats;
@@ -100,10 +100,10 @@ typedef struct kdr_render_stats {
 /* The image and the per-pixel arrays a render keeps (row-major). */
 typedef struct kdr_render_image {
     uint32_t width, height;
-    kdr_hits hits;          /* primary closest hits */
+    kdr_hits hits;           /* primary closest hits */
     float *points, *normals; /* 3 per pixel, valid where prim >= 0 */
-    float *visibility;      /* 1 per pixel */
-    uint8_t *rgb;           /* 3 per pixel */
+    float *visibility;       /* 1 per pixel */
+    uint8_t *rgb;            /* 3 per pixel */
 } kdr_render_image;
 
 /* Bytes kdr_render_alloc takes for p's image, and the most a PNG of it can

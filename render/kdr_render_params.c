@@ -69,13 +69,18 @@ static int bad(char *err, size_t n, const char *name, const char *want) {
     return -1;
 }
 
-int kdr_render_param(kdr_render_params *p, const char *name, const char *value,
-                     char *err, size_t errlen) {
+int kdr_render_param(kdr_render_params *p, const char *name, const char *value, char *err,
+                     size_t errlen) {
     if (!value) value = "";
     if (!strcmp(name, "eye") || !strcmp(name, "target") || !strcmp(name, "up")) {
-        float *dst = name[0] == 'e' ? p->cam.eye : name[0] == 't' ? p->cam.target : p->cam.up;
-        if (floats(value, dst, 3)) return bad(err, errlen, name, "three finite numbers x,y,z");
-        p->set |= name[0] == 'e' ? KDR_RP_EYE : name[0] == 't' ? KDR_RP_TARGET : KDR_RP_UP;
+        float *dst = name[0] == 'e'   ? p->cam.eye
+                     : name[0] == 't' ? p->cam.target
+                                      : p->cam.up;
+        if (floats(value, dst, 3))
+            return bad(err, errlen, name, "three finite numbers x,y,z");
+        p->set |= name[0] == 'e'   ? KDR_RP_EYE
+                  : name[0] == 't' ? KDR_RP_TARGET
+                                   : KDR_RP_UP;
     } else if (!strcmp(name, "fov")) {
         float f;
         if (floats(value, &f, 1) || !(f > 0.0f && f < 180.0f))

@@ -56,3 +56,11 @@ add_test(NAME server_install
          COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_install.py
                  ${CMAKE_BINARY_DIR} "${KDRAY_SYSTEMD_ANALYZE}" ${PROJECT_SOURCE_DIR}/clients)
 set_tests_properties(server_install PROPERTIES TIMEOUT 300)
+
+# render.png against the daemon's own frustum and cone-shadow answers,
+# decoded by Pillow. Debian's python3 (python3-pil, scripts/dev): the test
+# fails, never skips, when Pillow is missing.
+add_test(NAME render_png
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_render.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(render_png PROPERTIES TIMEOUT 600)
