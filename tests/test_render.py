@@ -286,6 +286,34 @@ def test_bad_parameters(r, client, tris):
     r.eq(status, 405, "POST")
 
 
+def test_client(r, client, tris, url, clients):
+    """clients/kdray_client.py render writes the picture the endpoint sends."""
+    import subprocess
+    out = os.path.join(tempfile.mkdtemp(prefix="kdray-client-"), "view.png")
+    p = subprocess.run([sys.executable, os.path.join(clients, "kdray_client.py"),
+                        "--url", url, "render", "--scene", "t", "--eye", "%g,%g,%g" % EYE,
+                        "--target", "%g,%g,%g" % TARGET, "--fov", str(FOV), "--width", str(W), "--height",
+                        str(H), "--light", "%g,%g,%g,%g" % LIGHT, "--samples",
+                        str(SAMPLES), "--mode", "shade", "--out", out],
+                       capture_output=True, text=True, timeout=120)
+    r.eq(p.returncode, 0, "client exit status: " + p.stderr)
+    with open(out, "rb") as f:
+        got = f.read()
+    want = render(client, "t", **{k: v for k, v in camera_params("shade").items()
+                                  if k != "up"})[2]
+    r.eq(decode_png(got).tobytes(), decode_png(want).tobytes(), "client picture")
+    r.check('"total"' in p.stdout and '"hits"' in p.stdout, "timing and stats printed")
+    png, timing, stats = client.render("t", width=16, height=12, mode="depth")
+    r.eq((decode_png(png).size, stats["mode"]), ((16, 12), "depth"), "Client.render")
+    r.check(set(timing) >= {"primary", "shadow", "shade", "png", "total"}, str(timing))
+    p = subprocess.run([sys.executable, os.path.join(clients, "kdray_client.py"),
+                        "--url", url, "render", "--scene", "t", "--samples", "0",
+                        "--out", out], capture_output=True, text=True, timeout=120)
+    r.check(p.returncode == 1 and "samples" in p.stderr, "client error: " + p.stderr)
+    os.unlink(out)
+    os.rmdir(os.path.dirname(out))
+
+
 def test_limits_and_deadline(r, kdrayd, scene_path):
     d = lib.Daemon(kdrayd, ["--scene", "t=" + scene_path, "--max-rays", "10000"],
                    default_scene=False)
@@ -329,6 +357,7 @@ def main():
         for fn in (test_equals_queries, test_modes_differ, test_defaults_frame_the_scene,
                    test_bad_parameters):
             r.run(fn, client, tris)
+        r.run(test_client, client, tris, d.url, clients)
     finally:
         d.stop()
     r.run(test_limits_and_deadline, kdrayd, scene_path)
