@@ -126,8 +126,11 @@ def test_page(r, wd, url, out_dir):
     wd.s("POST", "/url", {"url": url + "/"})
     wd.wait("return window.kdray && window.kdray.pictures >= 1", "the first picture")
     first_ms = wd.js("return window.kdray.firstPictureMs")
-    print("first picture %.0f ms after the page started (%.2f s after navigation began)"
-          % (first_ms, time.time() - t0))
+    print("first picture (a draft) %.0f ms after the page started (%.2f s after "
+          "navigation began)" % (first_ms, time.time() - t0))
+    # then the full picture follows by itself
+    wd.wait("return window.kdray.pictures >= 2 && window.kdray.lastDraft === false && "
+            "window.kdray.inFlight === 0", "the full first picture")
     before = wd.wait(DIGEST_JS, "the first picture's pixels")
     wd.screenshot(os.path.join(out_dir, "page-first.png"))
     r.eq(wd.js("return [...document.querySelectorAll('#scene option')].map(o => o.value)"),
