@@ -152,8 +152,8 @@ typedef struct kdr_exec_result {
     double cpu_s;       /* thread CPU time of parsing, every chunk and encoding */
     double deadline_ms; /* the deadline applied, 0: none */
     /* KDR_EXEC_RENDER: statistics and stage times summed over the bands
-     * (primary_s, shadow_s, shade_s: time summed over the workers), and the
-     * PNG encoder's time */
+     * (primary_s, shadow_s, shade_s: thread CPU time summed over the
+     * workers), and the PNG encoder's thread CPU time */
     kdr_render_stats render;
     double png_s;
 } kdr_exec_result;

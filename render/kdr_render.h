@@ -94,7 +94,7 @@ typedef struct kdr_render_stats {
     kdr_shadow_stats shadow; /* cone-shadow statistics */
     uint64_t ao_rays;        /* ao hemisphere rays traced */
     uint64_t ao_nodes;
-    double primary_s, shadow_s, shade_s; /* wall time of each stage */
+    double primary_s, shadow_s, shade_s; /* each stage's time by now() */
 } kdr_render_stats;
 
 /* The image and the per-pixel arrays a render keeps (row-major). */
@@ -119,7 +119,8 @@ void kdr_render_free(kdr_render_image *img);
 #define KDR_RENDER_BAND_PIXELS 8192u
 size_t kdr_render_band_count(const kdr_render_params *p);
 /* Renders band b (primary, shadow or ao, shade). now() times the stages
- * (monotonic seconds; NULL: not timed). KDR_OK or a core error. */
+ * (seconds on any clock, e.g. the thread's CPU time; NULL: not timed).
+ * KDR_OK or a core error. */
 int kdr_render_band(const kdr_scene *scene, const kdr_render_params *p,
                     kdr_render_image *img, size_t band, double (*now)(void),
                     kdr_render_stats *stats);

@@ -67,10 +67,11 @@ static kdr_ray_kind ray_kind_of(kdr_endpoint ep) {
                                       : KDR_RAYS_BUNDLE;
 }
 
-/* A picture's stage times (Server-Timing, milliseconds: primary, shadow
- * and shade are summed over the workers that ran the bands, so on two
- * workers their sum is about twice the wall time; png is the encoder's,
- * total the query's wall time) and its statistics (X-Kdray-Render). */
+/* A picture's stage times (Server-Timing, milliseconds: primary, shadow,
+ * shade and png are thread CPU time, the first three summed over the
+ * workers that ran the bands, so on two idle workers their sum is about
+ * twice the wall time; queue and total are the query's wall times) and its
+ * statistics (X-Kdray-Render). */
 static void render_headers(const kdr_query_call *call, const kdr_exec_result *r,
                            kdr_response *out) {
     const kdr_render_stats *s = &r->render;
