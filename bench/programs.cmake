@@ -39,3 +39,10 @@ add_test(NAME bench_smoke
           --section core --section bundle --section frustum --section cone --quick
           --rays 4096 --frame 64 --res 16 --samples 1,16 --ref-samples 64 --repeat 1)
 set_tests_properties(bench_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
+
+# A picture's cost by stage on one thread (render/), against one plain
+# cone-shadow call over the same points. No Embree: nothing renders the same
+# picture there. Prints only.
+add_executable(kdray_bench_render ${CMAKE_CURRENT_SOURCE_DIR}/bench_render.c)
+set_target_properties(kdray_bench_render PROPERTIES OUTPUT_NAME kdray-bench-render)
+target_link_libraries(kdray_bench_render PRIVATE kdray_render kdray_scenes kdray_core)

@@ -98,6 +98,15 @@ curl -fsS -H 'Content-Type: application/cbor' -H 'Accept: application/json' \
   --data-binary @"$BODY" "$URL/v1/scenes/$SCENE/bundle"
 echo
 
+say "a picture: render.png (no camera given: the daemon frames the scene)"
+code=$(curl -fsS -o "$TMP" -w '%{http_code} %{content_type}' -D - \
+  "$URL/v1/scenes/$SCENE/render.png?width=320&height=240&samples=16" | tr -d '\r' |
+  grep -E '^(Server-Timing|X-Kdray-Render)|^[0-9]' || true)
+echo "$code"
+echo "$(wc -c < "$TMP") bytes of PNG"
+head -c 8 "$TMP" | od -An -tx1 | grep -q '89 50 4e 47 0d 0a 1a 0a' ||
+  { echo "curl-examples: render.png is not a PNG" >&2; exit 1; }
+
 say "an error: a direction that is not a number is 400 problem+json"
 code=$(curl -sS -o "$TMP" -w '%{http_code} %{content_type}' -H "$J" \
   "$URL/v1/scenes/$SCENE/bundle" -d '{"origins": [0,0,0], "directions": [0, 0, "x"]}')

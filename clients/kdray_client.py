@@ -40,6 +40,7 @@ import random
 import struct
 import sys
 import urllib.error
+import urllib.parse
 import urllib.request
 
 DEFAULT_URL = "http://127.0.0.1:8080"
@@ -300,6 +301,54 @@ class Client:
         path = "/v1/scenes/%s/frustum" % scene
         return decode_answer(self.call("POST", path, payload))
 
+    def render(self, scene, **params):
+        """GET render.png: a picture (PNG bytes) and its stage times and
+        statistics, as a (png, timing, stats) tuple of bytes and two dicts.
+        params: eye, target, up (3 numbers), light (x, y, z, radius), fov,
+        width, height, samples, mode; lists are sent comma-separated, and
+        what is left out the daemon chooses (it frames the scene)."""
+        query = urllib.parse.urlencode(
+            {k: ",".join("%r" % float(x) for x in v) if isinstance(v, (list, tuple))
+             else v for k, v in params.items() if v is not None})
+        path = "/v1/scenes/%s/render.png" % urllib.parse.quote(scene)
+        status, hdrs, data = self.request("GET", path + ("?" + query if query else ""))
+        hdrs = {k.lower(): v for k, v in hdrs.items()}
+        if status != 200:
+            try:
+                problem = json.loads(data)
+            except ValueError:
+                problem = data.decode("utf-8", "replace")
+            retry = hdrs.get("retry-after", "")
+            raise KdrayError(status, problem, int(retry) if retry.isdigit() else None)
+        return data, parse_server_timing(hdrs.get("server-timing", "")), \
+            parse_render_stats(hdrs.get("x-kdray-render", ""))
+
+
+def parse_server_timing(value):
+    """{"primary": ms, ...} from a Server-Timing header."""
+    out = {}
+    for part in value.split(","):
+        name, _, rest = part.strip().partition(";")
+        if name and rest.startswith("dur="):
+            out[name] = float(rest[4:])
+    return out
+
+
+def parse_render_stats(value):
+    """The X-Kdray-Render header as a dict (numbers where they are numbers)."""
+    out = {}
+    for part in value.split(";"):
+        key, _, v = part.strip().partition("=")
+        if key:
+            try:
+                out[key] = int(v)
+            except ValueError:
+                try:
+                    out[key] = float(v)
+                except ValueError:
+                    out[key] = v
+    return out
+
 
 def random_directions(n, seed=1):
     """n directions uniform on the unit sphere (flat list of 3n floats)."""
@@ -370,6 +419,17 @@ def _cmd_frustum(client, args):
     return answer
 
 
+def _cmd_render(client, args):
+    png, timing, stats = client.render(
+        args.scene, eye=args.eye, target=args.target, up=args.up, fov=args.fov,
+        width=args.width, height=args.height, light=args.light,
+        samples=args.samples, mode=args.mode)
+    with open(args.out, "wb") as f:
+        f.write(png)
+    print("wrote %s (%d bytes)" % (args.out, len(png)), file=sys.stderr)
+    return {"out": args.out, "bytes": len(png), "timing_ms": timing, "stats": stats}
+
+
 def _parser():
     p = argparse.ArgumentParser(description="kdray HTTP client")
     p.add_argument("--url", default=DEFAULT_URL)
@@ -401,6 +461,18 @@ def _parser():
     f.add_argument("--height", type=int, default=240)
     f.add_argument("--tile", type=int, default=8)
     f.add_argument("--pgm", help="write a PGM depth image")
+    r = sub.add_parser("render", help="a picture (PNG) rendered by the daemon")
+    r.add_argument("--out", required=True, help="the PNG file to write")
+    r.add_argument("--eye", type=_vec)
+    r.add_argument("--target", type=_vec)
+    r.add_argument("--up", type=_vec)
+    r.add_argument("--fov", type=float)
+    r.add_argument("--width", type=int)
+    r.add_argument("--height", type=int)
+    r.add_argument("--light", type=lambda t: _vec(t, 4), help="x,y,z,radius")
+    r.add_argument("--samples", type=int)
+    r.add_argument("--mode", choices=("shade", "depth", "normal", "shadow", "ao"))
+    r.add_argument("--scene", default="default")
     for q in (b, f):
         q.add_argument("--fields", help="answer arrays, e.g. t,prim (default: all)")
     for q in (b, s, f):
@@ -425,7 +497,7 @@ def main(argv=None):
                     "ready": lambda c, a: c.ready(),
                     "scenes": lambda c, a: {"scenes": c.scenes()},
                     "bundle": _cmd_bundle, "shadow": _cmd_shadow,
-                    "frustum": _cmd_frustum}
+                    "frustum": _cmd_frustum, "render": _cmd_render}
         answer = handlers[args.cmd](client, args)
     except KdrayError as err:
         print(json.dumps(err.problem), file=sys.stderr)

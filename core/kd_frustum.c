@@ -89,6 +89,14 @@ void kdr_camera_ray(const kdr_camera *cam, uint32_t px, uint32_t py,
     out->tmax = INFINITY;
 }
 
+void kdr_camera_row_dirs(const kdr_camera *cam, uint32_t py, uint32_t x0,
+                         uint32_t n, float *dirs) {
+    kd_camera_basis b;
+    kd_camera_basis_init(cam, &b);
+    for (uint32_t i = 0; i < n; i++)
+        kd_camera_dir(&b, x0 + i, py, dirs + 3 * (size_t)i);
+}
+
 size_t kdr_frustum_tile_count(const kdr_camera *cam, uint32_t tile) {
     if (!cam || tile == 0)
         return 0;

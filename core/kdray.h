@@ -271,6 +271,11 @@ int kdr_camera_validate(const kdr_camera *cam);
  * (unnormalised direction, tmin 0, tmax +inf). */
 void kdr_camera_ray(const kdr_camera *cam, uint32_t px, uint32_t py,
                     kdr_ray *out);
+/* The directions of pixels (x0 .. x0+n-1, py), 3 floats each into dirs:
+ * exactly kdr_camera_ray's, with the camera's basis computed once (for
+ * callers that need many pixels' rays, such as render/). */
+void kdr_camera_row_dirs(const kdr_camera *cam, uint32_t py, uint32_t x0,
+                         uint32_t n, float *dirs);
 
 typedef enum kdr_frustum_mode {
     KDR_FRUSTUM_MULTI4 = 0, /* four tiles per traversal, SIMD lanes */

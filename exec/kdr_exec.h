@@ -42,6 +42,7 @@
 #include <stdint.h>
 
 #include "kdr_protocol.h"
+#include "kdr_render.h"
 #include "kdray.h"
 
 #ifdef __cplusplus
@@ -120,6 +121,7 @@ typedef enum kdr_exec_kind {
     KDR_EXEC_BUNDLE,
     KDR_EXEC_CONE_SHADOW,
     KDR_EXEC_FRUSTUM,
+    KDR_EXEC_RENDER, /* a picture (render/): q->render, no body; PNG answer */
 } kdr_exec_kind;
 
 typedef enum kdr_exec_mode {
@@ -149,6 +151,11 @@ typedef struct kdr_exec_result {
     double queued_s, parse_s, trace_s, encode_s; /* wall times */
     double cpu_s;       /* thread CPU time of parsing, every chunk and encoding */
     double deadline_ms; /* the deadline applied, 0: none */
+    /* KDR_EXEC_RENDER: statistics and stage times summed over the bands
+     * (primary_s, shadow_s, shade_s: thread CPU time summed over the
+     * workers), and the PNG encoder's thread CPU time */
+    kdr_render_stats render;
+    double png_s;
 } kdr_exec_result;
 
 typedef struct kdr_exec_job kdr_exec_job;
@@ -170,6 +177,9 @@ typedef struct kdr_exec_query {
     double deadline_ms;     /* the caller's deadline from start, 0 = none; a
                                request's "deadline_ms" can only shorten it */
     kdr_exec_claim *claim;  /* charged as the query grows; NULL: unlimited */
+    /* KDR_EXEC_RENDER: the parameters as given (copied, then framed by the
+     * executor, so the caller's copy need not outlive submission) */
+    const kdr_render_params *render;
     /* optional: called once, by the thread that finished q, after the
      * result is filled (kdr_exec_wait already returns 1). It must not block;
      * q may be freed by another thread as soon as it is called. */

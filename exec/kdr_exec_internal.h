@@ -85,6 +85,11 @@ struct kdr_exec_job {
             kdr_shadow_stats *stats; /* one per chunk, summed by encode */
             size_t per_chunk;        /* points */
         } shadow;
+        struct {
+            kdr_render_params p;     /* framed */
+            kdr_render_image img;
+            kdr_render_stats *stats; /* one per band, summed by encode */
+        } render;
     } k;
 };
 
@@ -121,6 +126,8 @@ void kdr_exec_fail(kdr_exec_job *j, int status, const char *fmt, ...)
     ;
 /* A protocol error: 500 (protocol/ runs out of memory) becomes 503. */
 void kdr_exec_fail_proto(kdr_exec_job *j, const kdr_proto_error *err);
+/* The render kind's step table (kdr_exec_render.c). */
+const kdr_exec_kind_ops *kdr_exec_render_ops(void);
 /* Notes a core error from a chunk (the first one wins). */
 void kdr_exec_note_rc(kdr_exec_job *j, int rc);
 /* First item and count of chunk c, for work of total items in chunks of per. */

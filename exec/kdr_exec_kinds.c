@@ -286,6 +286,8 @@ const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
         return &FRUSTUM;
     case KDR_EXEC_CONE_SHADOW:
         return &SHADOW;
+    case KDR_EXEC_RENDER:
+        return kdr_exec_render_ops();
     }
     return NULL;
 }

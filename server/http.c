@@ -88,6 +88,8 @@ struct req_state {
     int started, start_failed;
     kdr_query_call call;
     kdr_response early; /* the answer when kdr_query_start refused */
+    kdr_render_params render; /* render.png: the query string, parsed */
+    char render_err[256];     /* the first bad parameter, "" if none */
     kdr_watch_entry watch;
     /* for the access log */
     unsigned status;
@@ -131,6 +133,11 @@ static enum MHD_Result queue(kdr_http *h, struct MHD_Connection *c, req_state *r
     }
     if (atomic_load(&h->srv->stopping))
         MHD_add_response_header(resp, MHD_HTTP_HEADER_CONNECTION, "close");
+    if (r->server_timing[0]) MHD_add_response_header(resp, "Server-Timing", r->server_timing);
+    if (r->render_stats[0]) {
+        MHD_add_response_header(resp, "X-Kdray-Render", r->render_stats);
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
+    }
     enum MHD_Result ok = MHD_queue_response(c, r->status, resp);
     MHD_destroy_response(resp);
     rs->queued = 1;
@@ -237,6 +244,18 @@ static void on_query_done(void *ctx) {
     MHD_resume_connection(rs->conn);
 }
 
+/* One query-string argument of render.png; the first bad one is kept. */
+static enum MHD_Result render_arg(void *cls, enum MHD_ValueKind kind, const char *key,
+                                  const char *value) {
+    (void)kind;
+    req_state *rs = cls;
+    if (rs->render_err[0]) return MHD_YES;
+    if (kdr_render_param(&rs->render, key, value, rs->render_err, sizeof rs->render_err) ==
+        0)
+        rs->render_err[0] = '\0';
+    return MHD_YES;
+}
+
 /* The body is complete. A small one may be answered here at once;
  * otherwise the connection is suspended before the query reaches the
  * workers, so that their resume can never overtake the suspension. */
@@ -245,8 +264,18 @@ static enum MHD_Result start_query(kdr_http *h, struct MHD_Connection *c, req_st
     long scene = kdr_route_scene(h->srv, req->path);
     kdr_response now = {0};
     int rc = -1;
+    kdr_request with_args = *req;
+    if (rs->ep == KDR_EP_RENDER) {
+        kdr_render_params_init(&rs->render);
+        rs->render_err[0] = '\0';
+        MHD_get_connection_values(c, MHD_GET_ARGUMENT_KIND, render_arg, rs);
+        with_args.render = &rs->render;
+        req = &with_args;
+    }
     if (scene < 0) {
         kdr_route_problem(&now, 404, "no such scene");
+    } else if (rs->render_err[0]) {
+        kdr_route_problem(&now, 400, rs->render_err);
     } else if (req->len <= INLINE_BODY_MAX) {
         rc = kdr_query_try_inline(h->srv, &rs->call, (size_t)scene, rs->ep, req,
                                   on_query_done, rs, &now);

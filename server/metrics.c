@@ -20,8 +20,10 @@ static const double BUCKETS[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05
 
 static const char *const EP_NAMES[KDR_EP_COUNT] = {"health",      "ready",   "metrics",
                                                    "scenes",      "scene",   "bundle",
-                                                   "cone-shadow", "frustum", "other"};
-static const char *const RAY_NAMES[KDR_RAYS_COUNT] = {"bundle", "cone-shadow", "frustum"};
+                                                   "cone-shadow", "frustum", "render",
+                                                   "page",        "other"};
+static const char *const RAY_NAMES[KDR_RAYS_COUNT] = {"bundle", "cone-shadow", "frustum",
+                                                      "render"};
 
 static atomic_uint_fast64_t requests[KDR_EP_COUNT][NSTATUS + 1];
 static atomic_uint_fast64_t latency_buckets[KDR_EP_COUNT][NBUCKET + 1];

@@ -23,6 +23,8 @@ typedef enum kdr_endpoint {
     KDR_EP_BUNDLE,
     KDR_EP_CONE_SHADOW,
     KDR_EP_FRUSTUM,
+    KDR_EP_RENDER, /* GET .../render.png */
+    KDR_EP_PAGE,   /* GET /: the page (page.c) */
     KDR_EP_OTHER, /* unknown paths */
     KDR_EP_COUNT
 } kdr_endpoint;
@@ -31,6 +33,7 @@ typedef enum kdr_ray_kind {
     KDR_RAYS_BUNDLE,
     KDR_RAYS_SHADOW,
     KDR_RAYS_FRUSTUM,
+    KDR_RAYS_RENDER, /* a picture's primary, shadow and ao rays */
     KDR_RAYS_COUNT
 } kdr_ray_kind;
 

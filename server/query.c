@@ -30,10 +30,12 @@ static const unsigned COST_SHIFT = 3;
 static kdr_exec_kind kind_of(kdr_endpoint ep) {
     return ep == KDR_EP_FRUSTUM       ? KDR_EXEC_FRUSTUM
            : ep == KDR_EP_CONE_SHADOW ? KDR_EXEC_CONE_SHADOW
+           : ep == KDR_EP_RENDER      ? KDR_EXEC_RENDER
                                       : KDR_EXEC_BUNDLE;
 }
 
 static size_t inline_rays(const kdr_scene_version *v, kdr_endpoint ep) {
+    if (ep == KDR_EP_RENDER) return 0; /* a picture always goes to the workers */
     unsigned ns = atomic_load_explicit(&((kdr_scene_version *)v)->ns_per_ray[kind_of(ep)],
                                        memory_order_relaxed);
     if (ns == 0) return INLINE_RAYS_UNKNOWN;
@@ -61,7 +63,38 @@ static void learn_cost(kdr_scene_version *v, kdr_endpoint ep, const kdr_exec_res
 static kdr_ray_kind ray_kind_of(kdr_endpoint ep) {
     return ep == KDR_EP_FRUSTUM       ? KDR_RAYS_FRUSTUM
            : ep == KDR_EP_CONE_SHADOW ? KDR_RAYS_SHADOW
+           : ep == KDR_EP_RENDER      ? KDR_RAYS_RENDER
                                       : KDR_RAYS_BUNDLE;
+}
+
+/* A picture's stage times (Server-Timing, milliseconds: primary, shadow,
+ * shade and png are thread CPU time, the first three summed over the
+ * workers that ran the bands, so on two idle workers their sum is about
+ * twice the wall time; queue and total are the query's wall times) and its
+ * statistics (X-Kdray-Render). */
+static void render_headers(const kdr_query_call *call, const kdr_exec_result *r,
+                           kdr_response *out) {
+    const kdr_render_stats *s = &r->render;
+    const double total = r->parse_s + r->trace_s + r->encode_s;
+    snprintf(out->server_timing, sizeof out->server_timing,
+             "primary;dur=%.2f, shadow;dur=%.2f, shade;dur=%.2f, png;dur=%.2f, "
+             "queue;dur=%.2f, total;dur=%.2f",
+             s->primary_s * 1e3, s->shadow_s * 1e3, s->shade_s * 1e3, r->png_s * 1e3,
+             r->queued_s * 1e3, total * 1e3);
+    /* one cone per hit point in the modes with a light */
+    const int lit = call->render.mode == KDR_RENDER_SHADE || call->render.mode == KDR_RENDER_SHADOW;
+    snprintf(out->render_stats, sizeof out->render_stats,
+             "width=%u; height=%u; mode=%s; samples=%u; pixels=%llu; hits=%llu; "
+             "primary_nodes_per_ray=%.2f; cones=%llu; cones_decided=%llu; "
+             "shadow_rays=%llu; shadow_nodes=%llu; ao_rays=%llu",
+             call->render.cam.width, call->render.cam.height,
+             kdr_render_mode_name(call->render.mode), call->render.samples,
+             (unsigned long long)s->pixels, (unsigned long long)s->hits,
+             s->pixels ? (double)s->primary_nodes / (double)s->pixels : 0.0,
+             (unsigned long long)(lit ? s->hits : 0),
+             (unsigned long long)s->shadow.cones_decided,
+             (unsigned long long)s->shadow.rays_traced,
+             (unsigned long long)s->shadow.nodes_visited, (unsigned long long)s->ao_rays);
 }
 
 /* Holds the scene's current version and fills the executor query. */
@@ -76,6 +109,7 @@ static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoi
     }
     call->ep = ep;
     call->path = req->path;
+    if (req->render) call->render = *req->render;
     /* the precheck refused any other Content-Type (415) */
     const kdr_media media = kdr_proto_media_of(req->content_type);
     call->q = (kdr_exec_query){.kind = kind_of(ep),
@@ -89,6 +123,7 @@ static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoi
                                .start = req->start,
                                .deadline_ms = srv->deadline_ms,
                                .claim = req->claim,
+                               .render = ep == KDR_EP_RENDER ? &call->render : NULL,
                                .on_done = on_done,
                                .done_ctx = ctx};
     return 0;
@@ -138,6 +173,7 @@ void kdr_query_finish(kdr_query_call *call, kdr_response *out) {
         out->len = r->body.len;
         out->rays = r->rays;
         r->body = (kdr_buf){0}; /* the response owns it now */
+        if (call->ep == KDR_EP_RENDER) render_headers(call, r, out);
         kdr_metrics_rays(ray_kind_of(call->ep), out->rays);
     } else if (r->stopped == KDR_STOP_CANCELLED) {
         kdr_log_debug("%s: client hung up; query cancelled after %zu of %zu chunks",

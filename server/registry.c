@@ -172,7 +172,7 @@ static kdr_scene_version *new_version(unsigned generation) {
     if (!v) return NULL;
     v->generation = generation;
     atomic_init(&v->refs, 1);
-    for (int k = 0; k < 3; k++)
+    for (size_t k = 0; k < sizeof v->ns_per_ray / sizeof v->ns_per_ray[0]; k++)
         atomic_init(&v->ns_per_ray[k], 0);
     return v;
 }

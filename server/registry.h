@@ -38,8 +38,9 @@ typedef struct kdr_scene_version {
     atomic_long refs;
     /* Running mean cost of one ray of work, in ns of one thread, per query
      * kind (bundle, cone-shadow, frustum; 0 = not measured yet): how much a
-     * query of N rays would hold an HTTP thread if answered inline. */
-    atomic_uint ns_per_ray[3];
+     * query of N rays would hold an HTTP thread if answered inline; render
+     * is measured too, per pixel x (1 + samples), though never inlined). */
+    atomic_uint ns_per_ray[4];
 } kdr_scene_version;
 
 typedef struct kdr_registry kdr_registry;

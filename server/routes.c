@@ -31,7 +31,11 @@ static int is_post_endpoint(kdr_endpoint ep) {
     return ep == KDR_EP_BUNDLE || ep == KDR_EP_CONE_SHADOW || ep == KDR_EP_FRUSTUM;
 }
 
-int kdr_route_is_query(kdr_endpoint ep) { return is_post_endpoint(ep); }
+/* A render is a GET, but a query all the same: admitted, run and charged
+ * by the executor. */
+int kdr_route_is_query(kdr_endpoint ep) {
+    return is_post_endpoint(ep) || ep == KDR_EP_RENDER;
+}
 
 static route match(const char *path);
 
@@ -44,12 +48,15 @@ static kdr_endpoint query_endpoint(const char *op) {
     if (!strcmp(op, "bundle")) return KDR_EP_BUNDLE;
     if (!strcmp(op, "cone-shadow")) return KDR_EP_CONE_SHADOW;
     if (!strcmp(op, "frustum")) return KDR_EP_FRUSTUM;
+    if (!strcmp(op, "render.png")) return KDR_EP_RENDER;
     return KDR_EP_OTHER;
 }
 
 static route match(const char *path) {
     route r = {KDR_EP_OTHER, NULL, 0};
-    if (!strcmp(path, "/v1/health"))
+    if (!strcmp(path, "/") || !strcmp(path, "/index.html"))
+        r.ep = KDR_EP_PAGE;
+    else if (!strcmp(path, "/v1/health"))
         r.ep = KDR_EP_HEALTH;
     else if (!strcmp(path, "/v1/ready"))
         r.ep = KDR_EP_READY;
@@ -132,7 +139,7 @@ int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long conten
         out->allow = is_post_endpoint(r.ep) ? ALLOW_POST : ALLOW_GET;
         return 1;
     }
-    if (r.ep != KDR_EP_METRICS && not_ready(srv, out)) return 1;
+    if (r.ep != KDR_EP_METRICS && r.ep != KDR_EP_PAGE && not_ready(srv, out)) return 1;
     if (r.scene && kdr_registry_index(srv->registry, r.scene, r.scene_len) < 0) {
         problemf(out, 404, "scene %s: no such scene", r.scene, r.scene_len);
         return 1;
@@ -328,6 +335,9 @@ void kdr_route_handle(kdr_server *srv, const kdr_request *req, kdr_response *out
     case KDR_EP_SCENES:
     case KDR_EP_SCENE:
         answer_scenes(srv, &r, out);
+        return;
+    case KDR_EP_PAGE:
+        kdr_page_answer(out);
         return;
     default: /* queries go through kdr_query_start (http.c) */
         kdr_route_problem(out, 404, "no such path");

@@ -42,6 +42,7 @@ typedef struct kdr_request {
     size_t len;
     double start;          /* kdr_now() when its headers arrived */
     kdr_exec_claim *claim; /* query endpoints: the admitted claim */
+    const kdr_render_params *render; /* render.png: its parsed parameters */
 } kdr_request;
 
 /* An answer: body is malloc'd (or NULL when len is 0) and owned by whoever
@@ -56,6 +57,9 @@ typedef struct kdr_response {
     kdr_endpoint ep;
     uint64_t rays; /* traced for this answer, for the access log */
     int no_answer; /* the client left: close without answering */
+    /* render.png: Server-Timing and X-Kdray-Render header values ("" none) */
+    char server_timing[192];
+    char render_stats[256];
 } kdr_response;
 
 /* Routing before the body is read: decides 404/405/415/503 and 413 from
@@ -77,6 +81,9 @@ void kdr_route_refusal(kdr_server *srv, kdr_admit why, size_t bytes, kdr_respons
 struct kdr_buf;
 void kdr_route_answer_buf(kdr_response *out, int rc, struct kdr_buf *b, const char *ct);
 
+/* The page at / (page.c: HTML embedded at build time). */
+void kdr_page_answer(kdr_response *out);
+
 /* The scene index of a query endpoint's path (the precheck found it), or -1. */
 long kdr_route_scene(kdr_server *srv, const char *path);
 
@@ -90,6 +97,7 @@ typedef struct kdr_query_call {
     kdr_scene_version *scene; /* held until finished: a reload swaps, never frees it */
     kdr_endpoint ep;
     const char *path;
+    kdr_render_params render; /* render.png's parameters, as parsed */
 } kdr_query_call;
 
 /* 0: started (on_done(ctx) will be called exactly once); -1: nothing

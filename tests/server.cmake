@@ -63,3 +63,20 @@ add_test(NAME server_cache
                  $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients
                  ${PROJECT_SOURCE_DIR}/scenes/default.glb)
 set_tests_properties(server_cache PROPERTIES TIMEOUT 600)
+
+# render.png against the daemon's own frustum and cone-shadow answers,
+# decoded by Pillow. Debian's python3 (python3-pil, scripts/dev): the test
+# fails, never skips, when Pillow is missing.
+add_test(NAME render_png
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_render.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(render_png PROPERTIES TIMEOUT 600)
+
+# The page at / in headless Debian Chromium driven by Debian's chromedriver
+# (scripts/dev installs both; the test fails, never skips, without them).
+# Screenshots: build/tests/page-screenshots/.
+add_test(NAME page
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_page.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients
+                 ${CMAKE_CURRENT_BINARY_DIR}/page-screenshots)
+set_tests_properties(page PROPERTIES TIMEOUT 600)
