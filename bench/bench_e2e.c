@@ -6,7 +6,9 @@
  *                   [--rays N] [--repeat R] [--threads T] [--workload W]...
  *
  * For each ladder scene (default haus and engine = 2CylinderEngine) it
- * starts kdrayd with T worker threads (default 2) on the scene, and for
+ * starts kdrayd with T worker threads (default 2) on the scene (at the
+ * HTTP threads' priority, --worker-nice 0, as Embree's threads run here:
+ * on a shared machine niced workers would lose the CPU to the neighbours), and for
  * each workload (camera, random, ao_any, shadow: bench.h; N rays, default
  * 1M) it times, interleaved, R passes (default 3, the best kept) of:
  *  - kdrayd: one CBOR bundle request over a keep-alive loopback connection
@@ -17,13 +19,13 @@
  *    rays converted into its structs before timing) traced by T threads of
  *    this process that take 4096-ray chunks from a shared counter, for every
  *    API rival_apis lists for the work; the fastest is the headline.
- * Both are wall time (T threads each). It also runs kdray-trace on the same
- * request file (the daemon's executor, in-process, tracing only) so the
- * table says where kdrayd's time goes: tracing, and everything else
- * (upload, parse, encode, download). kdrayd's and Embree's hit counts must
- * agree within 0.1% (the fast intersectors are not watertight), else the
- * run fails. The last line is the geometric mean over every scene and
- * workload of Embree ms / kdrayd ms (the target: >= 0.5).
+ * Both are wall time (T threads each). kdrayd's Server-Timing header splits
+ * its time into the body's arrival, parse, trace and encode; the rest is
+ * the answer's transfer. kdray-trace on the same request file (the
+ * daemon's executor in-process, tracing only) is the in-process reference. kdrayd's and
+ * Embree's hit counts must agree within 0.1% (the fast intersectors are not watertight),
+ * else the run fails. The last line is the geometric mean over every scene and workload
+ * of Embree ms / kdrayd ms (the target: >= 0.5).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -105,7 +107,7 @@ static int daemon_start(daemon_proc *d, const opts *o, const char *scene_path) {
         close(p[0]), close(p[1]);
         execl(o->kdrayd, o->kdrayd, "--listen", "127.0.0.1:0", "--threads", threads,
               "--scene", scene, "--max-body-mb", "128", "--max-rays", "16777216",
-              (char *)NULL);
+              "--worker-nice", "0", (char *)NULL);
         perror(o->kdrayd);
         _exit(127);
     }
@@ -184,10 +186,11 @@ static int fill(int fd, inbuf *b, size_t want) { /* until len - pos >= want */
     return 0;
 }
 
-/* Milliseconds from the first byte sent: the body's last byte handed to
- * the kernel, the answer's first byte read, its last byte read. */
+/* Milliseconds from the first byte sent to the answer's last byte read,
+ * and kdrayd's own account of them. */
 typedef struct times {
-    double sent, first, done;
+    double done;
+    double srv[5]; /* Server-Timing: body, queue, parse, trace, encode (ms) */
 } times;
 
 /* POSTs body; reads the whole answer (Content-Length or chunked) into
@@ -202,16 +205,21 @@ static int http_post(int fd, const char *path, const unsigned char *body, size_t
                             "Content-Length: %zu\r\n\r\n",
                             path, len);
     if (write_all(fd, head, (size_t)hn) || write_all(fd, body, len)) return -1;
-    tm->sent = wall_ms() - t0;
     in->len = in->pos = 0;
     char *end;
     for (;;) {
         if (fill(fd, in, in->len - in->pos + 1)) return -1;
-        if (!tm->first) tm->first = wall_ms() - t0;
         in->p[in->len] = 0; /* fill leaves room */
         if ((end = strstr(in->p, "\r\n\r\n"))) break;
     }
     const int status = atoi(in->p + 9);
+    const char *st = strcasestr(in->p, "\r\nserver-timing:");
+    static const char *const names[5] = {
+        "body;dur=", "queue;dur=", "parse;dur=", "trace;dur=", "encode;dur="};
+    for (int k = 0; k < 5; k++) {
+        const char *at = st && st < end ? strstr(st, names[k]) : NULL;
+        tm->srv[k] = at && at < end ? atof(at + strlen(names[k])) : NAN;
+    }
     const char *cl = strcasestr(in->p, "\r\ncontent-length:");
     const int chunked = strcasestr(in->p, "\r\ntransfer-encoding: chunked") != NULL;
     in->pos = (size_t)(end + 4 - in->p);
@@ -509,14 +517,14 @@ static int run_workload(const opts *o, const ladder_entry *e, const kdr_scene *k
         ea[a] = (emb_api){.api = apis[a], .best_ms = INFINITY};
 
     inbuf in = {0};
-    times http_best = {INFINITY, INFINITY, INFINITY};
+    times http_best = {.done = INFINITY};
     long kd_hits = -1;
     for (int pass = 0; pass < o->repeat; pass++) {
         for (size_t a = 0; a < napis; a++)
             emb_pass_once(&ea[a], emb, &w, o->threads);
         unsigned char *ans = NULL;
         size_t anslen = 0;
-        times tm = {0, 0, 0};
+        times tm = {0};
         const int st = http_post(fd, "/v1/scenes/default/bundle", body.p, body.len, &in,
                                  &ans, &anslen, &tm);
         if (st != 200) {
@@ -536,12 +544,13 @@ static int run_workload(const opts *o, const ladder_entry *e, const kdr_scene *k
         if (ea[a].best_ms < ea[best].best_ms) best = a;
     const long e_hits = ea[best].hits;
     const double ratio = ea[best].best_ms / http_best.done;
-    printf(
-        "%-8s %-7s %8zu %5.1f %-31s %7.1f %7.1f %6.1f %6.1f %6.1f %7.1f %5.0f%% %6.3f\n",
-        e->name, wname, w.n, body.len / 1048576.0, ea[best].name + 7, ea[best].best_ms,
-        http_best.done, http_best.sent, http_best.first - http_best.sent,
-        http_best.done - http_best.first, tr,
-        tr > 0 ? 100.0 * (1.0 - tr / http_best.done) : NAN, ratio);
+    const double *v = http_best.srv;
+    printf("%-7s %-7s %7zu %5.1f %-24s %7.1f %7.1f %6.1f %6.1f %6.1f %6.1f %6.1f %7.1f "
+           "%5.0f%% %6.3f\n",
+           e->name, wname, w.n, body.len / 1048576.0, ea[best].name + 7, ea[best].best_ms,
+           http_best.done, v[0], v[1] + v[2], v[3], v[4],
+           http_best.done - v[0] - v[1] - v[2] - v[3] - v[4], tr,
+           100.0 * (1.0 - v[3] / http_best.done), ratio);
     fflush(stdout);
     const double diff = fabs((double)kd_hits - (double)e_hits);
     if (kd_hits < 0 || diff > 0.001 * (double)w.n) {
@@ -637,9 +646,9 @@ int main(int argc, char **argv) {
     printf("kdrayd --threads %u over loopback (CBOR bundles, keep-alive) against Embree "
            "in this process with %u threads (4096-ray chunks); wall ms, best of %d\n",
            o.threads, o.threads, o.repeat);
-    printf("%-8s %-7s %8s %5s %-31s %7s %7s %6s %6s %6s %7s %6s %6s\n", "scene", "work",
-           "rays", "MiB", "Embree's best API", "Embree", "kdrayd", "send", "wait", "recv",
-           "trace", "other", "ratio");
+    printf("%-7s %-7s %7s %5s %-24s %7s %7s %6s %6s %6s %6s %6s %7s %6s %6s\n", "scene",
+           "work", "rays", "MiB", "Embree's best API", "Embree", "kdrayd", "body",
+           "parse", "trace", "encode", "rest", "inproc", "other", "ratio");
     result res = {0};
     int rc = 0;
     for (int k = 0; k < o.nonly; k++) {
@@ -659,11 +668,12 @@ int main(int argc, char **argv) {
         printf("geometric mean of Embree ms / kdrayd ms over %d rows: %.3f (target >= "
                "0.5)\n",
                res.rows, exp(res.ratio_sum_log / res.rows));
-    printf("(kdrayd = send + wait + recv: until the body is handed to the kernel, "
-           "then until the answer's first byte, then until its last; trace: "
-           "kdray-trace's best tracing time of the same request file in-process, %u "
-           "threads, run after the passes; other: the share of kdrayd's time that is "
-           "not tracing)\n",
+    printf("(ms; kdrayd: from the first byte sent to the answer's last byte read, and "
+           "how kdrayd's Server-Timing header splits it: body = the request's arrival, "
+           "parse = queue + parse, trace = first chunk to last, encode; rest = the "
+           "answer's transfer and what no step covers; inproc: kdray-trace's best "
+           "tracing time of the same request file, %u threads, run after the passes; "
+           "other: the share of kdrayd's time that is not tracing)\n",
            o.threads);
     if (res.fail) printf("bench_e2e: FAILED (hit counts disagree)\n");
     return rc || res.fail;

@@ -124,6 +124,7 @@ static enum MHD_Result queue(kdr_http *h, struct MHD_Connection *c, req_state *r
     if (r->content_type)
         MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, r->content_type);
     if (r->allow) MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, r->allow);
+    if (r->timing[0]) MHD_add_response_header(resp, "Server-Timing", r->timing);
     if (r->retry_after) {
         char secs[16];
         snprintf(secs, sizeof secs, "%u", r->retry_after);

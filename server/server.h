@@ -56,6 +56,7 @@ typedef struct kdr_response {
     kdr_endpoint ep;
     uint64_t rays; /* traced for this answer, for the access log */
     int no_answer; /* the client left: close without answering */
+    char timing[160]; /* a query answer's Server-Timing value, or "" */
 } kdr_response;
 
 /* Routing before the body is read: decides 404/405/415/503 and 413 from
@@ -90,6 +91,7 @@ typedef struct kdr_query_call {
     kdr_scene_version *scene; /* held until finished: a reload swaps, never frees it */
     kdr_endpoint ep;
     const char *path;
+    double submitted; /* kdr_now() when the whole body was handed over */
 } kdr_query_call;
 
 /* 0: started (on_done(ctx) will be called exactly once); -1: nothing
