@@ -14,6 +14,21 @@ rays/s / in-process rays/s; the gap is parsing, encoding and transport).
 The 1-ray round-trip median comes from wrk --latency with one connection
 and from a plain keep-alive Python loop.
 
+    bench_service.py KDRAYD KDRAY_TRACE --large N [--large-only] [--large-repeat R]
+
+adds (by default, N = 1M) one row per query kind and encoding for N-ray
+requests (issue 16): bundle closest and any, cone-shadow (N / 64 points,
+64 samples, one light), frustum closest and any (sqrt(N) x sqrt(N)), and a
+"transport only" bundle whose rays all have tmin > tmax (nothing to trace),
+each in JSON numbers, base64 and CBOR. Each is POSTed R times (keep-alive
+http.client; best kept) and run R times in-process by kdray-trace (the same
+file through the same executor, tracing time only; best kept); the row
+gives both, their ratio, and kdrayd's own split of the best POST from its
+Server-Timing header (body arrival, queue + parse, trace, encode; rest =
+the answer's transfer). "tr+codec" = 1 - trace / HTTP time: the share of
+that one request spent on transport and codecs, which neighbours' load
+cannot skew the way it skews two runs at different moments. 0 skips them.
+
     bench_service.py KDRAYD KDRAY_TRACE --soak 60 [--soak-only]
 
 adds a soak run (the issue's "zero errors and no growth in memory under a
@@ -561,7 +576,7 @@ def main():
     ap.add_argument("--soak", type=int, default=0, metavar="S",
                     help="also run the S-second mixed-query soak (issue: 60)")
     ap.add_argument("--soak-only", action="store_true",
-                    help="skip the throughput table and round trip")
+                    help="skip the throughput table, the round trip and the large rows")
     ap.add_argument("--large", type=int, default=1048576, metavar="N",
                     help="rays of the large-request rows (0: none; issue 16: 1M)")
     ap.add_argument("--large-only", action="store_true",
