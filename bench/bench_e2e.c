@@ -178,7 +178,8 @@ static int fill(int fd, inbuf *b, size_t want) { /* until len - pos >= want */
             b->p = realloc(b->p, b->cap);
             if (!b->p) return -1;
         }
-        const ssize_t k = recv(fd, b->p + b->len, b->cap - b->len, 0);
+        /* one byte stays free: the header scan NUL-terminates */
+        const ssize_t k = recv(fd, b->p + b->len, b->cap - b->len - 1, 0);
         if (k < 0 && errno == EINTR) continue;
         if (k <= 0) return -1;
         b->len += (size_t)k;
@@ -193,8 +194,8 @@ typedef struct times {
     double srv[5]; /* Server-Timing: body, queue, parse, trace, encode (ms) */
 } times;
 
-/* POSTs body; reads the whole answer (Content-Length or chunked) into
- * *ans. Returns the HTTP status, -1 on a transport error. */
+/* POSTs body; reads the whole answer (by its Content-Length) into *ans.
+ * Returns the HTTP status, -1 on a transport error. */
 static int http_post(int fd, const char *path, const unsigned char *body, size_t len,
                      inbuf *in, unsigned char **ans, size_t *anslen, times *tm) {
     const double t0 = wall_ms();
@@ -221,9 +222,7 @@ static int http_post(int fd, const char *path, const unsigned char *body, size_t
         tm->srv[k] = at && at < end ? atof(at + strlen(names[k])) : NAN;
     }
     const char *cl = strcasestr(in->p, "\r\ncontent-length:");
-    const int chunked = strcasestr(in->p, "\r\ntransfer-encoding: chunked") != NULL;
     in->pos = (size_t)(end + 4 - in->p);
-    size_t out = 0;
     if (cl && cl < end) {
         const size_t n = strtoull(cl + 17, NULL, 10);
         if (fill(fd, in, n)) return -1;
@@ -232,30 +231,7 @@ static int http_post(int fd, const char *path, const unsigned char *body, size_t
         tm->done = wall_ms() - t0;
         return status;
     }
-    if (!chunked) return -1;
-    /* Chunks are moved down over their own size lines: the decoded answer
-     * ends up contiguous at the start of the body. */
-    const size_t start = in->pos;
-    for (;;) {
-        char *nl;
-        for (;;) {
-            if (fill(fd, in, 1)) return -1;
-            in->p[in->len] = 0;
-            if ((nl = strstr(in->p + in->pos, "\r\n"))) break;
-            if (fill(fd, in, in->len - in->pos + 1)) return -1;
-        }
-        const size_t n = strtoull(in->p + in->pos, NULL, 16);
-        in->pos = (size_t)(nl + 2 - in->p);
-        if (fill(fd, in, n + 2)) return -1;
-        memmove(in->p + start + out, in->p + in->pos, n);
-        out += n;
-        in->pos += n + 2;
-        if (n == 0) break; /* no trailers are sent */
-    }
-    *ans = (unsigned char *)in->p + start;
-    *anslen = out;
-    tm->done = wall_ms() - t0;
-    return status;
+    return -1; /* kdrayd always sends Content-Length */
 }
 
 /* ---- CBOR request and answer ----------------------------------------------------- */
