@@ -159,6 +159,7 @@ typedef struct bench_workload {
     kdr_ray *rays;
     float *org, *dir;
     float tmin, tmax;   /* shared by all rays */
+    kdr_camera cam;     /* camera: the camera whose pixels the rays are */
 } bench_workload;
 
 #define BENCH_AO_PER_POINT 64

@@ -28,7 +28,8 @@ static void tile_pixel(int k, uint32_t *dx, uint32_t *dy) {
     *dy = (uint32_t)(((k >> 1) & 1) | ((k >> 2) & 2));
 }
 
-static size_t camera_rays(const kdr_scene *kd, size_t n, kdr_ray *out) {
+static size_t camera_rays(const kdr_scene *kd, size_t n, kdr_ray *out,
+                          kdr_camera *cam_out) {
     kdr_bounds b;
     kdr_scene_bounds(kd, &b);
     const float diag = kdr_scene_diagonal(kd);
@@ -48,6 +49,7 @@ static size_t camera_rays(const kdr_scene *kd, size_t n, kdr_ray *out) {
                 tile_pixel(k, &dx, &dy);
                 kdr_camera_ray(&cam, x0 + dx, y0 + dy, &out[i++]);
             }
+    *cam_out = cam;
     return i;
 }
 
@@ -145,7 +147,7 @@ int bench_workload_make(bench_workload *w, const kdr_scene *kd, const char *name
         return -1;
     w->name = name;
     if (!strcmp(name, "camera")) {
-        w->n = camera_rays(kd, n, w->rays);
+        w->n = camera_rays(kd, n, w->rays, &w->cam);
         w->query = KDR_CLOSEST, w->work = RIVAL_WORK_CAMERA, w->group = 0;
     } else if (!strcmp(name, "random")) {
         random_rays(kd, w->n = n, w->rays);
@@ -157,7 +159,8 @@ int bench_workload_make(bench_workload *w, const kdr_scene *kd, const char *name
     } else if (!strcmp(name, "shadow")) {
         shadow_rays(kd, w->n = n / BENCH_SHADOW_PER_POINT * BENCH_SHADOW_PER_POINT,
                     w->rays);
-        w->query = KDR_ANY, w->work = RIVAL_WORK_SHADOW, w->group = BENCH_SHADOW_PER_POINT;
+        w->query = KDR_ANY, w->work = RIVAL_WORK_SHADOW;
+        w->group = BENCH_SHADOW_PER_POINT;
     } else {
         bench_workload_free(w);
         return -1;
