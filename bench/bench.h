@@ -152,16 +152,18 @@ void bench_fail(const char *fmt, ...);
  * rival converts), and a kdr_trace_batch batch (bundles) in which rays
  * [g*group, (g+1)*group) share one origin (group 0: all share; 1: none). */
 typedef struct bench_workload {
-    const char *name;   /* camera, random, ao_any, ao_closest */
+    const char *name;   /* camera, random, ao_any, ao_closest, shadow */
     kdr_query query;
     int work;           /* rival_work */
     size_t n, group;
     kdr_ray *rays;
     float *org, *dir;
     float tmin, tmax;   /* shared by all rays */
+    kdr_camera cam;     /* camera: the camera whose pixels the rays are */
 } bench_workload;
 
 #define BENCH_AO_PER_POINT 64
+#define BENCH_SHADOW_PER_POINT 16
 
 /*
  * camera:     primary rays of a camera outside the scene looking at its
@@ -174,7 +176,10 @@ typedef struct bench_workload {
  * ao_any,
  * ao_closest: 64 hemisphere directions around the geometric normal of a
  *             random point on a random triangle, tmin 1e-4 and tmax 0.1 of
- *             the scene diagonal; any hit / closest hit.
+ *             the scene diagonal; any hit / closest hit;
+ * shadow:     16 rays per random surface point toward random points of a
+ *             sphere light above the scene (unnormalised directions,
+ *             [1e-4, 1 - 1e-4] of the segment); any hit.
  * Returns 0, or -1 (out of memory / unknown name).
  */
 int bench_workload_make(bench_workload *w, const kdr_scene *kd,

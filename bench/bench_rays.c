@@ -28,7 +28,8 @@ static void tile_pixel(int k, uint32_t *dx, uint32_t *dy) {
     *dy = (uint32_t)(((k >> 1) & 1) | ((k >> 2) & 2));
 }
 
-static size_t camera_rays(const kdr_scene *kd, size_t n, kdr_ray *out) {
+static size_t camera_rays(const kdr_scene *kd, size_t n, kdr_ray *out,
+                          kdr_camera *cam_out) {
     kdr_bounds b;
     kdr_scene_bounds(kd, &b);
     const float diag = kdr_scene_diagonal(kd);
@@ -48,6 +49,7 @@ static size_t camera_rays(const kdr_scene *kd, size_t n, kdr_ray *out) {
                 tile_pixel(k, &dx, &dy);
                 kdr_camera_ray(&cam, x0 + dx, y0 + dy, &out[i++]);
             }
+    *cam_out = cam;
     return i;
 }
 
@@ -106,6 +108,37 @@ static void ao_rays(const kdr_scene *kd, size_t n, kdr_ray *out) {
     }
 }
 
+/* Shadow rays: 16 samples per surface point (a random point on a random
+ * triangle) toward uniform points of a sphere light above the scene (centre
+ * half a diagonal above the box's top, radius 5% of the diagonal). The
+ * direction is the unnormalised segment to the light sample and [tmin,
+ * tmax] = [1e-4, 1 - 1e-4] of it, so every ray shares tmin and tmax; any
+ * hit. */
+static void shadow_rays(const kdr_scene *kd, size_t n, kdr_ray *out) {
+    const size_t ntris = kdr_scene_triangle_count(kd);
+    const float diag = kdr_scene_diagonal(kd);
+    kdr_bounds b;
+    kdr_scene_bounds(kd, &b);
+    const float light[3] = {0.5f * (b.min[0] + b.max[0]), b.max[1] + 0.5f * diag,
+                            0.5f * (b.min[2] + b.max[2])};
+    stress_rng r;
+    stress_rng_seed(&r, SEED + 1);
+    float p[3] = {0, 0, 0}, nrm[3];
+    for (size_t i = 0; i < n; i++) {
+        if (i % BENCH_SHADOW_PER_POINT == 0 && ntris)
+            surface_point(kdr_scene_triangle(kd, stress_rng_next(&r) % ntris), &r, p,
+                          nrm);
+        float d[3];
+        stress_rng_dir(&r, d);
+        for (int k = 0; k < 3; k++) {
+            out[i].org[k] = p[k];
+            out[i].dir[k] = light[k] + 0.05f * diag * d[k] - p[k];
+        }
+        out[i].tmin = 1e-4f;
+        out[i].tmax = 1.0f - 1e-4f;
+    }
+}
+
 int bench_workload_make(bench_workload *w, const kdr_scene *kd, const char *name,
                         size_t n) {
     memset(w, 0, sizeof *w);
@@ -114,7 +147,7 @@ int bench_workload_make(bench_workload *w, const kdr_scene *kd, const char *name
         return -1;
     w->name = name;
     if (!strcmp(name, "camera")) {
-        w->n = camera_rays(kd, n, w->rays);
+        w->n = camera_rays(kd, n, w->rays, &w->cam);
         w->query = KDR_CLOSEST, w->work = RIVAL_WORK_CAMERA, w->group = 0;
     } else if (!strcmp(name, "random")) {
         random_rays(kd, w->n = n, w->rays);
@@ -123,6 +156,11 @@ int bench_workload_make(bench_workload *w, const kdr_scene *kd, const char *name
         ao_rays(kd, w->n = n / BENCH_AO_PER_POINT * BENCH_AO_PER_POINT, w->rays);
         w->query = name[3] == 'a' ? KDR_ANY : KDR_CLOSEST;
         w->work = RIVAL_WORK_HEMISPHERE, w->group = BENCH_AO_PER_POINT;
+    } else if (!strcmp(name, "shadow")) {
+        shadow_rays(kd, w->n = n / BENCH_SHADOW_PER_POINT * BENCH_SHADOW_PER_POINT,
+                    w->rays);
+        w->query = KDR_ANY, w->work = RIVAL_WORK_SHADOW;
+        w->group = BENCH_SHADOW_PER_POINT;
     } else {
         bench_workload_free(w);
         return -1;

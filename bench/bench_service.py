@@ -14,6 +14,21 @@ rays/s / in-process rays/s; the gap is parsing, encoding and transport).
 The 1-ray round-trip median comes from wrk --latency with one connection
 and from a plain keep-alive Python loop.
 
+    bench_service.py KDRAYD KDRAY_TRACE --large N [--large-only] [--large-repeat R]
+
+adds (by default, N = 1M) one row per query kind and encoding for N-ray
+requests (issue 16): bundle closest and any, cone-shadow (N / 64 points,
+64 samples, one light), frustum closest and any (sqrt(N) x sqrt(N)), and a
+"transport only" bundle whose rays all have tmin > tmax (nothing to trace),
+each in JSON numbers, base64 and CBOR. Each is POSTed R times (keep-alive
+http.client; best kept) and run R times in-process by kdray-trace (the same
+file through the same executor, tracing time only; best kept); the row
+gives both, their ratio, and kdrayd's own split of the best POST from its
+Server-Timing header (body arrival, queue + parse, trace, encode; rest =
+the answer's transfer). "tr+codec" = 1 - trace / HTTP time: the share of
+that one request spent on transport and codecs, which neighbours' load
+cannot skew the way it skews two runs at different moments. 0 skips them.
+
     bench_service.py KDRAYD KDRAY_TRACE --soak 60 [--soak-only]
 
 adds a soak run (the issue's "zero errors and no growth in memory under a
@@ -85,7 +100,12 @@ end
 
 
 def start_daemon(kdrayd, scene, threads):
-    args = [kdrayd, "--listen", "127.0.0.1:0", "--threads", str(threads)]
+    # A 1M-ray bundle in JSON numbers is ~40 MB. Workers at the HTTP threads'
+    # priority (--worker-nice 0): kdray-trace, the in-process side, runs at
+    # nice 0 too, and on a shared machine niced workers lose the CPU to the
+    # neighbours.
+    args = [kdrayd, "--listen", "127.0.0.1:0", "--threads", str(threads),
+            "--max-body-mb", "256", "--worker-nice", "0"]
     if scene:
         args += ["--scene", "default=" + scene]
     proc = subprocess.Popen(args, stderr=subprocess.PIPE, text=True)
@@ -137,22 +157,59 @@ def _cbor_head(major, n):
     raise ValueError(n)
 
 
-def cbor_request_body(origin, dirs):
-    """{"origins": 85(...), "directions": 85(...)} by hand (this script runs
-    without python3-cbor2), with a padding member so that the directions'
-    float32 bytes start at a multiple of 4 and kdrayd reads them in place
-    (the origins' do already)."""
-    def text(t):
-        return _cbor_head(3, len(t)) + t.encode()
+class F32(list):
+    """A float array to send as an RFC 8746 float32 typed array (tag 85)."""
 
-    def typed(vals):
-        data = struct.pack("<%df" % len(vals), *vals)
-        return b"\xd8\x55" + _cbor_head(2, len(data)) + data
-    head = b"\xa3" + text("origins") + typed(origin)
-    rest = text("directions") + typed(dirs)
-    payload_at = len(head) + len(text("_pad")) + 1 + len(rest) - 4 * len(dirs)
-    pad = (4 - payload_at % 4) % 4
-    return head + text("_pad") + text("x" * pad) + rest
+
+def _cbor_item(v, out):
+    if isinstance(v, dict):
+        _cbor_map(v, out)
+    elif isinstance(v, F32):
+        data = struct.pack("<%df" % len(v), *v)
+        out += b"\xd8\x55" + _cbor_head(2, len(data)) + data
+    elif isinstance(v, (list, tuple)):
+        out += _cbor_head(4, len(v))
+        for x in v:
+            _cbor_item(x, out)
+    elif isinstance(v, bool):
+        out.append(0xf5 if v else 0xf4)
+    elif isinstance(v, int):
+        out += _cbor_head(0, v) if v >= 0 else _cbor_head(1, -1 - v)
+    elif isinstance(v, float):
+        out += b"\xfb" + struct.pack(">d", v)
+    elif isinstance(v, str):
+        out += _cbor_head(3, len(v.encode())) + v.encode()
+    else:
+        raise TypeError(type(v))
+
+
+def _cbor_map(d, out):
+    """An indefinite-length map, so that a padding member ("_p": "x..."; kdrayd
+    ignores unknown members) can go before any typed array whose float32
+    bytes would not start at a multiple of 4: kdrayd then reads it in place."""
+    out.append(0xbf)
+    for k, v in d.items():
+        key = bytearray()
+        _cbor_item(k, key)
+        if isinstance(v, F32):
+            at = len(out) + len(key) + 2 + len(_cbor_head(2, 4 * len(v)))
+            if at % 4:
+                out += b"\x62_p" + _cbor_head(3, 4 - at % 4) + b"x" * (4 - at % 4)
+        out += key
+        _cbor_item(v, out)
+    out.append(0xff)
+
+
+def cbor_body(payload):
+    """payload (a dict; F32 values become typed arrays) as a CBOR body, by hand:
+    this script runs without python3-cbor2."""
+    out = bytearray()
+    _cbor_map(payload, out)
+    return bytes(out)
+
+
+def cbor_request_body(origin, dirs):
+    return cbor_body({"origins": F32(origin), "directions": F32(dirs)})
 
 
 def wrk_rate(url, body_path, lua_path, seconds, conns, latency=False):
@@ -376,6 +433,139 @@ def throughput_table(args, url, scene, tmp):
           "http.client keep-alive %.1f us" % (p50 * 1e6, py * 1e6))
 
 
+# ---- 1M-ray rows (issue 16) --------------------------------------------------
+
+LARGE_SIDE = 1024           # frustum image LARGE_SIDE^2 pixels
+LARGE_SHADOW_SAMPLES = 64   # cone-shadow: rays / 64 points, one light
+
+
+def _json_f32(vals):
+    """JSON numbers as a client holding float32 data prints them ("%.9g"
+    round-trips every float32)."""
+    return "[" + ",".join("%.9g" % v for v in vals) + "]"
+
+
+def large_payloads(bounds, n):
+    """(label, endpoint, kind, payload) for every query kind at n rays;
+    float arrays as F32 (CBOR typed arrays, base64, or JSON numbers)."""
+    lo, hi = bounds["min"], bounds["max"]
+    size = max(b - a for a, b in zip(lo, hi)) or 1.0
+    c = [(a + b) / 2 for a, b in zip(lo, hi)]
+    origin, dirs = rays(bounds, n, seed=n)
+    dirs = F32(struct.unpack("<%df" % len(dirs), struct.pack("<%df" % len(dirs), *dirs)))
+    rng = random.Random(5)
+    npts = n // LARGE_SHADOW_SAMPLES
+    pts = F32(struct.unpack("<%df" % (3 * npts), struct.pack(
+        "<%df" % (3 * npts), *(rng.uniform(lo[k % 3], hi[k % 3]) for k in range(3 * npts)))))
+    light = {"center": [c[0], hi[1] + size, c[2]], "radius": 0.05 * size}
+    side = int(round(n ** 0.5))
+    cam = {"eye": origin, "target": c, "up": [0.0, 1.0, 0.0], "fov_y_deg": 60.0,
+           "width": side, "height": side}
+    bundle = {"origins": F32(origin), "directions": dirs}
+    return [
+        ("bundle closest", "bundle", "bundle", dict(bundle)),
+        ("bundle any", "bundle", "bundle", dict(bundle, query="any")),
+        ("cone-shadow", "cone-shadow", "cone-shadow",
+         {"points": pts, "lights": [light], "samples": LARGE_SHADOW_SAMPLES}),
+        ("frustum closest", "frustum", "frustum", {"camera": cam, "tile": 8}),
+        ("frustum any", "frustum", "frustum", {"camera": cam, "tile": 8, "query": "any"}),
+        ("transport only", "bundle", "bundle", dict(bundle, tmin=1.0, tmax=0.0)),
+    ]
+
+
+def encode_payload(payload, enc):
+    """The body bytes and file suffix of a payload in one encoding."""
+    if enc == "cbor":
+        return cbor_body(payload), ".cbor"
+    parts = []
+    for k, v in payload.items():
+        if isinstance(v, F32):
+            v = json.dumps(f32_b64(v)) if enc == "base64" else _json_f32(v)
+        else:
+            v = json.dumps(v)
+        parts.append("%s:%s" % (json.dumps(k), v))
+    if enc == "base64":
+        parts.append('"encoding":"base64"')
+    return ("{" + ",".join(parts) + "}").encode(), ".json"
+
+
+def timed_post(conn, path, body, ctype):
+    """One POST on a keep-alive http.client connection, timed from the
+    request's first byte to the answer's last: (status, seconds, answer
+    bytes, kdrayd's Server-Timing as {step: ms}). http.client sends the body
+    with one sendall and reads a Content-Length answer with one read: both
+    memcpy-speed next to kdrayd's work."""
+    t0 = time.perf_counter()
+    conn.request("POST", path, body, {"Content-Type": ctype, "Accept": ctype})
+    resp = conn.getresponse()
+    data = resp.read()
+    dt = time.perf_counter() - t0
+    timing = dict((m.group(1), float(m.group(2))) for m in re.finditer(
+        r"(\w+);dur=([\d.]+)", resp.getheader("Server-Timing") or ""))
+    return resp.status, dt, len(data), timing
+
+
+def trace_best_ms(args, kind, path, repeat):
+    cmd = [args.trace, "--kind", kind, "--mode", "fast", "--threads", str(args.threads),
+           "--repeat", str(repeat), path]
+    if args.scene:
+        cmd[1:1] = ["--scene", args.scene]
+    out = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                         text=True, timeout=600)
+    m = re.search(r"best ([\d.]+) ms", out.stderr)
+    if not m:
+        raise SystemExit("kdray-trace: " + out.stderr)
+    return float(m.group(1))
+
+
+def large_table(args, url, scene, tmp):
+    """Each request: R curl POSTs and R in-process runs (kdray-trace, the same
+    request file through the same executor, tracing time only); best of
+    each. ratio = in-process ms / HTTP ms (the request's rate over HTTP
+    against in-process). kdrayd's Server-Timing header of the best POST
+    splits its time: body (arrival), parse (queue + parse), trace, encode;
+    rest = the answer's transfer and what no step covers; "tr+codec" = 1 -
+    trace / HTTP ms, the share of the request's time that is transport and
+    codecs, measured within that one request (robust to the neighbours'
+    load, unlike the ratio, whose two sides run at different moments)."""
+    n, reps = args.large, args.large_repeat
+    print("\n%d-ray requests, %d worker threads, best of %d (Python http.client, "
+          "keep-alive, loopback, one request at a time; in-process: kdray-trace --repeat %d, tracing only)"
+          % (n, args.threads, reps, max(reps, 3)))
+    print("%-15s %-6s %8s %8s %8s %6s %6s %6s %6s %6s %6s %8s %6s %8s" % (
+        "request", "enc", "body MiB", "ans MiB", "HTTP ms", "MiB/s", "body", "parse",
+        "trace", "encode", "rest", "in-proc", "ratio", "tr+codec"))
+    host, port = url.split("//")[1].split(":")
+    conn = http.client.HTTPConnection(host, int(port), timeout=600)
+    for label, ep, kind, payload in large_payloads(scene["bounds"], n):
+        for enc in ("json", "base64", "cbor"):
+            body, suffix = encode_payload(payload, enc)
+            path = os.path.join(tmp, "large%s" % suffix)
+            with open(path, "wb") as f:
+                f.write(body)
+            ctype = "application/cbor" if enc == "cbor" else "application/json"
+            best = None
+            for _ in range(reps):
+                st, total, nbytes, timing = timed_post(conn, "/v1/scenes/default/" + ep,
+                                                       body, ctype)
+                if st != 200:
+                    raise SystemExit("%s %s: HTTP %d" % (label, enc, st))
+                if best is None or total < best[0]:
+                    best = (total, nbytes, timing)
+            core = trace_best_ms(args, kind, path, max(reps, 3))
+            http_ms = best[0] * 1e3
+            steps = [best[2].get(k, float("nan")) for k in
+                     ("body", "queue", "parse", "trace", "encode")]
+            print("%-15s %-6s %8.2f %8.2f %8.1f %6.0f %6.1f %6.1f %6.1f %6.1f %6.1f %8.1f "
+                  "%6.3f %7.0f%%" % (
+                      label, enc, len(body) / 2**20, best[1] / 2**20, http_ms,
+                      (len(body) + best[1]) / 2**20 / best[0], steps[0],
+                      steps[1] + steps[2], steps[3], steps[4], http_ms - sum(steps), core,
+                      core / http_ms, 100 * (1 - steps[3] / http_ms)), flush=True)
+            os.unlink(path)
+    conn.close()
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("kdrayd")
@@ -386,7 +576,13 @@ def main():
     ap.add_argument("--soak", type=int, default=0, metavar="S",
                     help="also run the S-second mixed-query soak (issue: 60)")
     ap.add_argument("--soak-only", action="store_true",
-                    help="skip the throughput table and round trip")
+                    help="skip the throughput table, the round trip and the large rows")
+    ap.add_argument("--large", type=int, default=1048576, metavar="N",
+                    help="rays of the large-request rows (0: none; issue 16: 1M)")
+    ap.add_argument("--large-only", action="store_true",
+                    help="only the large-request rows")
+    ap.add_argument("--large-repeat", type=int, default=3, metavar="R",
+                    help="requests per large row, best kept")
     args = ap.parse_args()
     if not shutil.which("wrk"):
         raise SystemExit("wrk is not installed")
@@ -398,8 +594,10 @@ def main():
         print("kdrayd %s: scene default, %d triangles, %d threads, loopback"
               % (url, scene["triangles"], args.threads))
         ok = True
-        if not args.soak_only:
+        if not args.soak_only and not args.large_only:
             throughput_table(args, url, scene, tmp)
+        if args.large and not args.soak_only:
+            large_table(args, url, scene, tmp)
         if args.soak:
             ok = soak(url, proc, scene["bounds"], args.soak, tmp)
     finally:

@@ -46,3 +46,29 @@ set_tests_properties(bench_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
 add_executable(kdray_bench_render ${CMAKE_CURRENT_SOURCE_DIR}/bench_render.c)
 set_target_properties(kdray_bench_render PROPERTIES OUTPUT_NAME kdray-bench-render)
 target_link_libraries(kdray_bench_render PRIVATE kdray_render kdray_scenes kdray_core)
+
+# The end-to-end benchmark (issue 16): kdrayd over loopback with CBOR
+# against Embree with the same thread count in this process. Not a test:
+# `cmake --build build --target bench_e2e` (haus and 2CylinderEngine, 1M
+# rays per workload, about a minute).
+if(TARGET kdrayd AND TARGET kdray_trace)
+  add_executable(kdray_bench_e2e ${CMAKE_CURRENT_SOURCE_DIR}/bench_e2e.c)
+  target_link_libraries(kdray_bench_e2e PRIVATE kdray_bench_lib Threads::Threads)
+  add_custom_target(bench_e2e
+    COMMAND kdray_bench_e2e $<TARGET_FILE:kdrayd> $<TARGET_FILE:kdray_trace>
+            --dir ${CMAKE_BINARY_DIR}/scene-ladder
+    DEPENDS kdray_bench_e2e kdrayd kdray_trace
+    USES_TERMINAL
+    COMMENT "kdrayd end to end against Embree in-process")
+endif()
+if(TARGET kdray_bench_e2e)
+  # Smoke test (not a measurement): the end-to-end benchmark's client,
+  # CBOR bodies and answer reader against a real kdrayd on the two smallest
+  # rungs; fails if a request fails or kdrayd's and Embree's hit counts
+  # differ by more than 0.1%.
+  add_test(NAME bench_e2e_smoke
+    COMMAND kdray_bench_e2e $<TARGET_FILE:kdrayd> $<TARGET_FILE:kdray_trace>
+            --dir ${CMAKE_BINARY_DIR}/scene-ladder --only box --only teapots
+            --rays 8192 --repeat 1)
+  set_tests_properties(bench_e2e_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
+endif()

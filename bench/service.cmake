@@ -1,7 +1,8 @@
 # Service benchmark (owner: soak): kdrayd over loopback HTTP (wrk + Lua)
 # against the core's in-process rate from kdray-trace in the same run, for
-# 1, 1K and 64K-ray bundles in JSON and base64, plus the 1-ray round trip.
-# Not a test: `cmake --build build --target bench_service` (< 1 min);
+# 1, 1K and 64K-ray bundles in JSON, base64 and CBOR, the 1-ray round trip,
+# and 1M-ray requests of every kind and encoding with kdrayd's Server-Timing
+# split. Not a test: `cmake --build build --target bench_service` (~2 min);
 # `--target bench_service_soak` runs only the 60 s mixed-query soak (errors,
 # RSS growth, /metrics agreement).
 find_package(Python3 COMPONENTS Interpreter)

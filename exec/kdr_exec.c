@@ -224,11 +224,13 @@ static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
  * to every worker. */
 static void prepare_job(kdr_exec *ex, kdr_exec_job *j) {
     prepare_work(ex, j);
+    /* Before the chunks open: another worker may trace them all and
+     * finish the job (reading t_trace0) before this one gets the lock back. */
+    j->t_trace0 = kdr_exec_now();
     pthread_mutex_lock(&ex->lock);
     j->state = JOB_RUNNING;
     if (j->nchunks > 1) pthread_cond_broadcast(&ex->work);
     pthread_mutex_unlock(&ex->lock);
-    j->t_trace0 = kdr_exec_now();
 }
 
 static void drain(kdr_exec_job *j) {

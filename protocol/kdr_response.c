@@ -93,8 +93,23 @@ static void stage_words(const array_src *s, size_t k0, size_t m, void *stage) {
             memcpy(f, s->f + k0, m * sizeof *f);
             return;
         }
+        /* One integer select per value over hoisted pointers, on the
+         * floats' bits: GCC vectorises this loop, not src_float's (a float
+         * select under an int32 test, s->prim tested per value). */
+        const float *src = s->f + k0;
+        const int32_t *prim = s->prim + k0;
+        uint32_t *w = (uint32_t *)f, miss;
+        memcpy(&miss, &s->miss_f, 4);
+        for (size_t k = 0; k < m; k++) {
+            uint32_t v;
+            memcpy(&v, src + k, 4);
+            w[k] = prim[k] < 0 ? miss : v;
+        }
+    } else if (s->i) {
+        const int32_t *src = s->i + k0;
+        int32_t *i = stage;
         for (size_t k = 0; k < m; k++)
-            f[k] = src_float(s, k0 + k);
+            i[k] = src[k] < 0 ? -1 : src[k];
     } else {
         int32_t *i = stage;
         for (size_t k = 0; k < m; k++)
@@ -122,8 +137,12 @@ static int cbor_array(kdr_buf *b, const array_src *s, size_t n) {
         if (kdr_cbor_typed_head(b, KDR_CBOR_TAG_U8, n))
             return KDR_ENOMEM;
         unsigned char *p = (unsigned char *)b->data + b->len;
-        for (size_t k = 0; k < n; k++)
-            p[k] = (unsigned char)src_int(s, k);
+        if (s->hit_of) /* hoisted as in stage_words */
+            for (size_t k = 0; k < n; k++)
+                p[k] = s->hit_of[k] >= 0;
+        else
+            for (size_t k = 0; k < n; k++)
+                p[k] = s->u8[k] != 0;
         b->len += n;
         return 0;
     }

@@ -126,6 +126,7 @@ static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoi
                                .render = ep == KDR_EP_RENDER ? &call->render : NULL,
                                .on_done = on_done,
                                .done_ctx = ctx};
+    call->submitted = kdr_now();
     return 0;
 }
 
@@ -173,7 +174,19 @@ void kdr_query_finish(kdr_query_call *call, kdr_response *out) {
         out->len = r->body.len;
         out->rays = r->rays;
         r->body = (kdr_buf){0}; /* the response owns it now */
-        if (call->ep == KDR_EP_RENDER) render_headers(call, r, out);
+        if (call->ep == KDR_EP_RENDER) {
+            render_headers(call, r, out);
+        } else {
+            /* Where the request's time went, in the standard Server-Timing
+             * header (ms): the body's arrival (from the headers to the whole
+             * body), the queue, parsing, tracing (first chunk to last, all
+             * workers), encoding. Clients and the benchmarks read it. */
+            snprintf(out->server_timing, sizeof out->server_timing,
+                     "body;dur=%.3f, queue;dur=%.3f, parse;dur=%.3f, trace;dur=%.3f, "
+                     "encode;dur=%.3f",
+                     (call->submitted - call->q.start) * 1e3, r->queued_s * 1e3,
+                     r->parse_s * 1e3, r->trace_s * 1e3, r->encode_s * 1e3);
+        }
         kdr_metrics_rays(ray_kind_of(call->ep), out->rays);
     } else if (r->stopped == KDR_STOP_CANCELLED) {
         kdr_log_debug("%s: client hung up; query cancelled after %zu of %zu chunks",

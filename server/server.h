@@ -57,7 +57,8 @@ typedef struct kdr_response {
     kdr_endpoint ep;
     uint64_t rays; /* traced for this answer, for the access log */
     int no_answer; /* the client left: close without answering */
-    /* render.png: Server-Timing and X-Kdray-Render header values ("" none) */
+    /* Server-Timing (a query's stages, or render.png's) and X-Kdray-Render
+     * header values ("" none) */
     char server_timing[192];
     char render_stats[256];
 } kdr_response;
@@ -98,6 +99,7 @@ typedef struct kdr_query_call {
     kdr_endpoint ep;
     const char *path;
     kdr_render_params render; /* render.png's parameters, as parsed */
+    double submitted;         /* kdr_now() when the whole body was handed over */
 } kdr_query_call;
 
 /* 0: started (on_done(ctx) will be called exactly once); -1: nothing

@@ -12,15 +12,19 @@ trims answers; that malformed CBOR bodies get 400 problem+json naming the
 field (problem+json even when the client accepts only CBOR); that a
 typed array at a misaligned offset (copied) answers as one read in place;
 and that kdray-trace reads a .cbor request file (or --content-type) and
-answers it byte for byte as kdrayd does, in the media type --accept picks.
+answers it byte for byte as kdrayd does, in the media type --accept picks;
+and that query answers carry Server-Timing (body, queue, parse, trace,
+encode).
 """
 
 import json
 import os
+import re
 import struct
 import subprocess
 import sys
 import tempfile
+import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
@@ -264,13 +268,43 @@ def test_trace_reads_cbor(t, c, b):
         os.rmdir(tmp)
 
 
+def test_server_timing(t, c, b):
+    """A query answer says where its time went (Server-Timing: body, queue,
+    parse, trace, encode in ms, each >= 0, together no more than the
+    client's own wall time); an error answer does not."""
+    bounds = c.scene(SCENE)["bounds"]
+    o, d = lib.rays_into_box(bounds, RAYS, seed=5)
+    path = "/v1/scenes/%s/bundle" % SCENE
+    for enc, body in (("cbor", cbor_body({"origins": _f32_array(o),
+                                          "directions": _f32_array(d)})),
+                      ("json", json.dumps({"origins": o, "directions": d}).encode())):
+        ctype = CBOR if enc == "cbor" else "application/json"
+        t0 = time.perf_counter()
+        code, headers, _ = raw_post(c, path, body, ctype)
+        wall_ms = (time.perf_counter() - t0) * 1e3
+        t.eq(code, 200, enc + ": status")
+        st = {k.lower(): v for k, v in headers.items()}.get("server-timing", "")
+        steps = dict((m.group(1), float(m.group(2)))
+                     for m in re.finditer(r"(\w+);dur=([\d.]+)", st))
+        t.eq(sorted(steps), ["body", "encode", "parse", "queue", "trace"],
+             enc + ": Server-Timing steps in %r" % st)
+        t.check(steps.get("trace", 0) > 0, enc + ": a traced query took time: %r" % st)
+        t.check(sum(steps.values()) <= wall_ms + 1,
+                "%s: steps %r within the client's %.2f ms" % (enc, steps, wall_ms))
+    code, headers, _ = raw_post(c, path, b'{"origins": [0, 0]}', "application/json")
+    t.eq(code, 400, "bad body: 400")
+    t.check("server-timing" not in {k.lower() for k in headers},
+            "no Server-Timing on an error answer")
+
+
 def main():
     t = lib.Runner()
     d = lib.Daemon(KDRAYD, ["--threads", "2"])
     c, b = Client(d.url), Client(d.url, binary=True)
     try:
         for fn in (test_every_kind_both_ways, test_negotiation, test_fields,
-                   test_bad_bodies, test_misaligned_typed_array, test_trace_reads_cbor):
+                   test_bad_bodies, test_misaligned_typed_array, test_trace_reads_cbor,
+                   test_server_timing):
             t.run(fn, c, b)
     finally:
         rc = d.stop()
