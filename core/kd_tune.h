@@ -49,6 +49,21 @@
 #define KD_LEAF_SIMD_MIN 3
 #define KD_LEAF_AVX2_MIN 8
 
+/* ---- interleaved walks of a batch's incoherent rays (kd_traverse_stream.c) */
+
+/* Rays in flight per thread in the scalar form (the AVX-512 form has 16,
+ * one per lane). */
+#define KD_STREAM_RAYS 8
+/* Scenes whose nodes, references and triangles take at least this many
+ * bytes (kdr_tree_stats.bytes) are walked with every next node requested
+ * as soon as it is known and a leaf's triangles requested one turn before
+ * their test. */
+#define KD_STREAM_STAGE_MIN_BYTES ((size_t)16 << 20)
+/* kdr_trace_batch sends a chunk of incoherent rays to the interleaved walk
+ * without trying bundles when its origins change at least every this many
+ * rays on average (AO rays of one point share theirs: bundles). */
+#define KD_STREAM_MAX_RUN 2
+
 /* ---- leaves of every walk (kd_layout.c) ------------------------------------ */
 
 /* Scenes whose triangles, references and nodes take at least this many

@@ -11,6 +11,13 @@
  * operand is NaN the SECOND operand is returned, so f4_min(d, t_far) with a
  * NaN d yields t_far.
  *
+ * 16 lanes (f16_*, i16_*, AVX-512 F/DQ/BW/VL, KD_AVX512) serve the
+ * interleaved walk of incoherent batches (kd_traverse_stream16.c), whose
+ * lanes hold different rays at different nodes: masks are __mmask16 bits
+ * (m16) there, node words are gathered per lane and stack entries
+ * scattered. Call them only from KD_AVX512 functions after
+ * kd_cpu_has_avx512() said yes.
+ *
  * Only plain IEEE operations here (no FMA, no approximate reciprocals), so
  * that SIMD code can reproduce scalar results bit for bit. Every intrinsic
  * of core/ lives in this file; code written once for both widths uses the
@@ -23,6 +30,7 @@
 #include <stdint.h>
 
 #define KD_AVX2 __attribute__((target("avx2")))
+#define KD_AVX512 __attribute__((target("avx2,avx512f,avx512dq,avx512bw,avx512vl")))
 
 /* ---- 4 lanes (SSE2) ------------------------------------------------------ */
 
@@ -206,6 +214,80 @@ KD_AVX2 static inline void f8_rows9(const float *const r[8], f8 c[9]) {
     }
     c[8] = _mm256_setr_ps(r[0][8], r[1][8], r[2][8], r[3][8], r[4][8], r[5][8],
                           r[6][8], r[7][8]);
+}
+
+/* ---- 16 lanes (AVX-512), one ray per lane ------------------------------- */
+
+typedef __m512 f16;
+typedef __m512i i16;
+typedef __mmask16 m16;
+
+KD_AVX512 static inline f16 f16_set1(float x) { return _mm512_set1_ps(x); }
+KD_AVX512 static inline f16 f16_add(f16 a, f16 b) { return _mm512_add_ps(a, b); }
+KD_AVX512 static inline f16 f16_sub(f16 a, f16 b) { return _mm512_sub_ps(a, b); }
+KD_AVX512 static inline f16 f16_mul(f16 a, f16 b) { return _mm512_mul_ps(a, b); }
+/* a > b ? a : b and a < b ? a : b, as the scalar ternaries (NaN: b) */
+KD_AVX512 static inline f16 f16_max(f16 a, f16 b) { return _mm512_max_ps(a, b); }
+KD_AVX512 static inline f16 f16_min(f16 a, f16 b) { return _mm512_min_ps(a, b); }
+/* lanes of m: a, others b */
+KD_AVX512 static inline f16 f16_sel(m16 m, f16 a, f16 b) {
+    return _mm512_mask_blend_ps(m, b, a);
+}
+/* lanes of m where !(a < b) / !(a > b), so a NaN lane is set */
+KD_AVX512 static inline m16 f16_nlt(m16 m, f16 a, f16 b) {
+    return _mm512_mask_cmp_ps_mask(m, a, b, _CMP_NLT_UQ);
+}
+KD_AVX512 static inline m16 f16_ngt(m16 m, f16 a, f16 b) {
+    return _mm512_mask_cmp_ps_mask(m, a, b, _CMP_NGT_UQ);
+}
+/* lanes whose sign bit is set (-0.0 and -inf included) */
+KD_AVX512 static inline m16 f16_signs(f16 a) {
+    return _mm512_movepi32_mask(_mm512_castps_si512(a));
+}
+/* lane j (bit m) set to x */
+KD_AVX512 static inline f16 f16_put(f16 v, m16 m, float x) {
+    return _mm512_mask_broadcastss_ps(v, m, _mm_set_ss(x));
+}
+KD_AVX512 static inline void f16_store(float *p, f16 a) { _mm512_store_ps(p, a); }
+/* the float at byte offset 8 * idx of base, lanes of m (others: src) */
+KD_AVX512 static inline f16 f16_gather8(f16 src, m16 m, i16 idx, const void *base) {
+    return _mm512_mask_i32gather_ps(src, m, idx, base, 8);
+}
+/* base[idx] = a in the lanes of m */
+KD_AVX512 static inline void f16_scatter(float *base, m16 m, i16 idx, f16 a) {
+    _mm512_mask_i32scatter_ps(base, m, idx, a, 4);
+}
+
+KD_AVX512 static inline i16 i16_set1(int32_t x) { return _mm512_set1_epi32(x); }
+KD_AVX512 static inline i16 i16_iota(void) {
+    return _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+KD_AVX512 static inline i16 i16_add(i16 a, i16 b) { return _mm512_add_epi32(a, b); }
+/* a + b in the lanes of m, a elsewhere */
+KD_AVX512 static inline i16 i16_add_in(m16 m, i16 a, i16 b) {
+    return _mm512_mask_add_epi32(a, m, a, b);
+}
+KD_AVX512 static inline i16 i16_and(i16 a, i16 b) { return _mm512_and_si512(a, b); }
+KD_AVX512 static inline i16 i16_srl(i16 a, unsigned n) { return _mm512_srli_epi32(a, n); }
+KD_AVX512 static inline i16 i16_sll(i16 a, unsigned n) { return _mm512_slli_epi32(a, n); }
+KD_AVX512 static inline i16 i16_sel(m16 m, i16 a, i16 b) {
+    return _mm512_mask_blend_epi32(m, b, a);
+}
+/* lanes of m where a == b / where a & b != 0 */
+KD_AVX512 static inline m16 i16_eq(m16 m, i16 a, i16 b) {
+    return _mm512_mask_cmpeq_epi32_mask(m, a, b);
+}
+KD_AVX512 static inline m16 i16_test(i16 a, i16 b) { return _mm512_test_epi32_mask(a, b); }
+KD_AVX512 static inline i16 i16_put(i16 v, m16 m, int32_t x) {
+    return _mm512_mask_set1_epi32(v, m, x);
+}
+KD_AVX512 static inline void i16_store(int32_t *p, i16 a) { _mm512_store_si512(p, a); }
+/* the int32 at byte offset 8 * idx of base, lanes of m (others: src) */
+KD_AVX512 static inline i16 i16_gather8(i16 src, m16 m, i16 idx, const void *base) {
+    return _mm512_mask_i32gather_epi32(src, m, idx, base, 8);
+}
+KD_AVX512 static inline void i16_scatter(int32_t *base, m16 m, i16 idx, i16 a) {
+    _mm512_mask_i32scatter_epi32(base, m, idx, a, 4);
 }
 
 #endif /* KD_SIMD_H */
