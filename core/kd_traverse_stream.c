@@ -31,7 +31,8 @@ typedef struct ks_ray {
     const kd_node *n; /* the node of its next turn, already requested */
     float tn, tf;
     int sp;
-    int pend; /* n is a leaf whose triangles were requested last turn */
+    int pend; /* n is a leaf whose references (1) or triangles (2) were
+               * requested last turn */
     float org[3], inv[3], ss[3];
     unsigned neg[3];
     float tmin;
@@ -95,13 +96,14 @@ static inline float ks_self(uint32_t c, float a, float b) {
 }
 
 /* One turn of ray r: a node step, or a leaf and the pop after it (on
- * large scenes (stage != 0) a leaf's triangles are requested on the turn
- * that reaches it and tested on the next). Returns 1 while the ray goes
+ * large scenes (stage != 0) a leaf's reference list is requested on the
+ * turn that reaches it, its triangles on the next, the test on the one
+ * after). Returns 1 while the ray goes
  * on; 0 when it is done, with *found its answer. */
 static inline int ks_turn(const kdr_scene *s, ks_ray *r, const int any, const int avx2,
                           const int stage, int *found) {
     const kd_node *n = r->n;
-    r->o.nodes += (uint64_t)!r->pend;
+    r->o.nodes += (uint64_t)(r->pend == 0);
     if (!kd_is_leaf(n)) {
         /* descend()'s step without its branches: with t_lo <= t_hi (or
          * NaN) its five cases are "near needed unless t_hi < tn", "far
@@ -137,9 +139,12 @@ static inline int ks_turn(const kdr_scene *s, ks_ray *r, const int any, const in
             r->n = next;
             return 1;
         }
-    } else if (stage && !r->pend) {
-        kd_prefetch_tris(s, s->refs + n->u.first, kd_count(n));
-        r->pend = 1;
+    } else if (stage && r->pend < 2) {
+        /* staged: the reference list, next turn the triangles, then the test */
+        if (r->pend++ == 0)
+            kd_prefetch_refs(s, n);
+        else
+            kd_prefetch_tris(s, s->refs + n->u.first, kd_count(n));
         return 1;
     } else if (r->pend = 0,
                kd_walk_leaf(s, n, &r->pre, &r->pre4, r->tmin, any, avx2, &r->o)) {

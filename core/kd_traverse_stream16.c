@@ -25,8 +25,9 @@
  *
  * On scenes of KD_STREAM_STAGE_MIN_BYTES and more (trees and triangles
  * that do not stay in the caches) a lane that reaches a leaf requests its
- * triangles and tests them on its next turn, and every lane's next node is
- * requested as soon as it is known.
+ * reference list, on its next turn the triangles, and tests them on the
+ * turn after; and every lane's next node is requested as soon as it is
+ * known.
  */
 #include "kd_stream.h"
 #include "kd_traverse_bundle.h"
@@ -47,7 +48,8 @@ typedef struct ks16 {
     i16 node, sp, visits;
     f16 tn, tf, org[3], inv[3], ss[3];
     m16 act;  /* lanes holding a ray */
-    m16 pend; /* lanes whose leaf's triangles were requested last turn */
+    m16 refs; /* lanes whose leaf's reference list was requested last turn */
+    m16 tris; /* lanes whose leaf's triangles were requested last turn */
     _Alignas(64) int32_t stk_node[KD_MAX_DEPTH][16];
     _Alignas(64) float stk_tn[KD_MAX_DEPTH][16];
     _Alignas(64) float stk_tf[KD_MAX_DEPTH][16];
@@ -182,12 +184,17 @@ KD_AVX512 static inline void ks16_turn(ks_src *c, ks16 *w) {
     /* the node: split (word 0) and bits (word 1) of kd_node[node] */
     const i16 bits = i16_gather8(three, act, node, (const int32_t *)s->nodes + 1);
     const f16 split = f16_gather8(f16_set1(0.0f), act, node, s->nodes);
-    w->visits = i16_add_in(act & ~w->pend, w->visits, one);
+    w->visits = i16_add_in(act & ~w->refs & ~w->tris, w->visits, one);
     const i16 axis = i16_and(bits, three);
     const m16 at_leaf = i16_eq(act, axis, three);
-    const m16 leaf_new = at_leaf & ~w->pend & c->stage; /* request, test next turn */
-    const m16 leaf = at_leaf & ~leaf_new;
-    w->pend = leaf_new;
+    /* staged leaves: references requested on the turn that reaches the
+     * leaf, triangles on the next (the references are then in the cache,
+     * so the requests cost no miss), the test on the one after */
+    const m16 get_refs = at_leaf & ~w->refs & ~w->tris & c->stage;
+    const m16 get_tris = at_leaf & w->refs;
+    const m16 leaf = at_leaf & ~get_refs & ~get_tris;
+    w->refs = get_refs;
+    w->tris = get_tris;
     const m16 inner = act & ~at_leaf;
     /* descend()'s step, lane by lane as masks */
     const m16 ax1 = i16_eq(0xFFFF, axis, one), ax2 = i16_eq(0xFFFF, axis, i16_set1(2));
@@ -225,7 +232,11 @@ KD_AVX512 static inline void ks16_turn(ks_src *c, ks16 *w) {
         i16_store(nv, w->node);
         for (unsigned mm = moved; mm; mm &= mm - 1)
             __builtin_prefetch(s->nodes + nv[__builtin_ctz(mm)]);
-        for (unsigned mm = leaf_new; mm; mm &= mm - 1) {
+        for (unsigned mm = get_refs; mm; mm &= mm - 1) {
+            const kd_node *n = s->nodes + nv[__builtin_ctz(mm)];
+            kd_prefetch_refs(s, n);
+        }
+        for (unsigned mm = get_tris; mm; mm &= mm - 1) {
             const kd_node *n = s->nodes + nv[__builtin_ctz(mm)];
             kd_prefetch_tris(s, s->refs + n->u.first, kd_count(n));
         }
@@ -245,7 +256,7 @@ KD_AVX512 void kd_stream16_trace(const kdr_scene *s, const kdr_ray_batch *b,
     w.tn = w.tf = f16_set1(0.0f);
     for (int k = 0; k < 3; k++)
         w.org[k] = w.inv[k] = w.ss[k] = f16_set1(0.0f);
-    w.act = w.pend = 0;
+    w.act = w.refs = w.tris = 0;
     for (int j = 0; j < 16; j++)
         if (ks16_fill(&c, &w, j)) w.act |= (m16)(1u << j);
     while (w.act)
