@@ -131,14 +131,16 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
     memcpy(ids, tmp, count * sizeof *ids);
 }
 
-int kd_batch_scattered(const kdr_ray_batch *b, size_t first, size_t count) {
+int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                       size_t count) {
     if (b->org_stride == 0 || count <= 8)
         return 0;
     size_t runs = 1;
     for (size_t i = first + 1; i < first + count; i++)
         runs += memcmp(b->org + 3 * i, b->org + 3 * (i - 1), 3 * sizeof(float)) != 0;
-    return runs * KD_STREAM_MAX_RUN >= count &&
-           order_spread(b, first, count) >= KB_SORT_SPREAD;
+    if (runs * KD_STREAM_MAX_RUN < count && s->stats.bytes < KD_STREAM_RUNS_MIN_BYTES)
+        return 0;
+    return order_spread(b, first, count) >= KB_SORT_SPREAD;
 }
 
 static int batch_args_ok(const kdr_ray_batch *b, size_t first, size_t count,

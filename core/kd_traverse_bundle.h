@@ -71,11 +71,16 @@ void kd_batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r);
 void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
                      kdr_query q, kdr_hits *out, kdr_trav_stats *stats);
 
-/* 1 when rays [first, first+count) are incoherent (mean direction spread
- * per 8 rays over KB_SORT_SPREAD) and their origins change at least every
- * KD_STREAM_MAX_RUN rays on average: no bundle would hold its lanes, so
- * the drivers send them straight to the interleaved walk (kd_batch.c). */
-int kd_batch_scattered(const kdr_ray_batch *b, size_t first, size_t count);
+/* 1 when rays [first, first+count) have their own origins (stride 3) and
+ * incoherent directions (mean spread per 8 rays over KB_SORT_SPREAD), and
+ * either their origins change at least every KD_STREAM_MAX_RUN rays on
+ * average (no bundle would hold its lanes) or the scene takes at least
+ * KD_STREAM_RUNS_MIN_BYTES (runs of a shared origin, AO rays of many
+ * points: there the interleaved walk's hidden memory latency beats the
+ * bundles' shared descent). The drivers send such chunks straight to the
+ * interleaved walk (kd_batch.c). */
+int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                       size_t count);
 
 /* Orders rays [first, first+count) (count <= KB_CHUNK) for bundling: when
  * consecutive rays are incoherent (mean direction spread per 8 rays over
@@ -578,7 +583,8 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
         size_t alone = base;
         if (flags & KB_FALLBACK)
             while (alone < end &&
-                   kd_batch_scattered(rb, alone, end - alone < KB_CHUNK ? end - alone : KB_CHUNK))
+                   kd_batch_scattered(s, rb, alone,
+                                      end - alone < KB_CHUNK ? end - alone : KB_CHUNK))
                 alone += end - alone < KB_CHUNK ? end - alone : KB_CHUNK;
         if (alone > base) {
             KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, out, stats);

@@ -63,6 +63,14 @@
  * without trying bundles when its origins change at least every this many
  * rays on average (AO rays of one point share theirs: bundles). */
 #define KD_STREAM_MAX_RUN 2
+/* ... and on scenes of at least this many bytes whatever their origins do.
+ * bench/ab, batches of AO rays (16 per point, 4096 per call), interleaved /
+ * bundles: any hit 0.79 on haus (2 MiB), 0.98-1.05 on 2CylinderEngine
+ * (6 MiB), 1.16 on engine3 (20 MiB), 1.42 on the 1.09M scene (59 MiB);
+ * closest hit 0.78, 0.97, 1.15, 1.33. Batches with one shared origin
+ * (stride 0) stay with bundles on every scene: the interleaved walk lost
+ * there (64-ray AO batches 0.64-0.90, cone samples 0.77-1.00). */
+#define KD_STREAM_RUNS_MIN_BYTES ((size_t)8 << 20)
 
 /* ---- leaves of every walk (kd_layout.c) ------------------------------------ */
 
