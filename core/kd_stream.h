@@ -17,19 +17,24 @@
 /* Traces rays ids[0..m) of the batch (ids NULL: rays [first, first + m);
  * arguments checked by the caller, scene with a tree) and writes each
  * result at its own index; stats as kdr_trace_batch. Picks
- * kd_stream16_trace on AVX-512 CPUs, else kd_stream_scalar_trace. */
+ * kd_stream_trace16 on AVX-512 CPUs, else kd_stream_trace8 on AVX2 CPUs,
+ * else kd_stream_scalar_trace. */
 void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
                      size_t first, size_t m, kdr_query q, kdr_hits *out,
                      kdr_trav_stats *stats);
 
-/* The two forms, same contract (tests call both): KD_STREAM_RAYS rays
- * interleaved in scalar code (kd_traverse_stream.c), and 16 rays in the
- * lanes of AVX-512 registers (kd_traverse_stream16.c; only after
- * kd_cpu_has_avx512() said yes). flags: KD_STREAM_STAGE or 0. */
+/* The forms, same contract (tests call each): KD_STREAM_RAYS rays
+ * interleaved in scalar code (kd_traverse_stream.c), and 8 or 16 rays in
+ * the lanes of AVX2 or AVX-512 registers (kd_traverse_stream_lanes.h; only
+ * after kdr_cpu_has_avx2() / kd_cpu_has_avx512() said yes). flags:
+ * KD_STREAM_STAGE or 0. */
 void kd_stream_scalar_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
                             size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
                             kdr_trav_stats *stats);
-void kd_stream16_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+void kd_stream_trace8(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                      size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
+                      kdr_trav_stats *stats);
+void kd_stream_trace16(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
                        size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
                        kdr_trav_stats *stats);
 

@@ -1,7 +1,8 @@
 /*
  * kd_traverse_stream.c — the interleaved walk of a batch's incoherent rays
- * without AVX-512 (kd_traverse_stream16.c is the AVX-512 form; this file
- * also dispatches between them): KD_STREAM_RAYS rays are in flight in one
+ * without SIMD lanes (kd_traverse_stream16.c and kd_traverse_stream8.c are
+ * the AVX-512 and AVX2 forms; this file also dispatches between the three:
+ * 16 lanes, else 8, else this one): KD_STREAM_RAYS rays are in flight in one
  * thread, each with its own stack, interval and best hit; in turn each
  * ray takes ONE node step or tests one leaf, requests (prefetches) the
  * node it visits next and yields to the next ray. When its turn comes
@@ -214,7 +215,9 @@ void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *i
                      size_t first, size_t m, kdr_query q, kdr_hits *out,
                      kdr_trav_stats *stats) {
     if (kd_cpu_has_avx512())
-        kd_stream16_trace(s, b, ids, first, m, q, 0, out, stats);
+        kd_stream_trace16(s, b, ids, first, m, q, 0, out, stats);
+    else if (kdr_cpu_has_avx2())
+        kd_stream_trace8(s, b, ids, first, m, q, 0, out, stats);
     else
         kd_stream_scalar_trace(s, b, ids, first, m, q, 0, out, stats);
 }

@@ -413,16 +413,18 @@ static int differ(const results *a, const results *b, size_t i, kdr_query q) {
 /* The traversal under test: 0..3 = the public modes, 4/5 = the 4/8-wide
  * drivers without the incoherence fallback, 6..9 = the interleaved walk's
  * scalar and AVX-512 forms, plain and with staged leaves, 10 = its
- * dispatch with an id list (the rays in reverse order). */
-#define NWAYS 11
+ * dispatch with an id list (the rays in reverse order), 11/12 = its AVX2
+ * 8-lane form, plain and staged. */
+#define NWAYS 13
 static const char *const way_names[NWAYS] = {
     "auto",   "single",        "bundle4",  "bundle8",          "raw4",      "raw8",
-    "stream", "stream-staged", "stream16", "stream16-staged", "stream-ids"};
+    "stream", "stream-staged", "stream16", "stream16-staged", "stream-ids",
+    "stream8", "stream8-staged"};
 
 /* 0 when the CPU cannot run that way (8 lanes without AVX2, 16 without
  * AVX-512). */
 static int way_runs(int way) {
-    if (way == 3 || way == 5)
+    if (way == 3 || way == 5 || way == 11 || way == 12)
         return kdr_cpu_has_avx2(); /* bundle8 would run 4-wide: raw8 must not run */
     if (way == 8 || way == 9)
         return kd_cpu_has_avx512();
@@ -442,8 +444,12 @@ static void run_way(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                                    way == 7 ? KD_STREAM_STAGE : 0, &h, NULL);
     } else if (way == 8 || way == 9) {
         if (s->nodes)
-            kd_stream16_trace(s, b, NULL, first, count, q,
+            kd_stream_trace16(s, b, NULL, first, count, q,
                               way == 9 ? KD_STREAM_STAGE : 0, &h, NULL);
+    } else if (way == 11 || way == 12) {
+        if (s->nodes)
+            kd_stream_trace8(s, b, NULL, first, count, q,
+                             way == 12 ? KD_STREAM_STAGE : 0, &h, NULL);
     } else if (way == 10) {
         size_t *ids = malloc(count * sizeof *ids);
         for (size_t i = 0; i < count; i++)
