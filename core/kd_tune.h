@@ -51,8 +51,8 @@
 
 /* ---- interleaved walks of a batch's incoherent rays (kd_traverse_stream.c) */
 
-/* Rays in flight per thread in the scalar form (the AVX-512 form has 16,
- * one per lane). */
+/* Rays in flight per thread in the scalar form (the AVX-512 and AVX2
+ * forms have 16 and 8, one per lane). */
 #define KD_STREAM_RAYS 8
 /* Scenes whose nodes, references and triangles take at least this many
  * bytes (kdr_tree_stats.bytes) are walked with every next node requested
