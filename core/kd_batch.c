@@ -138,7 +138,10 @@ int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
     size_t runs = 1;
     for (size_t i = first + 1; i < first + count; i++)
         runs += memcmp(b->org + 3 * i, b->org + 3 * (i - 1), 3 * sizeof(float)) != 0;
-    if (runs * KD_STREAM_MAX_RUN < count && s->stats.bytes < KD_STREAM_RUNS_MIN_BYTES)
+    /* one origin for the whole chunk (a cone's samples of one point) is
+     * the shared-origin case whatever the stride says: bundles */
+    if (runs * KD_STREAM_MAX_RUN < count &&
+        (runs == 1 || s->stats.bytes < KD_STREAM_RUNS_MIN_BYTES))
         return 0;
     return order_spread(b, first, count) >= KB_SORT_SPREAD;
 }

@@ -75,10 +75,11 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
  * incoherent directions (mean spread per 8 rays over KB_SORT_SPREAD), and
  * either their origins change at least every KD_STREAM_MAX_RUN rays on
  * average (no bundle would hold its lanes) or the scene takes at least
- * KD_STREAM_RUNS_MIN_BYTES (runs of a shared origin, AO rays of many
- * points: there the interleaved walk's hidden memory latency beats the
- * bundles' shared descent). The drivers send such chunks straight to the
- * interleaved walk (kd_batch.c). */
+ * KD_STREAM_RUNS_MIN_BYTES and the chunk holds more than one origin (runs
+ * of a shared origin, AO rays of many points: there the interleaved walk's
+ * hidden memory latency beats the bundles' shared descent; one origin in
+ * the whole chunk, a cone's samples of one point, stays with bundles). The
+ * drivers send such chunks straight to the interleaved walk (kd_batch.c). */
 int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                        size_t count);
 

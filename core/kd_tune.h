@@ -63,7 +63,11 @@
  * without trying bundles when its origins change at least every this many
  * rays on average (AO rays of one point share theirs: bundles). */
 #define KD_STREAM_MAX_RUN 2
-/* ... and on scenes of at least this many bytes whatever their origins do.
+/* ... and on scenes of at least this many bytes when a chunk holds more
+ * than one origin (a chunk with a single origin, a cone's samples of one
+ * point, stays with bundles: through the interleaved walk cone64 ran at
+ * 0.82 on the 1.09M scene and 0.73 on the distinct 1M one, bench/ab 2f3b672
+ * 9c08ffa and 01c9790 bd29679).
  * bench/ab, batches of AO rays (16 per point, 4096 per call), interleaved /
  * bundles: any hit 0.79 on haus (2 MiB), 0.98-1.05 on 2CylinderEngine
  * (6 MiB), 1.16 on engine3 (20 MiB), 1.42 on the 1.09M scene (59 MiB);
