@@ -98,7 +98,9 @@ typedef struct kdr_trav_stats {
                                 over rays; a bundle/frustum step counts once per
                                 active ray) */
     uint64_t tri_tests;      /* ray-triangle tests */
-    uint64_t fallbacks;      /* bundles or frusta that fell back to single rays */
+    uint64_t fallbacks;      /* frusta that fell back to single rays; bundle-sized
+                              * groups of a batch traced without bundles (the
+                              * interleaved walk of incoherent rays) */
 } kdr_trav_stats;
 
 /* ---- single rays --------------------------------------------------------- */
