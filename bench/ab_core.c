@@ -27,6 +27,15 @@
  *            light (bench_cone's, r = 0.03 diagonal), points and normals
  *            of ao's surface points (rays / 16 points)
  *   cone64   the same with bench_cone's large light (r = 0.25) at 64 spp
+ *   shadow   any hit, one ray per surface point (ao's points) toward a
+ *            random point of bench_cone's small light, tmax 1, per ray
+ *   brandom, bao, baoc, bshadow
+ *            random (closest), ao (any hit), ao with closest hit and shadow
+ *            rays through kdr_trace_batch(AUTO) in calls of 4096 rays
+ *            (KDR_CHUNK_RAYS, the daemon's chunk) with per-ray origins and
+ *            intervals, in the order the single sets trace them; Embree
+ *            traces them with rtcIntersect1 / rtcOccluded1 as in the single
+ *            sets
  *
  *   kdray_ab [--dir DIR] [--only NAME]... [--rays N] [--rounds R]
  *            [--set NAME]...
@@ -103,11 +112,19 @@ static double cpu_s(void) {
 
 enum {
     SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
-    SET_CONE16, SET_CONE64, NSETS
+    SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
+    SET_BSHADOW, NSETS
 };
 static const char *const set_names[NSETS] = {"camera", "random",  "ao",
                                              "ao64",   "b8ao",    "b8cam",
-                                             "frustum", "cone16", "cone64"};
+                                             "frustum", "cone16", "cone64",
+                                             "shadow", "brandom", "bao",
+                                             "baoc",   "bshadow"};
+/* Sets Embree traces too (per ray, rtcIntersect1 / rtcOccluded1). */
+static const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0,
+                                                1, 1, 1, 1, 1};
+/* Rays per kdr_trace_batch call of the b* sets (the daemon's chunk). */
+#define AB_BATCH 4096
 
 typedef struct scene_in {
     const float *tris;
@@ -212,6 +229,33 @@ static void ao_rays(const scene_in *s, size_t n, size_t per_point, kdr_ray *out)
     }
 }
 
+/* bench_cone's lights: small (r = 0.03 diagonal) or large (0.25). */
+static void light_of(const scene_in *s, int large, kdr_sphere_light *li) {
+    static const float dir[3] = {-0.35f, 0.85f, 0.40f};
+    const float dist = large ? 0.55f : 0.9f;
+    for (int k = 0; k < 3; k++)
+        li->center[k] = 0.5f * (s->lo[k] + s->hi[k]) + dist * s->diag * dir[k];
+    li->radius = (large ? 0.25f : 0.03f) * s->diag;
+}
+
+/* One shadow ray per surface point (ao_rays' points) toward a random point
+ * of the sphere light li: dir = target - point, t in [1e-4, 1]. */
+static void shadow_rays(const scene_in *s, size_t n, const kdr_sphere_light *li,
+                        kdr_ray *out) {
+    ao_rays(s, n, 1, out);
+    stress_rng r;
+    stress_rng_seed(&r, 11);
+    for (size_t i = 0; i < n; i++) {
+        float d[3];
+        stress_rng_dir(&r, d);
+        const float u = stress_rng_float(&r);
+        for (int k = 0; k < 3; k++)
+            out[i].dir[k] = li->center[k] + u * li->radius * d[k] - out[i].org[k];
+        out[i].tmin = 1e-4f;
+        out[i].tmax = 1.0f;
+    }
+}
+
 /* Points on random triangles (ao_rays' points) outside bench_cone's light,
  * each with a direction on its normal's side as the "normal" (the query
  * only uses it to offset the point toward the light), written to pts
@@ -219,11 +263,7 @@ static void ao_rays(const scene_in *s, size_t n, size_t per_point, kdr_ray *out)
 static void cone_query(const scene_in *s, size_t npts, int large, uint32_t spp,
                        kdr_ray *scratch, float *pts, kdr_sphere_light *li,
                        kdr_shadow_query *q) {
-    static const float dir[3] = {-0.35f, 0.85f, 0.40f};
-    const float dist = large ? 0.55f : 0.9f;
-    for (int k = 0; k < 3; k++)
-        li->center[k] = 0.5f * (s->lo[k] + s->hi[k]) + dist * s->diag * dir[k];
-    li->radius = (large ? 0.25f : 0.03f) * s->diag;
+    light_of(s, large, li);
     float *nrm = pts + 3 * npts;
     ao_rays(s, npts, 1, scratch);
     size_t m = 0;
@@ -257,6 +297,7 @@ typedef struct job {
     size_t n, group; /* batches: rays per kdr_trace_batch call (shared origin) */
     const kdr_camera *cam;
     float *bdir; /* batch directions, 3n */
+    float *borg, *btmin, *btmax; /* b* sets: origins (3n), tmin, tmax (n) */
     const kdr_shadow_query *sq; /* cone sets: n = points * samples */
 } job;
 
@@ -281,6 +322,15 @@ static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
         kdr_hits h = {o->t, o->prim, o->u, o->v, o->hit};
         c->frustum(s, j->cam, 8, 0, c->tiles(j->cam, 8), j->q, KDR_FRUSTUM_MULTI4,
                    &h, st);
+        return;
+    }
+    if (j->set >= SET_BRANDOM) {
+        for (size_t first = 0; first < j->n; first += AB_BATCH) {
+            const size_t g = j->n - first < AB_BATCH ? j->n - first : AB_BATCH;
+            kdr_ray_batch b = {j->n, j->borg, 3, j->bdir, j->btmin, 1, j->btmax, 1};
+            kdr_hits h = {o->t, o->prim, o->u, o->v, o->hit};
+            c->trace_batch(s, &b, first, g, j->q, KDR_TRAV_AUTO, &h, st);
+        }
         return;
     }
     if (j->set == SET_B8AO || j->set == SET_B8CAM) {
@@ -360,7 +410,7 @@ static void result_copy(const job *j, const result *from, result *to) {
  * copied to out[0] and out[1] for the comparison. */
 static void run_job(const job *j, kdr_scene *const kd[2], RTCScene sc, int rounds,
                     result out[3]) {
-    const int emb = j->set <= SET_AO64;
+    const int emb = set_embree[j->set];
     double best[3] = {INFINITY, INFINITY, INFINITY};
     double ratio_ba[64], ratio_ae[64], ratio_be[64];
     kdr_trav_stats st[2];
@@ -459,6 +509,8 @@ static int run_scene(const opts *o, const ladder_entry *e) {
     const size_t n = o->rays;
     kdr_ray *rays = malloc(n * sizeof *rays);
     float *bdir = malloc(3 * n * sizeof *bdir);
+    float *borg = malloc(3 * n * sizeof *borg);
+    float *btmin = malloc(n * sizeof *btmin), *btmax = malloc(n * sizeof *btmax);
     result out[3];
     for (int c = 0; c < 3; c++) {
         out[c].t = malloc(n * 4), out[c].prim = malloc(n * 4);
@@ -473,7 +525,8 @@ static int run_scene(const opts *o, const ladder_entry *e) {
     for (int set = 0; set < NSETS; set++) {
         if (!((o->sets >> set) & 1))
             continue;
-        job j = {set, KDR_CLOSEST, rays, n, n, &cam, bdir};
+        job j = {set, KDR_CLOSEST, rays, n, n, &cam, bdir, borg, btmin, btmax, NULL};
+        kdr_sphere_light li;
         switch (set) {
         case SET_CAMERA:
         case SET_FRUSTUM:
@@ -483,17 +536,26 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             j.n = camera_rays(&cam, 1, rays);
             break;
         case SET_RANDOM:
+        case SET_BRANDOM:
             random_rays(&si, n, rays);
             break;
         case SET_AO:
+        case SET_BAO:
             ao_rays(&si, n, 16, rays), j.q = KDR_ANY;
+            break;
+        case SET_BAOC:
+            ao_rays(&si, n, 16, rays);
+            break;
+        case SET_SHADOW:
+        case SET_BSHADOW:
+            light_of(&si, 0, &li);
+            shadow_rays(&si, n, &li, rays), j.q = KDR_ANY;
             break;
         default: /* ao64, b8ao */
             ao_rays(&si, n, 64, rays), j.q = KDR_ANY, j.group = 64;
             break;
         }
         kdr_shadow_query sq;
-        kdr_sphere_light li;
         if (set == SET_CONE16 || set == SET_CONE64) {
             const int large = set == SET_CONE64;
             const uint32_t spp = large ? 64 : 16;
@@ -501,8 +563,11 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             j.sq = &sq;
             j.n = sq.n * spp;
         } else {
-            for (size_t i = 0; i < j.n; i++)
+            for (size_t i = 0; i < j.n; i++) {
                 memcpy(bdir + 3 * i, rays[i].dir, 12);
+                memcpy(borg + 3 * i, rays[i].org, 12);
+                btmin[i] = rays[i].tmin, btmax[i] = rays[i].tmax;
+            }
         }
         run_job(&j, kd, oracle_rtc_scene(orc), o->rounds, out);
     }
@@ -515,6 +580,7 @@ static int run_scene(const opts *o, const ladder_entry *e) {
     oracle_free(orc);
     free(rays);
     free(bdir);
+    free(borg), free(btmin), free(btmax);
     free(tris);
     return 0;
 }
@@ -557,7 +623,7 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &o) != 0) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
-                        "frustum|cone16|cone64]...\n", argv[0]);
+                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow]...\n", argv[0]);
         return 2;
     }
     ladder_entry *v;

@@ -193,7 +193,12 @@ typedef enum bench_kd {
     BENCH_KD_BUNDLE8, /* kdr_trace_batch KDR_TRAV_BUNDLE8 (= AUTO with AVX2) */
     BENCH_KD_SORT8,   /* diagnostics: 8-wide, regrouped, no fallback */
     BENCH_KD_RAW8,    /* diagnostics: 8-wide, caller's order, no fallback */
+    BENCH_KD_BATCH,   /* kdr_trace_batch KDR_TRAV_AUTO in calls of
+                       * BENCH_BATCH_RAYS, every ray with its own origin
+                       * (stride 3), as a client's large request arrives */
 } bench_kd;
+
+#define BENCH_BATCH_RAYS 4096
 
 /* Measures the kd modes and every rival API for the workload's kind,
  * interleaved; prints a block, adds summary rows (with nodes per ray

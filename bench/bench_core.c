@@ -3,8 +3,11 @@
  * against Embree's BVH builds (HIGH quality, the one the rival traces, and
  * the default MEDIUM), memory per triangle, and kdray's single-ray walk
  * (kdr_intersect1 / kdr_occluded1) against every rival API on camera,
- * random and AO any-hit rays. At the end, one table of kd against the
- * strongest Embree API per workload, read back from the summary.
+ * random and AO any-hit rays, and the batch API (kdr_trace_batch AUTO in
+ * calls of BENCH_BATCH_RAYS rays with their own origins: bundles or the
+ * interleaved walk, as the daemon traces a request) beside it. At the end,
+ * one table of kd against the strongest Embree API per workload, read back
+ * from the summary.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -41,12 +44,12 @@ static int core_run(const bench_scene *s, const bench_opts *o) {
     }
     printf("\n== %s: %zu triangles; build CPU ms: kd %.1f, Embree HIGH %.1f\n", s->name,
            s->ntris, s->kd_build_ms, rival_build_ms(s->emb));
-    static const bench_kd single[] = {BENCH_KD_SINGLE};
+    static const bench_kd single[] = {BENCH_KD_SINGLE, BENCH_KD_BATCH};
     for (size_t k = 0; k < NWORK; k++) {
         bench_workload w;
         if (bench_workload_make(&w, s->kd, core_workloads[k], o->rays) != 0)
             return -1;
-        const int rc = bench_run_workload(s, &w, single, 1, o);
+        const int rc = bench_run_workload(s, &w, single, 2, o);
         bench_workload_free(&w);
         if (rc)
             return -1;
@@ -54,11 +57,12 @@ static int core_run(const bench_scene *s, const bench_opts *o) {
     return 0;
 }
 
-/* "0.27 rtcIntersect16_coherent": kd speed / the strongest Embree API's. */
-static void print_vs(const char *scene, const char *work) {
+/* "0.27 rtcIntersect16_coherent": kd speed (method kd_single or kd_batch)
+ * / the strongest Embree API's. */
+static void print_vs(const char *scene, const char *work, const char *method) {
     double best = 0.0;
     const char *api = bench_summary_rival(scene, work, &best);
-    const double kd = bench_summary_ms(scene, work, "kd_single");
+    const double kd = bench_summary_ms(scene, work, method);
     if (!api || kd <= 0) {
         printf(" | %28s", "-");
         return;
@@ -68,12 +72,14 @@ static void print_vs(const char *scene, const char *work) {
 
 static void core_finish(const bench_opts *o) {
     (void)o;
-    printf("\n== kd build and single rays against Embree's strongest API per workload "
-           "(x = kd speed / Embree speed)\n");
+    printf("\n== kd build, single rays and batches (kd_batch) against Embree's strongest "
+           "API per workload (x = kd speed / Embree speed)\n");
     printf("%-10s %9s | %9s %9s %9s %6s | %6s %6s", "scene", "tris", "kd ms", "HIGH ms",
            "MED ms", "kd/HI", "B/tri", "Emb");
     for (size_t k = 0; k < NWORK; k++)
         printf(" | %-28s", core_workloads[k]);
+    for (size_t k = 0; k < NWORK; k++)
+        printf(" | batch %-22s", core_workloads[k]);
     printf("\n");
     for (int i = 0; i < g_nscenes; i++) {
         const char *n = g_scenes[i].name;
@@ -84,7 +90,9 @@ static void core_finish(const bench_opts *o) {
                kd, hi, med, hi > 0 ? kd / hi : 0.0, g_scenes[i].kd_bpt,
                g_scenes[i].emb_bpt);
         for (size_t k = 0; k < NWORK; k++)
-            print_vs(n, core_workloads[k]);
+            print_vs(n, core_workloads[k], "kd_single");
+        for (size_t k = 0; k < NWORK; k++)
+            print_vs(n, core_workloads[k], "kd_batch");
         printf("\n");
     }
 }

@@ -188,7 +188,8 @@ void bench_workload_free(bench_workload *w) {
 /* ---- kdray's methods ----------------------------------------------------------- */
 
 static const char *const kd_names[] = {"kd_single", "kd_bundle4", "kd_bundle8",
-                                       "kd_sort8_nofallback", "kd_raw8_nofallback"};
+                                       "kd_sort8_nofallback", "kd_raw8_nofallback",
+                                       "kd_batch"};
 
 typedef struct kd_job {
     const kdr_scene *kd;
@@ -196,6 +197,7 @@ typedef struct kd_job {
     bench_kd mode;
     kdr_hits out;
     kdr_trav_stats *stats; /* NULL in timed passes, as the daemon calls */
+    float *org3;           /* BENCH_KD_BATCH: every ray's origin */
 } kd_job;
 
 static void kd_single(const kd_job *j) {
@@ -216,6 +218,21 @@ static void kd_run(void *ctx) {
     const bench_workload *w = j->w;
     if (j->mode == BENCH_KD_SINGLE) {
         kd_single(j);
+        return;
+    }
+    if (j->mode == BENCH_KD_BATCH) {
+        for (size_t first = 0; first < w->n; first += BENCH_BATCH_RAYS) {
+            const size_t cnt =
+                w->n - first < BENCH_BATCH_RAYS ? w->n - first : BENCH_BATCH_RAYS;
+            const kdr_ray_batch b = {cnt,       j->org3 + 3 * first, 3, w->dir + 3 * first,
+                                     &w->tmin, 0,                    &w->tmax, 0};
+            kdr_hits h = j->out;
+            if (w->query == KDR_ANY)
+                h.hit += first;
+            else
+                h.t += first, h.prim += first, h.u += first, h.v += first;
+            kdr_trace_batch(j->kd, &b, 0, cnt, w->query, KDR_TRAV_AUTO, &h, j->stats);
+        }
         return;
     }
     /* one batch per shared origin (all rays when each has its own) */
@@ -253,11 +270,19 @@ static int kd_job_init(kd_job *j, const bench_scene *s, const bench_workload *w,
     j->out.t = malloc(n * sizeof(float)), j->out.u = malloc(n * sizeof(float));
     j->out.v = malloc(n * sizeof(float)), j->out.prim = malloc(n * sizeof(int32_t));
     j->out.hit = malloc(n);
+    if (mode == BENCH_KD_BATCH) {
+        j->org3 = malloc(3 * n * sizeof(float));
+        if (!j->org3)
+            return -1;
+        for (size_t i = 0; i < n; i++)
+            memcpy(j->org3 + 3 * i, w->rays[i].org, 12);
+    }
     return j->out.t && j->out.u && j->out.v && j->out.prim && j->out.hit ? 0 : -1;
 }
 
 static void kd_job_free(kd_job *j) {
     free(j->out.t), free(j->out.u), free(j->out.v), free(j->out.prim), free(j->out.hit);
+    free(j->org3);
 }
 
 static size_t kd_job_hits(const kd_job *j) {
@@ -281,7 +306,7 @@ int bench_run_workload(const bench_scene *s, const bench_workload *w,
     int rc = 0;
     const size_t napi = rival_apis((rival_work)w->work, apis);
     for (size_t i = 0; i < nmodes && nk < 8 && rc == 0; i++) {
-        if (modes[i] >= BENCH_KD_BUNDLE8 && !kdr_cpu_has_avx2())
+        if (modes[i] >= BENCH_KD_BUNDLE8 && modes[i] <= BENCH_KD_RAW8 && !kdr_cpu_has_avx2())
             continue; /* 8-wide needs AVX2: AUTO is 4-wide on this CPU */
         rc = kd_job_init(&kj[nk], s, w, modes[i]);
         m[nm++] = (bench_method){kd_names[modes[i]], 0, NULL, kd_run, &kj[nk++], 0.0};
@@ -335,6 +360,18 @@ int bench_run_workload(const bench_scene *s, const bench_workload *w,
             printf(" %9.1f", npr);
         printf("%s\n", m[i].name == best ? "  <- best Embree" : "");
         bench_summary_add(s, w->name, m[i].name, w->n, m[i].best_ms, npr);
+        if (i < nk && kj[i].mode == BENCH_KD_BATCH && ref) {
+            /* the batch path must give kd_single's answers bit for bit */
+            size_t bad = 0;
+            for (size_t k = 0; k < w->n; k++)
+                bad += w->query == KDR_ANY
+                           ? kj[i].out.hit[k] != kj[0].out.hit[k]
+                           : memcmp(&kj[i].out.t[k], &kj[0].out.t[k], 4) ||
+                                 kj[i].out.prim[k] != kj[0].out.prim[k];
+            if (bad)
+                bench_fail("%s %s: kd_batch differs from kd_single on %zu rays", s->name,
+                           w->name, bad);
+        }
         const size_t diff = hits > ref ? hits - ref : ref - hits;
         if (ref && (double)diff > HIT_TOLERANCE * (double)w->n)
             bench_fail("%s %s: %s found %zu hits, kd_single %zu", s->name, w->name,

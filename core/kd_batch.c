@@ -2,14 +2,17 @@
  * kd_batch.c — the batch API (kdr_trace_batch): checks the arguments, picks
  * the bundle width (8 lanes with AVX2, else 4, or one ray at a time) and
  * owns the per-ray helpers the bundle drivers share: reading ray i of an
- * AoS batch with stride-0 sharing, and tracing one ray alone (rays a bundle
- * cannot take, and incoherent stretches).
+ * AoS batch with stride-0 sharing, tracing one ray alone (rays a bundle
+ * cannot take), ordering a chunk for bundles, and telling scattered chunks
+ * (incoherent rays with their own origins), which go to the interleaved
+ * walk of kd_stream.h instead.
  */
 #include <math.h>
 #include <stddef.h>
 #include <string.h>
 
 #include "kd_internal.h"
+#include "kd_stream.h"
 #include "kd_traverse.h"
 #include "kd_traverse_bundle.h"
 
@@ -17,8 +20,7 @@
  * __builtin_cpu_init here again would race between threads. */
 int kdr_cpu_has_avx2(void) { return __builtin_cpu_supports("avx2") ? 1 : 0; }
 
-/* Ray i with stride-0 fields shared; absent tmin/tmax mean 0 / +inf. */
-static void batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
+void kd_batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
     const float *o = b->org + b->org_stride * i;
     const float *d = b->dir + 3 * i;
     for (int k = 0; k < 3; k++) {
@@ -32,7 +34,7 @@ static void batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
 void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
                      kdr_query q, kdr_hits *out, kdr_trav_stats *stats) {
     kdr_ray r;
-    batch_read(b, i, &r);
+    kd_batch_read(b, i, &r);
     if (q == KDR_ANY) {
         out->hit[i] = (uint8_t)kdr_occluded1(s, &r, stats);
         return;
@@ -127,6 +129,21 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
     sort_pass(key, tmp, ids, count, first, KEY_PASS);
     sort_pass(key, ids, tmp, count, first, 2 * KEY_PASS);
     memcpy(ids, tmp, count * sizeof *ids);
+}
+
+int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                       size_t count) {
+    if (b->org_stride == 0 || count <= 8)
+        return 0;
+    size_t runs = 1;
+    for (size_t i = first + 1; i < first + count; i++)
+        runs += memcmp(b->org + 3 * i, b->org + 3 * (i - 1), 3 * sizeof(float)) != 0;
+    /* one origin for the whole chunk (a cone's samples of one point) is
+     * the shared-origin case whatever the stride says: bundles */
+    if (runs * KD_STREAM_MAX_RUN < count &&
+        (runs == 1 || s->stats.bytes < KD_STREAM_RUNS_MIN_BYTES))
+        return 0;
+    return order_spread(b, first, count) >= KB_SORT_SPREAD;
 }
 
 static int batch_args_ok(const kdr_ray_batch *b, size_t first, size_t count,

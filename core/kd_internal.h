@@ -90,6 +90,15 @@ __attribute__((noinline)) void kd_prefetch_tris(const kdr_scene *s,
                                                 const uint32_t *refs,
                                                 uint32_t count);
 
+/* Requests the reference list of leaf n (one or two lines). */
+static inline void kd_prefetch_refs(const kdr_scene *s, const kd_node *n) {
+    const uint32_t count = kd_count(n);
+    if (count == 0)
+        return;
+    __builtin_prefetch(s->refs + n->u.first);
+    __builtin_prefetch(s->refs + n->u.first + count - 1);
+}
+
 /* The post-build pass: rewrites the built tree into the traversal layout
  * above (core/kd_layout.c). KDR_ERANGE when the tree has KD_LAYOUT_MAX_NODES
  * nodes or more. */

@@ -48,6 +48,7 @@
 #define KD_TRAVERSE_BUNDLE_DECL
 
 #include "kd_internal.h"
+#include "kd_stream.h"
 #include "kd_traverse.h"
 
 /* Batch drivers: same contract as kdr_trace_batch (arguments checked by the
@@ -62,9 +63,25 @@ void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                       size_t count, kdr_query q, int flags, kdr_hits *out,
                       kdr_trav_stats *stats);
 
+/* Ray i of the batch, stride-0 fields shared; absent tmin/tmax mean 0 /
+ * +inf (kd_batch.c). */
+void kd_batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r);
+
 /* Traces ray i alone and writes its result (kd_batch.c). */
 void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
                      kdr_query q, kdr_hits *out, kdr_trav_stats *stats);
+
+/* 1 when rays [first, first+count) have their own origins (stride 3) and
+ * incoherent directions (mean spread per 8 rays over KB_SORT_SPREAD), and
+ * either their origins change at least every KD_STREAM_MAX_RUN rays on
+ * average (no bundle would hold its lanes) or the scene takes at least
+ * KD_STREAM_RUNS_MIN_BYTES and the chunk holds more than one origin (runs
+ * of a shared origin, AO rays of many points: there the interleaved walk's
+ * hidden memory latency beats the bundles' shared descent; one origin in
+ * the whole chunk, a cone's samples of one point, stays with bundles). The
+ * drivers send such chunks straight to the interleaved walk (kd_batch.c). */
+int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                       size_t count);
 
 /* Orders rays [first, first+count) (count <= KB_CHUNK) for bundling: when
  * consecutive rays are incoherent (mean direction spread per 8 rays over
@@ -74,15 +91,16 @@ void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
                     int sort, size_t *ids);
 
 /* Driver flags (the `flags` argument of kd_bundle*_trace). */
-#define KB_FALLBACK 1 /* incoherent stretches go ray by ray */
+#define KB_FALLBACK 1 /* incoherent stretches go through kd_stream_trace */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 
 /* Tuning: rays are incoherent when the average lane occupancy (active
  * lanes per node step / lanes that entered the tree) of a chunk's first
  * KB_PROBE or more bundles falls under KB_OCC_MIN; the rest of the chunk
- * and the next KB_FALLBACK_CHUNKS chunks of the batch are then traced ray
- * by ray, in the caller's order (no regrouping), after which the next chunk
- * probes again. */
+ * and the next KB_FALLBACK_CHUNKS chunks of the batch then go through the
+ * interleaved walk (kd_stream_trace), in the caller's order (no
+ * regrouping), after which the next chunk probes again. Chunks that
+ * kd_batch_scattered calls scattered go there without a probe. */
 #define KB_OCC_MIN 0.3
 #define KB_PROBE 4
 #define KB_FALLBACK_CHUNKS 4
@@ -511,12 +529,12 @@ KD_FN void KD_WN(kb_stats_add)(kdr_trav_stats *stats, const KD_WN(kb_bundle) *b,
     stats->tri_tests += b->tri_tests;
 }
 
-/* Traces rays ids[0..m) one by one: one fallback per bundle-sized group. */
+/* Traces rays ids[0..m) (ids NULL: [first, first + m)) through the
+ * interleaved walk: one fallback per bundle-sized group. */
 KD_FN void KD_WN(kb_alone)(const kdr_scene *s, const kdr_ray_batch *rb,
-                     const size_t *ids, int m, kdr_query q, kdr_hits *out,
-                     kdr_trav_stats *stats) {
-    for (int i = 0; i < m; i++)
-        kd_batch_single(s, rb, ids[i], q, out, stats);
+                           const size_t *ids, size_t first, size_t m, kdr_query q,
+                           kdr_hits *out, kdr_trav_stats *stats) {
+    kd_stream_trace(s, rb, ids, first, m, q, out, stats);
     if (stats)
         stats->fallbacks += (uint64_t)((m + KD_W - 1) / KD_W);
 }
@@ -545,7 +563,7 @@ KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
         used += (double)b.lane_steps;
         offered += (double)b.steps * kd_lane_count(b.lanes);
         if ((flags & KB_FALLBACK) && k >= KB_PROBE && used < KB_OCC_MIN * offered) {
-            KD_WN(kb_alone)(s, rb, ids + g + n, m - g - n, q, out, stats);
+            KD_WN(kb_alone)(s, rb, ids + g + n, 0, (size_t)(m - g - n), q, out, stats);
             return 1;
         }
     }
@@ -553,24 +571,38 @@ KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
 }
 
 /* The batch driver: chunks of KB_CHUNK rays, regrouped by direction, then
- * bundles of KD_W; incoherent stretches ray by ray (see KB_OCC_MIN). */
+ * bundles of KD_W; incoherent stretches through the interleaved walk (see
+ * KB_OCC_MIN and kd_batch_scattered). */
 KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t first,
-                   size_t count, kdr_query q, int flags, kdr_hits *out,
-                   kdr_trav_stats *stats) {
+                         size_t count, kdr_query q, int flags, kdr_hits *out,
+                         kdr_trav_stats *stats) {
     size_t ids[KB_CHUNK];
-    int skip = 0;
-    for (size_t base = first; base < first + count; base += KB_CHUNK) {
-        const size_t left = first + count - base;
-        const int m = left < KB_CHUNK ? (int)left : KB_CHUNK;
-        if (skip > 0) {
-            skip--;
-            kd_batch_order(rb, base, (size_t)m, 0, ids);
-            KD_WN(kb_alone)(s, rb, ids, m, q, out, stats);
+    const size_t end = first + count;
+    for (size_t base = first; base < end;) {
+        /* a stretch of scattered chunks, or the chunks after a failed
+         * probe, in one call: the walk's lanes stay full longer */
+        size_t alone = base;
+        if (flags & KB_FALLBACK)
+            while (alone < end &&
+                   kd_batch_scattered(s, rb, alone,
+                                      end - alone < KB_CHUNK ? end - alone : KB_CHUNK))
+                alone += end - alone < KB_CHUNK ? end - alone : KB_CHUNK;
+        if (alone > base) {
+            KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, out, stats);
+            base = alone;
             continue;
         }
+        const int m = end - base < KB_CHUNK ? (int)(end - base) : KB_CHUNK;
         kd_batch_order(rb, base, (size_t)m, (flags & KB_SORT) != 0, ids);
-        if (KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats))
-            skip = KB_FALLBACK_CHUNKS;
+        base += (size_t)m;
+        if (KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats)) {
+            const size_t skip = end - base < KB_FALLBACK_CHUNKS * KB_CHUNK
+                                    ? end - base
+                                    : KB_FALLBACK_CHUNKS * KB_CHUNK;
+            if (skip)
+                KD_WN(kb_alone)(s, rb, NULL, base, skip, q, out, stats);
+            base += skip;
+        }
     }
 }
 #endif /* KD_W */

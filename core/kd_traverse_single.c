@@ -16,24 +16,7 @@
  * leaves of clustered small triangles, so leaves of 3+ references are tested
  * 4 (SSE2) or 8 (AVX2) triangles at a time, bit-identical to kd_tri.h.
  */
-#include <math.h>
-
-#include "kd_internal.h"
-#include "kd_traverse.h"
-#include "kd_tri.h"
-#include "kd_tri_ntri.h"
-
-
-typedef struct kd_todo {
-    const kd_node *node;
-    float tn, tf;
-} kd_todo;
-
-typedef struct walk_out {
-    float t, u, v;
-    int32_t prim;
-    uint64_t nodes, tests;
-} walk_out;
+#include "kd_walk.h"
 
 /* Descends from n to a non-empty leaf, pushing far children; returns the
  * leaf, or NULL when the rest of this subtree is empty for the ray (a child
@@ -83,169 +66,12 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
     return n;
 }
 
-/* Keeps hit (t, prim) when it beats the best by the tie rule. */
-static inline void keep_hit(walk_out *o, float t, int32_t prim, float u,
-                            float v) {
-    if (kd_hit_better(t, prim, o->t, o->prim)) {
-        o->t = t;
-        o->u = u;
-        o->v = v;
-        o->prim = prim;
-    }
-}
-
-/* Tests four references at once (the last group repeats its final
- * reference); returns 1 at a hit when any != 0. All four use the best t at
- * the start of the group as tmax: a hit the scalar loop would reject with a
- * tighter tmax loses the tie rule anyway, so the best hit is the same. */
-static inline int test_group(const kdr_scene *s, const uint32_t *ref,
-                             uint32_t left, const kd_ntri_pre4 *pre4,
-                             float tmin, const int any, walk_out *o) {
-    const float *rows[4];
-    int32_t prims[4];
-    for (uint32_t j = 0; j < 4; j++) {
-        prims[j] = (int32_t)ref[j < left ? j : left - 1];
-        rows[j] = s->tris + 9 * (size_t)prims[j];
-    }
-    f4 t, V, W, det;
-    const int hits = kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(o->t),
-                                       &t, &V, &W, &det);
-    if (!hits)
-        return 0;
-    if (any)
-        return 1;
-    _Alignas(16) float tv[4], vv[4], wv[4], dv[4];
-    f4_store(tv, t);
-    f4_store(vv, V);
-    f4_store(wv, W);
-    f4_store(dv, det);
-    for (int j = 0; j < 4; j++)
-        if ((hits >> j) & 1 && kd_hit_better(tv[j], prims[j], o->t, o->prim))
-            keep_hit(o, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
-    return 0;
-}
-
-/* A leaf of at least 8 references, eight at a time; the last group is the
- * last eight references (re-testing a reference cannot change the best hit:
- * an equal (t, prim) is not better). Returns 1 at a hit when any != 0. Not
- * inlined: the caller is not compiled for AVX2. */
-KD_AVX2 __attribute__((noinline)) static int
-test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
-           const kd_ray_pre *pre, float tmin, const int any, walk_out *o) {
-    kd_ntri_pre8 pre8;
-    kd_ntri_pre_init8(pre, &pre8);
-    const f8 tmin8 = f8_set1(tmin);
-    for (uint32_t i = 0; i < count; i += 8) {
-        const uint32_t base = i + 8 <= count ? i : count - 8;
-        const float *rows[8];
-        for (int j = 0; j < 8; j++)
-            rows[j] = s->tris + 9 * (size_t)ref[base + j];
-        f8 t, V, W, det;
-        const int hits = kd_ntri_test8(&pre8, rows, tmin8, f8_set1(o->t), &t,
-                                           &V, &W, &det);
-        if (!hits)
-            continue;
-        if (any)
-            return 1;
-        _Alignas(32) float tv[8], vv[8], wv[8], dv[8];
-        f8_store(tv, t);
-        f8_store(vv, V);
-        f8_store(wv, W);
-        f8_store(dv, det);
-        for (int j = 0; j < 8; j++) {
-            const int32_t prim = (int32_t)ref[base + j];
-            if ((hits >> j) & 1 && kd_hit_better(tv[j], prim, o->t, o->prim))
-                keep_hit(o, tv[j], prim, vv[j] / dv[j], wv[j] / dv[j]);
-        }
-    }
-    return 0;
-}
-
-/* Tests every triangle of leaf n over [tmin, best t] and keeps the best by
- * the tie rule; returns 1 at the first hit when any != 0. Leaves of at least
- * KD_LEAF_SIMD_MIN references go four at a time. */
-static inline int test_leaf(const kdr_scene *s, const kd_node *n,
-                            const kd_ray_pre *pre, const kd_ntri_pre4 *pre4,
-                            float tmin, const int any, const int avx2,
-                            walk_out *o) {
-    const uint32_t *ref = s->refs + n->u.first;
-    const uint32_t count = kd_count(n);
-    o->tests += count;
-    if (avx2 && count >= KD_LEAF_AVX2_MIN)
-        return test_leaf8(s, ref, count, pre, tmin, any, o);
-    if (count >= KD_LEAF_SIMD_MIN) {
-        for (uint32_t i = 0; i < count; i += 4)
-            if (test_group(s, ref + i, count - i, pre4, tmin, any, o))
-                return 1;
-        return 0;
-    }
-    for (uint32_t i = 0; i < count; i++) {
-        float t, u, v;
-        const int32_t prim = (int32_t)ref[i];
-        if (!kd_tri_intersect(pre, s->tris + 9 * (size_t)prim, tmin, o->t, &t,
-                              &u, &v))
-            continue;
-        if (any)
-            return 1;
-        keep_hit(o, t, prim, u, v);
-    }
-    return 0;
-}
-
-/* The ray's set-up, three axes per SSE operation: validity (kd_ray_valid),
- * 1 / dir, the signed slack (kd_ray_slack, kd_signed_slack) and the root
- * clip (kd_clip_root_slack), every lane with the scalar operations, so the
- * interval is the scalar one bit for bit (max and min of the same non-NaN
- * values in another order). Lane 3 carries neutral values. Returns 0 when
- * the ray cannot be traced or misses the root box. */
-static inline int setup(const kdr_scene *s, const kdr_ray *r, float inv[3],
-                        float ss[3], unsigned neg[3], float *tn, float *tf) {
-    /* org[0..2] and dir[0..2], each loaded with the next float of kdr_ray */
-    const f4 org = f4_loadu(r->org), dir = f4_loadu(r->dir);
-    const f4 zero = f4_set1(0.0f);
-    const int finite = f4_bits(f4_eq(f4_sub(org, org), zero)) &
-                       f4_bits(f4_eq(f4_sub(dir, dir), zero)) & 7;
-    const int flat = f4_bits(f4_eq(dir, zero)) | 8;
-    if (finite != 7 || flat == 15 || !(r->tmin <= r->tmax))
-        return 0;
-    const f4 iv = f4_div(f4_set1(1.0f), f4_lane3(dir, 1.0f));
-    const f4 sgn = f4_set1(-0.0f);
-    const float slack =
-        f4_hmax(f4_lane3(f4_max(f4_andnot(sgn, org), f4_set1(s->root_mag)), 0.0f)) *
-        KD_SLACK_REL;
-    const f4 sl = f4_set1(slack);
-    _Alignas(16) float ivv[4], ssv[4];
-    f4_store(ivv, iv);
-    f4_store(ssv, f4_xor(sl, f4_and(iv, sgn)));
-    const int sign = f4_bits(dir);
-    for (int k = 0; k < 3; k++) {
-        inv[k] = ivv[k];
-        ss[k] = ssv[k];
-        neg[k] = (unsigned)(sign >> k) & 1u;
-    }
-    /* the root clip; a flat axis (direction 0) only rejects an origin
-     * outside the grown slab (kdr_bounds: max follows min in memory) */
-    const f4 lo = f4_sub(f4_loadu(s->root.min), sl);
-    const f4 hi = f4_add(f4_loadu(s->root.max), sl);
-    const f4 fl = f4_bitmask(flat);
-    if (f4_bits(f4_and(fl, f4_or(f4_lt(org, lo), f4_gt(org, hi)))) & 7)
-        return 0;
-    const f4 t0 = f4_mul(f4_sub(lo, org), iv), t1 = f4_mul(f4_sub(hi, org), iv);
-    /* entry min(t1, t0) and exit max(t0, t1): the scalar swap's result,
-     * NaN included; flat axes and lane 3 constrain nothing */
-    const f4 ent = f4_sel(fl, f4_set1(-INFINITY), f4_min(t1, t0));
-    const f4 ext = f4_sel(fl, f4_set1(INFINITY), f4_max(t0, t1));
-    *tn = f4_hmax(f4_max(ent, f4_set1(r->tmin)));
-    *tf = f4_hmin(f4_min(ext, f4_set1(r->tmax)));
-    return *tn <= *tf;
-}
-
 /* The walk shared by both queries; any != 0 stops at the first hit. */
 static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
-                       walk_out *o) {
+                       kd_walk_out *o) {
     float inv[3], ss[3], tn, tf;
     unsigned neg[3];
-    if (!s || !s->nodes || !setup(s, r, inv, ss, neg, &tn, &tf))
+    if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
         return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
@@ -258,7 +84,7 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     const kd_node *n = nodes;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
-        if (n && test_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
+        if (n && kd_walk_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
             return 1;
         const float bound = kd_term_bound(o->t);
         do {
@@ -272,7 +98,7 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     }
 }
 
-static void add_stats(kdr_trav_stats *st, const walk_out *o) {
+static void add_stats(kdr_trav_stats *st, const kd_walk_out *o) {
     if (!st)
         return;
     st->rays++;
@@ -282,7 +108,7 @@ static void add_stats(kdr_trav_stats *st, const walk_out *o) {
 
 int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
                    kdr_trav_stats *stats) {
-    walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
+    kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
     const int found = ray ? walk(scene, ray, 0, &o) : 0;
     add_stats(stats, &o);
     if (hit) {
@@ -296,7 +122,7 @@ int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
 
 int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
                   kdr_trav_stats *stats) {
-    walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
+    kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
     const int found = ray ? walk(scene, ray, 1, &o) : 0;
     add_stats(stats, &o);
     return found;

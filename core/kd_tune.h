@@ -67,6 +67,33 @@
 #define KD_LEAF_SIMD_MIN 3
 #define KD_LEAF_AVX2_MIN 8
 
+/* ---- interleaved walks of a batch's incoherent rays (kd_traverse_stream.c) */
+
+/* Rays in flight per thread in the scalar form (the AVX-512 and AVX2
+ * forms have 16 and 8, one per lane). */
+#define KD_STREAM_RAYS 8
+/* Scenes whose nodes, references and triangles take at least this many
+ * bytes (kdr_tree_stats.bytes) are walked with every next node requested
+ * as soon as it is known and a leaf's triangles requested one turn before
+ * their test. */
+#define KD_STREAM_STAGE_MIN_BYTES ((size_t)16 << 20)
+/* kdr_trace_batch sends a chunk of incoherent rays to the interleaved walk
+ * without trying bundles when its origins change at least every this many
+ * rays on average (AO rays of one point share theirs: bundles). */
+#define KD_STREAM_MAX_RUN 2
+/* ... and on scenes of at least this many bytes when a chunk holds more
+ * than one origin (a chunk with a single origin, a cone's samples of one
+ * point, stays with bundles: through the interleaved walk cone64 ran at
+ * 0.82 on the 1.09M scene and 0.73 on the distinct 1M one, bench/ab 2f3b672
+ * 9c08ffa and 01c9790 bd29679).
+ * bench/ab, batches of AO rays (16 per point, 4096 per call), interleaved /
+ * bundles: any hit 0.79 on haus (2 MiB), 0.98-1.05 on 2CylinderEngine
+ * (6 MiB), 1.16 on engine3 (20 MiB), 1.42 on the 1.09M scene (59 MiB);
+ * closest hit 0.78, 0.97, 1.15, 1.33. Batches with one shared origin
+ * (stride 0) stay with bundles on every scene: the interleaved walk lost
+ * there (64-ray AO batches 0.64-0.90, cone samples 0.77-1.00). */
+#define KD_STREAM_RUNS_MIN_BYTES ((size_t)8 << 20)
+
 /* ---- leaves of every walk (kd_layout.c) ------------------------------------ */
 
 /* Scenes whose triangles, references and nodes take at least this many

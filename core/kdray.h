@@ -112,7 +112,9 @@ typedef struct kdr_trav_stats {
                                 over rays; a bundle/frustum step counts once per
                                 active ray) */
     uint64_t tri_tests;      /* ray-triangle tests */
-    uint64_t fallbacks;      /* bundles or frusta that fell back to single rays */
+    uint64_t fallbacks;      /* frusta that fell back to single rays; bundle-sized
+                              * groups of a batch traced without bundles (the
+                              * interleaved walk of incoherent rays) */
 } kdr_trav_stats;
 
 /* ---- single rays --------------------------------------------------------- */
@@ -167,6 +169,12 @@ typedef enum kdr_trav_mode {
     KDR_TRAV_BUNDLE4 = 2,
     KDR_TRAV_BUNDLE8 = 3, /* falls back to 4 without AVX2 */
 } kdr_trav_mode;
+/* In the bundle modes (and AUTO) incoherent rays do not go into bundles:
+ * chunks of rays with their own origins and scattered directions, and
+ * chunks whose first bundles hold few active lanes, are walked one ray per
+ * stack but many rays interleaved in one thread (16 in AVX-512 lanes, else
+ * KD_STREAM_RAYS in scalar code; core/kd_stream.h). KDR_TRAV_SINGLE is the
+ * plain single-ray walk. */
 
 /* Traces rays [first, first+count) of the batch. Results are identical to
  * kdr_intersect1 / kdr_occluded1 ray by ray, whatever the mode. */

@@ -11,6 +11,12 @@
  * operand is NaN the SECOND operand is returned, so f4_min(d, t_far) with a
  * NaN d yields t_far.
  *
+ * The interleaved walk of incoherent batches (kd_traverse_stream_lanes.h)
+ * holds one ray per lane at 8 (AVX2: f8_, i8_) or 16 lanes (AVX-512 F/DQ/
+ * BW/VL: f16_, i16_, KD_AVX512); its helpers take lane masks as plain bits.
+ * Call 16-lane helpers only from KD_AVX512 functions after
+ * kd_cpu_has_avx512() said yes.
+ *
  * Only plain IEEE operations here (no FMA, no approximate reciprocals), so
  * that SIMD code can reproduce scalar results bit for bit. Every intrinsic
  * of core/ lives in this file; code written once for both widths uses the
@@ -23,6 +29,7 @@
 #include <stdint.h>
 
 #define KD_AVX2 __attribute__((target("avx2")))
+#define KD_AVX512 __attribute__((target("avx2,avx512f,avx512dq,avx512bw,avx512vl")))
 
 /* ---- 4 lanes (SSE2) ------------------------------------------------------ */
 
@@ -206,6 +213,149 @@ KD_AVX2 static inline void f8_rows9(const float *const r[8], f8 c[9]) {
     }
     c[8] = _mm256_setr_ps(r[0][8], r[1][8], r[2][8], r[3][8], r[4][8], r[5][8],
                           r[6][8], r[7][8]);
+}
+
+/* ---- one ray per lane: 8 (AVX2) and 16 (AVX-512) ------------------------
+ * The interleaved walk (kd_traverse_stream_lanes.h) keeps a different ray
+ * at a different node in every lane: node words are gathered per lane,
+ * stack entries written per lane, and masks are plain lane bits (unsigned,
+ * bit j = lane j), which AVX-512 compares give directly and AVX2 compares
+ * give through movemask. Same names at both widths (f8_/i8_, f16_/i16_),
+ * so the template is written once. */
+
+typedef __m256i i8;
+
+/* lanes of bit mask m: a, others b */
+KD_AVX2 static inline f8 f8_selm(unsigned m, f8 a, f8 b) {
+    return _mm256_blendv_ps(b, a, f8_bitmask((int)m));
+}
+/* lanes of m where !(a < b) / !(a > b), so a NaN lane is set */
+KD_AVX2 static inline unsigned f8_nlt(unsigned m, f8 a, f8 b) {
+    return m & (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_NLT_UQ));
+}
+KD_AVX2 static inline unsigned f8_ngt(unsigned m, f8 a, f8 b) {
+    return m & (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_NGT_UQ));
+}
+/* lanes whose sign bit is set (-0.0 and -inf included) */
+KD_AVX2 static inline unsigned f8_signs(f8 a) { return (unsigned)_mm256_movemask_ps(a); }
+/* the lanes of m set to x */
+KD_AVX2 static inline f8 f8_put(f8 v, unsigned m, float x) {
+    return f8_selm(m, _mm256_set1_ps(x), v);
+}
+/* the float at byte offset 8 * idx of base in the lanes of m (others: src) */
+KD_AVX2 static inline f8 f8_gather8(f8 src, unsigned m, i8 idx, const void *base) {
+    return _mm256_mask_i32gather_ps(src, (const float *)base, idx, f8_bitmask((int)m), 8);
+}
+/* base[idx] = a in the lanes of m (AVX2 has no scatter: lane by lane) */
+KD_AVX2 static inline void f8_scatter(float *base, unsigned m, i8 idx, f8 a) {
+    _Alignas(32) int32_t iv[8];
+    _Alignas(32) float av[8];
+    _mm256_store_si256((__m256i *)iv, idx);
+    _mm256_store_ps(av, a);
+    for (; m; m &= m - 1)
+        base[iv[__builtin_ctz(m)]] = av[__builtin_ctz(m)];
+}
+
+KD_AVX2 static inline i8 i8_set1(int32_t x) { return _mm256_set1_epi32(x); }
+KD_AVX2 static inline i8 i8_iota(void) { return _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7); }
+KD_AVX2 static inline i8 i8_add(i8 a, i8 b) { return _mm256_add_epi32(a, b); }
+/* a + b in the lanes of m, a elsewhere */
+KD_AVX2 static inline i8 i8_add_in(unsigned m, i8 a, i8 b) {
+    return _mm256_add_epi32(a, _mm256_and_si256(b, _mm256_castps_si256(f8_bitmask((int)m))));
+}
+KD_AVX2 static inline i8 i8_and(i8 a, i8 b) { return _mm256_and_si256(a, b); }
+KD_AVX2 static inline i8 i8_srl(i8 a, int n) { return _mm256_srli_epi32(a, n); }
+KD_AVX2 static inline i8 i8_sll(i8 a, int n) { return _mm256_slli_epi32(a, n); }
+KD_AVX2 static inline i8 i8_selm(unsigned m, i8 a, i8 b) {
+    return _mm256_castps_si256(
+        f8_selm(m, _mm256_castsi256_ps(a), _mm256_castsi256_ps(b)));
+}
+/* lanes of m where a == b / where a & b != 0 */
+KD_AVX2 static inline unsigned i8_eq(unsigned m, i8 a, i8 b) {
+    return m & (unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(a, b)));
+}
+KD_AVX2 static inline unsigned i8_test(i8 a, i8 b) {
+    const __m256i z = _mm256_cmpeq_epi32(_mm256_and_si256(a, b), _mm256_setzero_si256());
+    return ~(unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(z)) & 0xFFu;
+}
+KD_AVX2 static inline i8 i8_put(i8 v, unsigned m, int32_t x) {
+    return i8_selm(m, _mm256_set1_epi32(x), v);
+}
+KD_AVX2 static inline void i8_store(int32_t *p, i8 a) { _mm256_store_si256((__m256i *)p, a); }
+KD_AVX2 static inline i8 i8_gather8(i8 src, unsigned m, i8 idx, const void *base) {
+    return _mm256_mask_i32gather_epi32(src, (const int *)base, idx,
+                                       _mm256_castps_si256(f8_bitmask((int)m)), 8);
+}
+KD_AVX2 static inline void i8_scatter(int32_t *base, unsigned m, i8 idx, i8 a) {
+    _Alignas(32) int32_t iv[8], av[8];
+    _mm256_store_si256((__m256i *)iv, idx);
+    _mm256_store_si256((__m256i *)av, a);
+    for (; m; m &= m - 1)
+        base[iv[__builtin_ctz(m)]] = av[__builtin_ctz(m)];
+}
+
+typedef __m512 f16;
+typedef __m512i i16;
+
+KD_AVX512 static inline f16 f16_set1(float x) { return _mm512_set1_ps(x); }
+KD_AVX512 static inline f16 f16_add(f16 a, f16 b) { return _mm512_add_ps(a, b); }
+KD_AVX512 static inline f16 f16_sub(f16 a, f16 b) { return _mm512_sub_ps(a, b); }
+KD_AVX512 static inline f16 f16_mul(f16 a, f16 b) { return _mm512_mul_ps(a, b); }
+/* a > b ? a : b and a < b ? a : b, as the scalar ternaries (NaN: b) */
+KD_AVX512 static inline f16 f16_max(f16 a, f16 b) { return _mm512_max_ps(a, b); }
+KD_AVX512 static inline f16 f16_min(f16 a, f16 b) { return _mm512_min_ps(a, b); }
+KD_AVX512 static inline f16 f16_selm(unsigned m, f16 a, f16 b) {
+    return _mm512_mask_blend_ps((__mmask16)m, b, a);
+}
+KD_AVX512 static inline unsigned f16_nlt(unsigned m, f16 a, f16 b) {
+    return _mm512_mask_cmp_ps_mask((__mmask16)m, a, b, _CMP_NLT_UQ);
+}
+KD_AVX512 static inline unsigned f16_ngt(unsigned m, f16 a, f16 b) {
+    return _mm512_mask_cmp_ps_mask((__mmask16)m, a, b, _CMP_NGT_UQ);
+}
+KD_AVX512 static inline unsigned f16_signs(f16 a) {
+    return _mm512_movepi32_mask(_mm512_castps_si512(a));
+}
+KD_AVX512 static inline f16 f16_put(f16 v, unsigned m, float x) {
+    return _mm512_mask_broadcastss_ps(v, (__mmask16)m, _mm_set_ss(x));
+}
+KD_AVX512 static inline void f16_store(float *p, f16 a) { _mm512_store_ps(p, a); }
+KD_AVX512 static inline f16 f16_gather8(f16 src, unsigned m, i16 idx, const void *base) {
+    return _mm512_mask_i32gather_ps(src, (__mmask16)m, idx, base, 8);
+}
+KD_AVX512 static inline void f16_scatter(float *base, unsigned m, i16 idx, f16 a) {
+    _mm512_mask_i32scatter_ps(base, (__mmask16)m, idx, a, 4);
+}
+
+KD_AVX512 static inline i16 i16_set1(int32_t x) { return _mm512_set1_epi32(x); }
+KD_AVX512 static inline i16 i16_iota(void) {
+    return _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+KD_AVX512 static inline i16 i16_add(i16 a, i16 b) { return _mm512_add_epi32(a, b); }
+KD_AVX512 static inline i16 i16_add_in(unsigned m, i16 a, i16 b) {
+    return _mm512_mask_add_epi32(a, (__mmask16)m, a, b);
+}
+KD_AVX512 static inline i16 i16_and(i16 a, i16 b) { return _mm512_and_si512(a, b); }
+KD_AVX512 static inline i16 i16_srl(i16 a, unsigned n) { return _mm512_srli_epi32(a, n); }
+KD_AVX512 static inline i16 i16_sll(i16 a, unsigned n) { return _mm512_slli_epi32(a, n); }
+KD_AVX512 static inline i16 i16_selm(unsigned m, i16 a, i16 b) {
+    return _mm512_mask_blend_epi32((__mmask16)m, b, a);
+}
+KD_AVX512 static inline unsigned i16_eq(unsigned m, i16 a, i16 b) {
+    return _mm512_mask_cmpeq_epi32_mask((__mmask16)m, a, b);
+}
+KD_AVX512 static inline unsigned i16_test(i16 a, i16 b) {
+    return _mm512_test_epi32_mask(a, b);
+}
+KD_AVX512 static inline i16 i16_put(i16 v, unsigned m, int32_t x) {
+    return _mm512_mask_set1_epi32(v, (__mmask16)m, x);
+}
+KD_AVX512 static inline void i16_store(int32_t *p, i16 a) { _mm512_store_si512(p, a); }
+KD_AVX512 static inline i16 i16_gather8(i16 src, unsigned m, i16 idx, const void *base) {
+    return _mm512_mask_i32gather_epi32(src, (__mmask16)m, idx, base, 8);
+}
+KD_AVX512 static inline void i16_scatter(int32_t *base, unsigned m, i16 idx, i16 a) {
+    _mm512_mask_i32scatter_epi32(base, (__mmask16)m, idx, a, 4);
 }
 
 #endif /* KD_SIMD_H */

@@ -13,6 +13,10 @@
  * tmax, negative tmin, NaN/inf inputs), rays aimed at vertices and edge
  * midpoints, each cut into calls of 1, 3, 5, 7, 9, 13 and 64 rays. The 4- and 8-wide drivers are also called directly with
  * the incoherence fallback off, so the SIMD path sees every adversarial ray.
+ * So does the interleaved walk of incoherent rays (kd_stream.h): its scalar
+ * and AVX-512 forms are called directly on every set, each also with its
+ * leaves staged (the large-scene path), and through its dispatch with the
+ * rays in reverse order (the id list the bundle fallback passes).
  */
 #include <math.h>
 #include <stdio.h>
@@ -20,6 +24,8 @@
 #include <string.h>
 
 #include "kd_internal.h"
+#include "kd_stream.h"
+#include "kd_traverse.h"
 #include "kd_traverse_bundle.h"
 #include "kdray.h"
 #include "ladder.h"
@@ -265,6 +271,49 @@ static rayset rays_on_splits(const kdr_scene *s, const kdr_bounds *b,
     return r;
 }
 
+/* The walk's positional slack for an origin (kd_walk_setup's). */
+static float walk_slack(const kdr_scene *s, const float o[3]) {
+    float m = s->root_mag;
+    for (int k = 0; k < 3; k++)
+        m = fabsf(o[k]) > m ? fabsf(o[k]) : m;
+    return m * KD_SLACK_REL;
+}
+
+/* Rays lying in a plane parallel to a split plane at exactly the slack
+ * from it (direction component +-0 on the split axis, origin where
+ * split - org -/+ slack is exactly 0): the crossing 0 * inf is a NaN, so
+ * this is where a walk's "NaN visits both children" rule shows. For the
+ * slack to be a round number the origin sits outside the box on another
+ * axis, at a power of two P above the scene's magnitude (slack P * 2^-16),
+ * and aims back into the box. */
+static rayset rays_slack_planes(const kdr_scene *s, const kdr_bounds *b) {
+    rayset r = rays_alloc("slack-planes", 0);
+    float p2 = 1.0f;
+    while (p2 <= s->root_mag)
+        p2 *= 2.0f;
+    for (size_t i = 0; i < r.n; i++) {
+        float *o = r.org + 3 * i, *d = r.dir + 3 * i;
+        rnd_point(b, 0.0f, o);
+        rnd_dir(d);
+        const kd_node *n = NULL;
+        for (int tries = 0; tries < 64 && s->nnodes > 1 && !n; tries++) {
+            n = &s->nodes[rnd_u32() % s->nnodes];
+            n = kd_is_leaf(n) ? NULL : n;
+        }
+        if (!n)
+            continue;
+        const int k = kd_axis(n), j = (k + 1 + (int)(rnd_u32() & 1)) % 3;
+        const float sgn = (rnd_u32() & 1) ? 1.0f : -1.0f;
+        o[j] = sgn * p2;
+        d[j] = -sgn * fabsf(d[j]) - 0.1f * sgn;
+        d[k] = (rnd_u32() & 1) ? -0.0f : 0.0f;
+        const float sl = walk_slack(s, o);
+        /* exact: sl is a power of two at least 2^7 ulps of the split */
+        o[k] = (rnd_u32() & 1) ? n->u.split + sl : n->u.split - sl;
+    }
+    return r;
+}
+
 /* Rays aimed exactly at vertices and edge midpoints (edge functions of 0
  * and the double-precision fallback), from one shared point or from
  * distinct points. */
@@ -362,19 +411,55 @@ static int differ(const results *a, const results *b, size_t i, kdr_query q) {
 }
 
 /* The traversal under test: 0..3 = the public modes, 4/5 = the 4/8-wide
- * drivers without the incoherence fallback. */
-static const char *const way_names[6] = {"auto", "single", "bundle4",
-                                         "bundle8", "raw4", "raw8"};
+ * drivers without the incoherence fallback, 6..9 = the interleaved walk's
+ * scalar and AVX-512 forms, plain and with staged leaves, 10 = its
+ * dispatch with an id list (the rays in reverse order), 11/12 = its AVX2
+ * 8-lane form, plain and staged. */
+#define NWAYS 13
+static const char *const way_names[NWAYS] = {
+    "auto",   "single",        "bundle4",  "bundle8",          "raw4",      "raw8",
+    "stream", "stream-staged", "stream16", "stream16-staged", "stream-ids",
+    "stream8", "stream8-staged"};
+
+/* 0 when the CPU cannot run that way (8 lanes without AVX2, 16 without
+ * AVX-512). */
+static int way_runs(int way) {
+    if (way == 3 || way == 5 || way == 11 || way == 12)
+        return kdr_cpu_has_avx2(); /* bundle8 would run 4-wide: raw8 must not run */
+    if (way == 8 || way == 9)
+        return kd_cpu_has_avx512();
+    return 1;
+}
 
 static void run_way(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                     size_t count, kdr_query q, int way, results *out) {
     kdr_hits h = {out->t, out->prim, out->u, out->v, out->hit};
-    if (way == 4)
+    if (way == 4) {
         kd_bundle4_trace(s, b, first, count, q, 0, &h, NULL);
-    else if (way == 5)
+    } else if (way == 5) {
         kd_bundle8_trace(s, b, first, count, q, 0, &h, NULL);
-    else if (kdr_trace_batch(s, b, first, count, q, (kdr_trav_mode)way, &h, NULL))
+    } else if (way == 6 || way == 7) {
+        if (s->nodes)
+            kd_stream_scalar_trace(s, b, NULL, first, count, q,
+                                   way == 7 ? KD_STREAM_STAGE : 0, &h, NULL);
+    } else if (way == 8 || way == 9) {
+        if (s->nodes)
+            kd_stream_trace16(s, b, NULL, first, count, q,
+                              way == 9 ? KD_STREAM_STAGE : 0, &h, NULL);
+    } else if (way == 11 || way == 12) {
+        if (s->nodes)
+            kd_stream_trace8(s, b, NULL, first, count, q,
+                             way == 12 ? KD_STREAM_STAGE : 0, &h, NULL);
+    } else if (way == 10) {
+        size_t *ids = malloc(count * sizeof *ids);
+        for (size_t i = 0; i < count; i++)
+            ids[i] = first + count - 1 - i;
+        if (s->nodes)
+            kd_stream_trace(s, b, ids, 0, count, q, &h, NULL);
+        free(ids);
+    } else if (kdr_trace_batch(s, b, first, count, q, (kdr_trav_mode)way, &h, NULL)) {
         g_failures++;
+    }
 }
 
 static void check_cut(const char *scene, const rayset *rs, const kdr_scene *s,
@@ -436,11 +521,9 @@ static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
         hits += ref.prim[i] >= 0;
     printf("%-8s %-13s %zu rays, %zu hits\n", scene, rs->name, b.n, hits);
     for (int q = KDR_CLOSEST; q <= KDR_ANY; q++)
-        for (int way = 0; way < 6; way++) {
-            if ((way == 3 || way == 5) && !kdr_cpu_has_avx2())
-                continue; /* bundle8 would run 4-wide: raw8 must not run */
-            check_way(scene, rs, s, &b, &ref, (kdr_query)q, way);
-        }
+        for (int way = 0; way < NWAYS; way++)
+            if (way_runs(way))
+                check_way(scene, rs, s, &b, &ref, (kdr_query)q, way);
     res_free(&ref);
 }
 
@@ -457,7 +540,8 @@ static void check_scene(const scene_src *src, int integer) {
                      rays_distinct(&bb),       rays_nearby(&bb),
                      rays_zeros(&bb, integer), rays_on_splits(s, &bb, 0),
                      rays_on_splits(s, &bb, 1), rays_intervals(&bb),
-                     rays_aimed(src, &bb, 0),  rays_aimed(src, &bb, 1)};
+                     rays_aimed(src, &bb, 0),  rays_aimed(src, &bb, 1),
+                     rays_slack_planes(s, &bb)};
     for (size_t k = 0; k < sizeof sets / sizeof sets[0]; k++) {
         check_set(src->name, s, &sets[k]);
         rays_free(&sets[k]);
@@ -481,8 +565,8 @@ static void check_shared_interval(const scene_src *src) {
     kdr_ray_batch b = {rs.n, rs.org, 0, rs.dir, rs.tmin, 0, rs.tmax, 0};
     results ref = reference(s, &b);
     for (int q = KDR_CLOSEST; q <= KDR_ANY; q++)
-        for (int way = 0; way < 6; way++)
-            if (!((way == 3 || way == 5) && !kdr_cpu_has_avx2()))
+        for (int way = 0; way < NWAYS; way++)
+            if (way_runs(way))
                 check_way(src->name, &rs, s, &b, &ref, (kdr_query)q, way);
     res_free(&ref);
     rays_free(&rs);
@@ -547,6 +631,8 @@ static int check_ladder(const char *dir) {
 int main(int argc, char **argv) {
     printf("AVX2: %s\n", kdr_cpu_has_avx2() ? "yes (4- and 8-wide tested)"
                                             : "no (8-wide skipped)");
+    printf("AVX-512: %s\n", kd_cpu_has_avx512() ? "yes (16-lane interleaved walk tested)"
+                                               : "no (16-lane interleaved walk skipped)");
     if (argc > 1)
         return check_ladder(argv[1]);
     check_api();

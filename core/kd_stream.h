@@ -1,0 +1,50 @@
+/*
+ * kd_stream.h — the interleaved walk of a batch's incoherent rays
+ * (core/kd_traverse_stream.c): many rays of one batch in flight in one
+ * thread, each with its own stack and interval, advanced in turn one node
+ * step or one leaf at a time after its next node was requested from
+ * memory. Per ray it is exactly the single-ray walk (kd_traverse_single.c:
+ * same set-up, node rule, leaves and tie rule), so every answer equals
+ * kdr_intersect1 / kdr_occluded1 bit for bit. Internal to core/.
+ */
+#ifndef KD_STREAM_H
+#define KD_STREAM_H
+
+#include <stddef.h>
+
+#include "kdray.h"
+
+/* Traces rays ids[0..m) of the batch (ids NULL: rays [first, first + m);
+ * arguments checked by the caller, scene with a tree) and writes each
+ * result at its own index; stats as kdr_trace_batch. Picks
+ * kd_stream_trace16 on AVX-512 CPUs, else kd_stream_trace8 on AVX2 CPUs,
+ * else kd_stream_scalar_trace. */
+void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                     size_t first, size_t m, kdr_query q, kdr_hits *out,
+                     kdr_trav_stats *stats);
+
+/* The forms, same contract (tests call each): KD_STREAM_RAYS rays
+ * interleaved in scalar code (kd_traverse_stream.c), and 8 or 16 rays in
+ * the lanes of AVX2 or AVX-512 registers (kd_traverse_stream_lanes.h; only
+ * after kdr_cpu_has_avx2() / kd_cpu_has_avx512() said yes). flags:
+ * KD_STREAM_STAGE or 0. */
+void kd_stream_scalar_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                            size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
+                            kdr_trav_stats *stats);
+void kd_stream_trace8(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                      size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
+                      kdr_trav_stats *stats);
+void kd_stream_trace16(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                       size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
+                       kdr_trav_stats *stats);
+
+/* Leaves staged (a leaf's triangles requested one turn before their test)
+ * and next nodes requested on every scene, not only on scenes of
+ * KD_STREAM_STAGE_MIN_BYTES and more (tests put small scenes through that
+ * path with it). */
+#define KD_STREAM_STAGE 1
+
+/* 1 if the CPU (and OS) run AVX-512 F, DQ, BW and VL code. */
+int kd_cpu_has_avx512(void);
+
+#endif /* KD_STREAM_H */

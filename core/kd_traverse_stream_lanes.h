@@ -1,0 +1,278 @@
+/*
+ * kd_traverse_stream_lanes.h — the interleaved walk in SIMD lanes, written
+ * once for 8 (AVX2) and 16 lanes (AVX-512): kd_traverse_stream8.c and
+ * kd_traverse_stream16.c define KD_W, include simd_width.h and this
+ * template (kd_stream_trace8, kd_stream_trace16). KD_W rays of a batch sit
+ * in the KD_W lanes, each lane ITS OWN ray at ITS OWN node with its own
+ * stack and interval (not a bundle: lanes never wait for each other). One
+ * turn of the loop advances every lane by one step:
+ *
+ *   gather   each lane's node (split and bits: two KD_W-way gathers);
+ *   step     the lanes at interior nodes take kd_traverse_single.c's node
+ *            step as mask operations (near/far, the empty-child flags, the
+ *            far entry scattered to the lane's stack when both are taken;
+ *            AVX2 has no scatter: the pushing lanes store one by one);
+ *   leaves   the lanes at leaves test their leaf one by one, with the
+ *            single walk's leaf test (kd_walk_leaf: one ray against 1, 4
+ *            or 8 triangles at a time);
+ *   pops     lanes after a leaf or with no child to enter pop their stack
+ *            (walk()'s pop: entries starting after kd_term_bound(best t)
+ *            are dropped);
+ *   refill   a finished lane writes its answer and takes the batch's next
+ *            ray, so the lanes stay full until the batch runs dry.
+ *
+ * Exact: per lane every float operation is the single walk's, in its
+ * order (a = split - org, t_lo = (a - ss) * inv, t_hi = (a + ss) * inv,
+ * max/min with the scalar ternaries' operand order, kd_term_bound's sum),
+ * the same leaves are tested in the same order with the same [tmin, best
+ * t], so t, u, v and prim are the single walk's bit for bit.
+ *
+ * On scenes of KD_STREAM_STAGE_MIN_BYTES and more (trees and triangles
+ * that do not stay in the caches) a lane that reaches a leaf requests its
+ * reference list, on its next turn the triangles, and tests them on the
+ * turn after; and every lane's next node is requested as soon as it is
+ * known.
+ */
+/* The includer includes kd_stream.h, kd_traverse_bundle.h and kd_walk.h
+ * BEFORE defining KD_W: kd_walk.h instantiates the triangle tests at its own
+ * widths, and kd_traverse_bundle.h would instantiate the bundle walk. */
+
+#undef KS_ALL
+#undef KS_LOG2W
+#define KS_ALL ((unsigned)((1u << KD_W) - 1)) /* every lane */
+#define KS_LOG2W (KD_W == 16 ? 4 : 3)
+
+/* Per-lane data the scalar parts use (leaf tests, answers). */
+typedef struct KD_WN(ks_lane) {
+    size_t id;
+    float tmin;
+    kd_walk_out o;
+    kd_ray_pre pre;
+    kd_ntri_pre4 pre4;
+} KD_WN(ks_lane);
+
+/* The lanes' state: in registers (the vectors) and in memory (stacks of
+ * {node, tn, tf} in lane columns: entry d of lane j is [d][j]). */
+typedef struct KD_WN(ks_lanes) {
+    VI node, sp, visits;
+    VF tn, tf, org[3], inv[3], ss[3];
+    unsigned act;  /* lanes holding a ray */
+    unsigned refs; /* lanes whose leaf's reference list was requested last turn */
+    unsigned tris; /* lanes whose leaf's triangles were requested last turn */
+    _Alignas(sizeof(VF)) int32_t stk_node[KD_MAX_DEPTH][KD_W];
+    _Alignas(sizeof(VF)) float stk_tn[KD_MAX_DEPTH][KD_W];
+    _Alignas(sizeof(VF)) float stk_tf[KD_MAX_DEPTH][KD_W];
+    KD_WN(ks_lane) lane[KD_W];
+} KD_WN(ks_lanes);
+
+/* The batch being traced. */
+typedef struct KD_WN(ks_src) {
+    const kdr_scene *s;
+    const kdr_ray_batch *b;
+    const size_t *ids; /* NULL: rays first, first + 1, ... */
+    size_t first, m, next;
+    kdr_query q;
+    kdr_hits *out;
+    kdr_trav_stats *stats;
+    unsigned stage; /* all lanes when leaves are staged (large scenes) */
+} KD_WN(ks_src);
+
+/* Writes lane l's answer and adds its stats. */
+static void KD_WN(ks_finish)(const KD_WN(ks_lane) * l, int found,
+                             const KD_WN(ks_src) * c) {
+    const size_t i = l->id;
+    if (c->stats) {
+        c->stats->rays++;
+        c->stats->nodes_visited += l->o.nodes;
+        c->stats->tri_tests += l->o.tests;
+    }
+    if (c->q == KDR_ANY) {
+        c->out->hit[i] = (uint8_t)found;
+        return;
+    }
+    c->out->t[i] = found ? l->o.t : -1.0f;
+    c->out->prim[i] = found ? l->o.prim : -1;
+    c->out->u[i] = found ? l->o.u : 0.0f;
+    c->out->v[i] = found ? l->o.v : 0.0f;
+}
+
+/* Puts the batch's next traceable ray into lane j (rays that cannot be
+ * traced or miss the root box are answered on the way, as kdr_intersect1
+ * answers them); returns 0 when the batch is exhausted. */
+KD_TARGET __attribute__((noinline)) static int
+KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
+    const unsigned bit = (unsigned)(1u << j);
+    KD_WN(ks_lane) *l = &w->lane[j];
+    while (c->next < c->m) {
+        kdr_ray ray;
+        l->id = c->ids ? c->ids[c->next] : c->first + c->next;
+        c->next++;
+        kd_batch_read(c->b, l->id, &ray);
+        l->o = (kd_walk_out){ray.tmax, 0.0f, 0.0f, -1, 0, 0};
+        float inv[3], ss[3], tn, tf;
+        unsigned neg[3];
+        if (!kd_walk_setup(c->s, &ray, inv, ss, neg, &tn, &tf)) {
+            KD_WN(ks_finish)(l, 0, c);
+            continue;
+        }
+        l->tmin = ray.tmin;
+        kd_ray_precompute(ray.org, ray.dir, &l->pre);
+        kd_ntri_pre_init4(&l->pre, &l->pre4);
+        w->node = IV(put)(w->node, bit, 0);
+        w->sp = IV(put)(w->sp, bit, 0);
+        w->visits = IV(put)(w->visits, bit, 0);
+        w->tn = V(put)(w->tn, bit, tn);
+        w->tf = V(put)(w->tf, bit, tf);
+        for (int k = 0; k < 3; k++) {
+            w->org[k] = V(put)(w->org[k], bit, ray.org[k]);
+            w->inv[k] = V(put)(w->inv[k], bit, inv[k]);
+            w->ss[k] = V(put)(w->ss[k], bit, ss[k]);
+        }
+        return 1;
+    }
+    return 0;
+}
+
+/* Lane j's pop (walk()'s): returns 0 when its stack holds nothing that
+ * starts at or before kd_term_bound(best t), i.e. the ray is done. */
+KD_FN int KD_WN(ks_pop)(KD_WN(ks_lanes) * w, int j, const int32_t *spv) {
+    const unsigned bit = (unsigned)(1u << j);
+    const float bound = kd_term_bound(w->lane[j].o.t);
+    int sp = spv[j];
+    do {
+        if (sp == 0) return 0;
+        --sp;
+    } while (!(w->stk_tn[sp][j] <= bound));
+    w->node = IV(put)(w->node, bit, w->stk_node[sp][j]);
+    w->tn = V(put)(w->tn, bit, w->stk_tn[sp][j]);
+    w->tf = V(put)(w->tf, bit, w->stk_tf[sp][j]);
+    w->sp = IV(put)(w->sp, bit, sp);
+    return 1;
+}
+
+/* The lanes' leaves and pops; finished lanes answer and refill. */
+KD_FN void KD_WN(ks_settle)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, unsigned leaf,
+                            unsigned pop) {
+    const kdr_scene *s = c->s;
+    _Alignas(sizeof(VF)) int32_t nv[KD_W], spv[KD_W], vis[KD_W];
+    IV(store)(nv, w->node);
+    IV(store)(spv, w->sp);
+    unsigned done = 0, found = 0;
+    for (unsigned mm = leaf; mm; mm &= mm - 1) {
+        const int j = __builtin_ctz(mm);
+        KD_WN(ks_lane) *l = &w->lane[j];
+        if (kd_walk_leaf(s, s->nodes + nv[j], &l->pre, &l->pre4, l->tmin, c->q == KDR_ANY,
+                         1, &l->o)) {
+            done |= (unsigned)(1u << j);
+            found |= (unsigned)(1u << j);
+        } else {
+            pop |= (unsigned)(1u << j);
+        }
+    }
+    for (unsigned mm = pop; mm; mm &= mm - 1) {
+        const int j = __builtin_ctz(mm);
+        if (!KD_WN(ks_pop)(w, j, spv)) {
+            done |= (unsigned)(1u << j);
+            found |= (unsigned)((w->lane[j].o.prim >= 0) << j);
+        }
+    }
+    if (!done) return;
+    IV(store)(vis, w->visits);
+    for (unsigned mm = done; mm; mm &= mm - 1) {
+        const int j = __builtin_ctz(mm);
+        w->lane[j].o.nodes = (uint64_t)vis[j];
+        KD_WN(ks_finish)(&w->lane[j], (found >> j) & 1, c);
+        if (!KD_WN(ks_fill)(c, w, j)) w->act &= (unsigned)~(1u << j);
+    }
+}
+
+/* One turn: every active lane takes one step. */
+KD_FN void KD_WN(ks_turn)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w) {
+    const kdr_scene *s = c->s;
+    const VI one = IV(set1)(1), three = IV(set1)(3);
+    const unsigned act = w->act;
+    const VI node = w->node;
+    const VF tn = w->tn, tf = w->tf;
+    /* the node: split (word 0) and bits (word 1) of kd_node[node] */
+    const VI bits = IV(gather8)(three, act, node, (const int32_t *)s->nodes + 1);
+    const VF split = V(gather8)(V(set1)(0.0f), act, node, s->nodes);
+    w->visits = IV(add_in)(act & ~w->refs & ~w->tris, w->visits, one);
+    const VI axis = IV(and)(bits, three);
+    const unsigned at_leaf = IV(eq)(act, axis, three);
+    /* staged leaves: references requested on the turn that reaches the
+     * leaf, triangles on the next (the references are then in the cache,
+     * so the requests cost no miss), the test on the one after */
+    const unsigned get_refs = at_leaf & ~w->refs & ~w->tris & c->stage;
+    const unsigned get_tris = at_leaf & w->refs;
+    const unsigned leaf = at_leaf & ~get_refs & ~get_tris;
+    w->refs = get_refs;
+    w->tris = get_tris;
+    const unsigned inner = act & ~at_leaf;
+    /* descend()'s step, lane by lane as masks */
+    const unsigned ax1 = IV(eq)(KS_ALL, axis, one),
+                   ax2 = IV(eq)(KS_ALL, axis, IV(set1)(2));
+    const VF o = V(selm)(ax2, w->org[2], V(selm)(ax1, w->org[1], w->org[0]));
+    const VF iv = V(selm)(ax2, w->inv[2], V(selm)(ax1, w->inv[1], w->inv[0]));
+    const VF ss = V(selm)(ax2, w->ss[2], V(selm)(ax1, w->ss[1], w->ss[0]));
+    const VF a = V(sub)(split, o);
+    const VF t_lo = V(mul)(V(sub)(a, ss), iv);
+    const VF t_hi = V(mul)(V(add)(a, ss), iv);
+    const unsigned neg = V(signs)(iv); /* the near child is above */
+    const VI below = IV(add)(node, one), above = IV(srl)(bits, 4);
+    const VI nearc = IV(selm)(neg, above, below), farc = IV(selm)(neg, below, above);
+    const unsigned below_empty = IV(test)(bits, IV(set1)(4));
+    const unsigned above_empty = IV(test)(bits, IV(set1)(8));
+    const unsigned near_empty = (neg & above_empty) | (~neg & below_empty);
+    const unsigned far_empty = (neg & below_empty) | (~neg & above_empty);
+    /* kd_traverse_stream.c's branch-free form of the five cases */
+    const unsigned go_near = V(nlt)(inner & ~near_empty, t_hi, tn);
+    const unsigned go_far = V(ngt)(inner & ~far_empty, t_lo, tf);
+    const unsigned push = go_near & go_far;
+    const VF far_tn = V(max)(t_lo, tn), near_tf = V(min)(t_hi, tf);
+    if (push) {
+        const VI slot = IV(add)(IV(sll)(w->sp, KS_LOG2W), IV(iota)());
+        IV(scatter)(&w->stk_node[0][0], push, slot, farc);
+        V(scatter)(&w->stk_tn[0][0], push, slot, far_tn);
+        V(scatter)(&w->stk_tf[0][0], push, slot, tf);
+        w->sp = IV(add_in)(push, w->sp, one);
+    }
+    const unsigned moved = go_near | go_far;
+    w->node = IV(selm)(moved, IV(selm)(go_near, nearc, farc), node);
+    w->tn = V(selm)(go_far & ~go_near, far_tn, tn);
+    w->tf = V(selm)(go_near, near_tf, tf);
+    if (c->stage) {
+        _Alignas(sizeof(VF)) int32_t nv[KD_W];
+        IV(store)(nv, w->node);
+        for (unsigned mm = moved; mm; mm &= mm - 1)
+            __builtin_prefetch(s->nodes + nv[__builtin_ctz(mm)]);
+        for (unsigned mm = get_refs; mm; mm &= mm - 1) {
+            const kd_node *n = s->nodes + nv[__builtin_ctz(mm)];
+            kd_prefetch_refs(s, n);
+        }
+        for (unsigned mm = get_tris; mm; mm &= mm - 1) {
+            const kd_node *n = s->nodes + nv[__builtin_ctz(mm)];
+            kd_prefetch_tris(s, s->refs + n->u.first, kd_count(n));
+        }
+    }
+    const unsigned pop = inner & ~moved;
+    if (leaf | pop) KD_WN(ks_settle)(c, w, leaf, pop);
+}
+
+KD_TARGET void KD_WN(kd_stream_trace)(const kdr_scene *s, const kdr_ray_batch *b,
+                                      const size_t *ids, size_t first, size_t m,
+                                      kdr_query q, int flags, kdr_hits *out,
+                                      kdr_trav_stats *stats) {
+    const int stage =
+        (flags & KD_STREAM_STAGE) || s->stats.bytes >= KD_STREAM_STAGE_MIN_BYTES;
+    KD_WN(ks_src) c = {s, b, ids, first, m, 0, q, out, stats, stage ? KS_ALL : 0};
+    KD_WN(ks_lanes) w;
+    w.node = w.sp = w.visits = IV(set1)(0);
+    w.tn = w.tf = V(set1)(0.0f);
+    for (int k = 0; k < 3; k++)
+        w.org[k] = w.inv[k] = w.ss[k] = V(set1)(0.0f);
+    w.act = w.refs = w.tris = 0;
+    for (int j = 0; j < KD_W; j++)
+        if (KD_WN(ks_fill)(&c, &w, j)) w.act |= (unsigned)(1u << j);
+    while (w.act)
+        KD_WN(ks_turn)(&c, &w);
+}
