@@ -136,4 +136,20 @@
  * 2 spp: bundles 0.0018 s vs single rays 0.0015 s on default/small). */
 #define TREE_MIN_RAYS 3u
 
+/* The cheap test (kd_cone.c, walk_pays): below CONE_WALK_FROM samples per
+ * point no whole-light cone walks; the samples of UNWALKED_CHUNK_RAYS / (S x
+ * lights) consecutive points go through the tree in one kdr_trace_batch
+ * (8-wide any-hit bundles), with no cone set-up. A walk (with its proofs)
+ * costs more than the 1-16 rays it may save even where it decides the
+ * point, and over the chunk the batch's set-up is paid once. Measured with
+ * kdray_bench_cone (default and 2CylinderEngine, small and large light,
+ * --repeat 3), kd_cone against the strongest Embree API, walks (bbaa220)
+ * against chunked bundles: 1-8 spp 0.08-0.49x -> 0.44-0.83x; 16 spp
+ * 0.26-0.67x -> 0.46-0.73x; 32 spp small lights 0.73 / 1.04x -> 0.63 /
+ * 0.76x (walks kept), large lights 0.36 / 0.43x -> 0.50 / 0.75x. A
+ * per-light moving average of the samples walks saved (walk only where it
+ * repays, probe one point in 8 otherwise) lost to both at 16-256 spp. */
+#define CONE_WALK_FROM 32u
+#define UNWALKED_CHUNK_RAYS 1024u
+
 #endif /* KD_TUNE_H */
