@@ -304,11 +304,18 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
     return lit;
 }
 
-/* The cheap test: does this point walk its whole light's cone? */
-static int walk_pays(uint32_t nsamples, kd_walk_policy policy) {
+/* The cheap test: does a point with this many samples toward a light of
+ * this angular size (sin_a = r / D) walk its whole light's cone? Below
+ * CONE_WALK_FROM samples never (no cone set-up either: the query's points
+ * then go through trace_unwalked in chunks); wide cones (penumbra-heavy:
+ * the walk goes over budget, and a decided cone is rare) only from
+ * CONE_WALK_WIDE_FROM samples on. */
+static int walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
     if (policy != KD_WALK_AUTO)
         return policy == KD_WALK_ALWAYS;
-    return nsamples >= CONE_WALK_FROM;
+    if (nsamples < CONE_WALK_FROM)
+        return 0;
+    return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM;
 }
 
 /* The whole light's candidate budget for this point: a full one, a couple
@@ -335,6 +342,12 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     int rc = ws_reserve(ws, nsamples);
     if (rc != KDR_OK)
         return rc;
+    if (!walk_pays(nsamples, f->sin_a, ws->policy)) {
+        /* a wide cone at moderate samples: straight to the bundles */
+        make_samples(f, nsamples, ws);
+        *vis = (float)lit_by_tree(scene, ws, ws->idx, nsamples) / (float)nsamples;
+        return KDR_OK;
+    }
     kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
                        .proofs = f->along == 0.0f, .last = ls->last,
                        .max_cands = cand_budget(nsamples, ls)};
@@ -430,7 +443,9 @@ static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
 static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q,
                         size_t first, size_t count, kdr_shadow_mode mode,
                         float *visibility, shadow_ws *ws) {
-    if (mode == KDR_SHADOW_CONE && !walk_pays(q->samples, ws->policy))
+    if (mode == KDR_SHADOW_CONE &&
+        (ws->policy == KD_WALK_NEVER ||
+         (ws->policy == KD_WALK_AUTO && q->samples < CONE_WALK_FROM)))
         return trace_unwalked(scene, q, first, count, visibility, ws);
     for (size_t i = first; i < first + count; i++) {
         for (size_t l = 0; l < q->nlights; l++) {

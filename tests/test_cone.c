@@ -319,13 +319,14 @@ static void test_analytic(void) {
     /* the open light is exactly 1 on every path; where the cone walks
      * (forced, or from CONE_WALK_FROM samples on) it decides the open
      * light's cones without rays; below CONE_WALK_FROM the cheap test sends
-     * every sample to the any-hit bundles instead */
-    const uint32_t spp[4] = {1, 4, 31, 64};
+     * every sample to the any-hit bundles instead (both lights are wide:
+     * from CONE_WALK_WIDE_FROM on, AUTO walks too) */
+    const uint32_t spp[4] = {1, 4, 31, CONE_WALK_WIDE_FROM};
     kdr_shadow_query q = make_query(pts, 16, lights, 2, 64);
     for (int k = 0; k < 8; k++) {
         float vis[32];
         kdr_shadow_stats st = {0};
-        const int walk = k >= 4 || spp[k] >= CONE_WALK_FROM;
+        const int walk = k >= 4 || spp[k % 4] >= CONE_WALK_WIDE_FROM;
         q.samples = spp[k % 4];
         CHECK(kd_shadow_trace_policy(s, &q, 0, 16, KDR_SHADOW_CONE,
                                      k >= 4 ? KD_WALK_ALWAYS : KD_WALK_AUTO, vis,
