@@ -4,8 +4,13 @@
  * whose segment reaches the light.
  *
  * KDR_SHADOW_RAYS traces every sample through the kd-tree (the reference).
- * KDR_SHADOW_CONE decides a (point, light) by cones, from the whole light
- * down to small groups of samples, and traces only what no cone decides:
+ * KDR_SHADOW_CONE first asks a cheap test whether a point's cone walk can
+ * pay (walk_pays: not below CONE_WALK_FROM samples, nor toward wide lights
+ * below CONE_WALK_WIDE_FROM); when it cannot, the point's samples go
+ * straight to any-hit bundles (kdr_trace_batch), chunked over consecutive
+ * points below CONE_WALK_FROM. Otherwise it decides the (point, light) by
+ * cones, from the whole light down to small groups of samples, and traces
+ * only what no cone decides:
  *  1. Candidates: the cone of the whole light walks the kd-tree with a
  *     budget (kd_cone_trav.c); every triangle its cull keeps is judged by
  *     a proof against the float triangle test (kd_cone_proof.c, which needs
@@ -318,12 +323,11 @@ static int walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
     return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM;
 }
 
-/* The whole light's candidate budget for this point: a full one, a couple
- * at few samples, or none (the walk then only looks for an empty cone,
- * stopping at the first candidate) below CONE_RAYS_BELOW samples and while
- * the light backs off after busy cones. Every point walks at least that
- * far: a cone that reaches no occluder is decided without samples, as the
- * contract requires. */
+/* The whole light's candidate budget for a point that walks: a full one,
+ * a couple at few samples, or none (the walk then only looks for an empty
+ * cone, stopping at the first candidate) below CONE_RAYS_BELOW samples
+ * (forced walks only: the cheap test sends such points to bundles) and
+ * while the light backs off after busy cones. */
 static size_t cand_budget(uint32_t nsamples, light_state *ls) {
     if (ls->skip > 0) {
         ls->skip--;

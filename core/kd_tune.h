@@ -88,12 +88,16 @@
  * and a large light each, auto offsets, kd_cone time against the strongest
  * Embree API in the same run), at 10b8208 and after. */
 
-/* Below this many samples per point no cone walks: the samples go through
- * the tree (bundles, or one by one under TREE_MIN_RAYS), after the light's
- * last blocker. A walk with its proofs costs about what 8 rays do, and below
- * 9 samples it decides too little to repay it: rays only at 1-8 spp
- * 0.36-0.62x against walks 0.11-0.49x; at 16 spp walks win on three of the
- * four views (0.50-0.68x against 0.38-0.55x). */
+/* Forced walks (KD_WALK_ALWAYS; kdr_shadow_trace's cheap test below sends
+ * such points to bundles without a walk): below this many samples the walk
+ * only looks for an empty cone, stopping at its first candidate, and
+ * everything else goes through the tree (bundles, or one by one under
+ * TREE_MIN_RAYS), after the light's last blocker. A walk with its proofs
+ * costs about what 8 rays do, and below 9 samples it decides too little
+ * to repay it: rays only at 1-8 spp 0.36-0.62x against walks 0.11-0.49x;
+ * at 16 spp walks won on three of the four views against rays traced
+ * point by point (0.50-0.68x against 0.38-0.55x; chunked bundles, below,
+ * beat both). */
 #define CONE_RAYS_BELOW 9u
 /* The whole light's walk is over budget past CONE_MAX_CANDS candidates (the
  * triangles its cull keeps that no proof dismisses) or CONE_NODES_BASE +
