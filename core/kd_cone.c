@@ -4,8 +4,13 @@
  * whose segment reaches the light.
  *
  * KDR_SHADOW_RAYS traces every sample through the kd-tree (the reference).
- * KDR_SHADOW_CONE decides a (point, light) by cones, from the whole light
- * down to small groups of samples, and traces only what no cone decides:
+ * KDR_SHADOW_CONE first asks a cheap test whether a point's cone walk can
+ * pay (walk_pays: not below CONE_WALK_FROM samples, nor toward wide lights
+ * below CONE_WALK_WIDE_FROM); when it cannot, the point's samples go
+ * straight to any-hit bundles (kdr_trace_batch), chunked over consecutive
+ * points below CONE_WALK_FROM. Otherwise it decides the (point, light) by
+ * cones, from the whole light down to small groups of samples, and traces
+ * only what no cone decides:
  *  1. Candidates: the cone of the whole light walks the kd-tree with a
  *     budget (kd_cone_trav.c); every triangle its cull keeps is judged by
  *     a proof against the float triangle test (kd_cone_proof.c, which needs
@@ -60,6 +65,7 @@ typedef struct shadow_ws {
     float *borg, *bdir, *btmax; /* pending samples as a kdr_ray_batch */
     uint8_t *bhit;
     int wide;       /* AVX2 packets */
+    kd_walk_policy policy;
     kdr_shadow_stats st;
     kd_cells cells;
 } shadow_ws;
@@ -303,12 +309,25 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
     return lit;
 }
 
-/* The whole light's candidate budget for this point: a full one, a couple
- * at few samples, or none (the walk then only looks for an empty cone,
- * stopping at the first candidate) below CONE_RAYS_BELOW samples and while
- * the light backs off after busy cones. Every point walks at least that
- * far: a cone that reaches no occluder is decided without samples, as the
- * contract requires. */
+/* The cheap test: does a point with this many samples toward a light of
+ * this angular size (sin_a = r / D) walk its whole light's cone? Below
+ * CONE_WALK_FROM samples never (no cone set-up either: the query's points
+ * then go through trace_unwalked in chunks); wide cones (penumbra-heavy:
+ * the walk goes over budget, and a decided cone is rare) only from
+ * CONE_WALK_WIDE_FROM samples on. */
+static int walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
+    if (policy != KD_WALK_AUTO)
+        return policy == KD_WALK_ALWAYS;
+    if (nsamples < CONE_WALK_FROM)
+        return 0;
+    return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM;
+}
+
+/* The whole light's candidate budget for a point that walks: a full one,
+ * a couple at few samples, or none (the walk then only looks for an empty
+ * cone, stopping at the first candidate) below CONE_RAYS_BELOW samples
+ * (forced walks only: the cheap test sends such points to bundles) and
+ * while the light backs off after busy cones. */
 static size_t cand_budget(uint32_t nsamples, light_state *ls) {
     if (ls->skip > 0) {
         ls->skip--;
@@ -327,6 +346,12 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     int rc = ws_reserve(ws, nsamples);
     if (rc != KDR_OK)
         return rc;
+    if (!walk_pays(nsamples, f->sin_a, ws->policy)) {
+        /* a wide cone at moderate samples: straight to the bundles */
+        make_samples(f, nsamples, ws);
+        *vis = (float)lit_by_tree(scene, ws, ws->idx, nsamples) / (float)nsamples;
+        return KDR_OK;
+    }
     kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
                        .proofs = f->along == 0.0f, .last = ls->last,
                        .max_cands = cand_budget(nsamples, ls)};
@@ -363,9 +388,69 @@ static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
     return first <= q->n && count <= q->n - first;
 }
 
+/* Points that do not walk their cones, a chunk at a time: the samples of
+ * consecutive points (toward the same lights, from nearby surfaces: the
+ * bundles stay coherent) go through the tree in one kdr_trace_batch, whose
+ * set-up is then paid per chunk, not per point. */
+static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
+                          size_t first, size_t count, float *visibility,
+                          shadow_ws *ws) {
+    const uint32_t n = q->samples;
+    const size_t per_point = (size_t)n * q->nlights;
+    size_t step = UNWALKED_CHUNK_RAYS / per_point;
+    step = step ? step : 1;
+    const size_t cap = step * per_point;
+    float *org = malloc(3 * cap * sizeof *org), *dir = malloc(3 * cap * sizeof *dir);
+    float *tmax = malloc(cap * sizeof *tmax);
+    uint8_t *hit = malloc(cap);
+    int rc = org && dir && tmax && hit ? KDR_OK : KDR_ENOMEM;
+    for (size_t i0 = first; rc == KDR_OK && i0 < first + count; i0 += step) {
+        const size_t i1 = first + count - i0 < step ? first + count : i0 + step;
+        size_t m = 0;
+        for (size_t i = i0; rc == KDR_OK && i < i1; i++)
+            for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
+                kd_shadow_frame f;
+                rc = kd_shadow_frame_init(scene, q, i, l, &f);
+                for (uint32_t s = 0; rc == KDR_OK && s < n; s++, m++) {
+                    kdr_ray r;
+                    kd_shadow_frame_ray(&f, s, n, &r);
+                    for (int k = 0; k < 3; k++) {
+                        org[3 * m + k] = r.org[k];
+                        dir[3 * m + k] = r.dir[k];
+                    }
+                    tmax[m] = r.tmax; /* tmin is 0 for every sample */
+                }
+            }
+        if (rc != KDR_OK)
+            break;
+        kdr_ray_batch b = {.n = m, .org = org, .org_stride = 3, .dir = dir,
+                           .tmax = tmax, .tmax_stride = 1};
+        kdr_hits out = {.hit = hit};
+        kdr_trav_stats ts = {0};
+        rc = kdr_trace_batch(scene, &b, 0, m, KDR_ANY, KDR_TRAV_AUTO, &out, &ts);
+        ws->st.rays_traced += m;
+        ws->st.nodes_visited += ts.nodes_visited;
+        for (size_t j = 0, pair = i0 * q->nlights; rc == KDR_OK && j < m; j += n, pair++) {
+            uint32_t lit = 0;
+            for (uint32_t s = 0; s < n; s++)
+                lit += hit[j + s] ? 0u : 1u;
+            visibility[pair] = (float)lit / (float)n;
+        }
+    }
+    free(org);
+    free(dir);
+    free(tmax);
+    free(hit);
+    return rc;
+}
+
 static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q,
                         size_t first, size_t count, kdr_shadow_mode mode,
                         float *visibility, shadow_ws *ws) {
+    if (mode == KDR_SHADOW_CONE &&
+        (ws->policy == KD_WALK_NEVER ||
+         (ws->policy == KD_WALK_AUTO && q->samples < CONE_WALK_FROM)))
+        return trace_unwalked(scene, q, first, count, visibility, ws);
     for (size_t i = first; i < first + count; i++) {
         for (size_t l = 0; l < q->nlights; l++) {
             kd_shadow_frame f;
@@ -391,11 +476,22 @@ static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q,
 int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
                      size_t first, size_t count, kdr_shadow_mode mode,
                      float *visibility, kdr_shadow_stats *stats) {
+    return kd_shadow_trace_policy(scene, q, first, count, mode, KD_WALK_AUTO,
+                                  visibility, stats);
+}
+
+int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
+                           size_t first, size_t count, kdr_shadow_mode mode,
+                           kd_walk_policy policy, float *visibility,
+                           kdr_shadow_stats *stats) {
     if (!query_valid(scene, q, first, count, visibility))
         return KDR_EINVAL;
     if (mode != KDR_SHADOW_CONE && mode != KDR_SHADOW_RAYS)
         return KDR_EINVAL;
+    if (policy != KD_WALK_AUTO && policy != KD_WALK_ALWAYS && policy != KD_WALK_NEVER)
+        return KDR_EINVAL;
     shadow_ws ws = {0};
+    ws.policy = policy;
     ws.wide = kdr_cpu_has_avx2();
     ws.lights = malloc(q->nlights * sizeof *ws.lights);
     int rc = ws.lights ? KDR_OK : KDR_ENOMEM;

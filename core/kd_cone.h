@@ -205,4 +205,23 @@ int kd_cone_packet_walk(const kdr_scene *scene, const kd_cone *c,
                         uint32_t *blocker, uint64_t *visited, int *open,
                         int wide);
 
+/* ---- the query's walk policy (kd_cone.c) ----------------------------------- */
+
+/* Whether a (point, light) walks its whole light's cone before sampling.
+ * KD_WALK_AUTO is what kdr_shadow_trace does (a cheap per-point test,
+ * kd_tune.h); the forced policies exist so that tests can check that every
+ * path gives the same answers. */
+typedef enum kd_walk_policy {
+    KD_WALK_AUTO = 0,
+    KD_WALK_ALWAYS = 1, /* every point walks (at least to its first candidate) */
+    KD_WALK_NEVER = 2,  /* no whole-light walk: samples go to the any-hit path */
+} kd_walk_policy;
+
+/* kdr_shadow_trace with an explicit walk policy (KDR_SHADOW_CONE only; the
+ * policy is ignored by KDR_SHADOW_RAYS). */
+int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
+                           size_t first, size_t count, kdr_shadow_mode mode,
+                           kd_walk_policy policy, float *visibility,
+                           kdr_shadow_stats *stats);
+
 #endif /* KD_CONE_H */

@@ -115,12 +115,16 @@
  * and a large light each, auto offsets, kd_cone time against the strongest
  * Embree API in the same run), at 10b8208 and after. */
 
-/* Below this many samples per point no cone walks: the samples go through
- * the tree (bundles, or one by one under TREE_MIN_RAYS), after the light's
- * last blocker. A walk with its proofs costs about what 8 rays do, and below
- * 9 samples it decides too little to repay it: rays only at 1-8 spp
- * 0.36-0.62x against walks 0.11-0.49x; at 16 spp walks win on three of the
- * four views (0.50-0.68x against 0.38-0.55x). */
+/* Forced walks (KD_WALK_ALWAYS; kdr_shadow_trace's cheap test below sends
+ * such points to bundles without a walk): below this many samples the walk
+ * only looks for an empty cone, stopping at its first candidate, and
+ * everything else goes through the tree (bundles, or one by one under
+ * TREE_MIN_RAYS), after the light's last blocker. A walk with its proofs
+ * costs about what 8 rays do, and below 9 samples it decides too little
+ * to repay it: rays only at 1-8 spp 0.36-0.62x against walks 0.11-0.49x;
+ * at 16 spp walks won on three of the four views against rays traced
+ * point by point (0.50-0.68x against 0.38-0.55x; chunked bundles, below,
+ * beat both). */
 #define CONE_RAYS_BELOW 9u
 /* The whole light's walk is over budget past CONE_MAX_CANDS candidates (the
  * triangles its cull keeps that no proof dismisses) or CONE_NODES_BASE +
@@ -162,5 +166,31 @@
  * set-up (grouping, sorting) costs more than a bundle saves (bench_cone at
  * 2 spp: bundles 0.0018 s vs single rays 0.0015 s on default/small). */
 #define TREE_MIN_RAYS 3u
+
+/* The cheap test (kd_cone.c, walk_pays): below CONE_WALK_FROM samples per
+ * point no whole-light cone walks; the samples of UNWALKED_CHUNK_RAYS / (S x
+ * lights) consecutive points go through the tree in one kdr_trace_batch
+ * (8-wide any-hit bundles), with no cone set-up. A walk (with its proofs)
+ * costs more than the 1-16 rays it may save even where it decides the
+ * point, and over the chunk the batch's set-up is paid once. Measured with
+ * kdray_bench_cone (default and 2CylinderEngine, small and large light,
+ * --repeat 3), kd_cone against the strongest Embree API, walks (bbaa220)
+ * against chunked bundles: 1-8 spp 0.08-0.49x -> 0.44-0.83x; 16 spp
+ * 0.26-0.67x -> 0.46-0.73x; 32 spp small lights 0.73 / 1.04x -> 0.63 /
+ * 0.76x (walks kept), large lights 0.36 / 0.43x -> 0.50 / 0.75x. A
+ * per-light moving average of the samples walks saved (walk only where it
+ * repays, probe one point in 8 otherwise) lost to both at 16-256 spp. */
+#define CONE_WALK_FROM 32u
+/* From CONE_WALK_FROM samples on, a point whose light is wider than
+ * CONE_WIDE_SIN (sin of the cone's half-angle; 0.1 is 5.7 degrees) walks
+ * only from CONE_WALK_WIDE_FROM samples on; below, its samples go straight
+ * to the bundles. Tuned on the benchmark's two light sizes only (small:
+ * about 2 degrees, large: about 27), large lights, walks against bundles
+ * (every point unwalked): default 0.35 / 0.48 / 0.64 / 0.79x against 0.50 /
+ * 0.53 / 0.56 / 0.59x at 32 / 64 / 128 / 256 spp, 2CylinderEngine 0.44 /
+ * 0.57 / 0.73 / 0.87x against 0.76 / 0.76 / 0.78 / 0.83x. */
+#define CONE_WIDE_SIN 0.1
+#define CONE_WALK_WIDE_FROM 128u
+#define UNWALKED_CHUNK_RAYS 1024u
 
 #endif /* KD_TUNE_H */

@@ -144,6 +144,21 @@ static uint64_t check_modes(const char *label, const kdr_scene *s,
           "%s cone", label);
     CHECK(kdr_shadow_trace(s, q, 0, q->n, KDR_SHADOW_RAYS, vr, &sr) == KDR_OK,
           "%s rays", label);
+    /* the walk forced on and off: the same answers, bit for bit */
+    const kd_walk_policy forced[2] = {KD_WALK_ALWAYS, KD_WALK_NEVER};
+    for (int k = 0; k < 2; k++) {
+        float *vf = malloc(m * sizeof *vf);
+        kdr_shadow_stats sf = {0};
+        CHECK(kd_shadow_trace_policy(s, q, 0, q->n, KDR_SHADOW_CONE, forced[k], vf,
+                                     &sf) == KDR_OK,
+              "%s policy %d", label, (int)forced[k]);
+        CHECK(memcmp(vf, vr, m * sizeof *vf) == 0, "%s: walk %s differs from rays",
+              label, k ? "off" : "on");
+        if (k == 1)
+            CHECK(sf.cones_decided == 0 && sf.rays_traced == (uint64_t)m * q->samples,
+                  "%s walk off traces every sample", label);
+        free(vf);
+    }
     int bad = 0;
     for (size_t i = 0; i < q->n && bad < 5; i++) {
         for (size_t l = 0; l < q->nlights; l++) {
@@ -301,24 +316,38 @@ static void test_analytic(void) {
     }
     /* light 0 above the roof, light 1 below the roof beside the points */
     const kdr_sphere_light lights[2] = {{{0, 0, 6}, 2.0f}, {{0, 0, -1}, 0.5f}};
-    /* every path (below and above CONE_WALK_MIN_SAMPLES) must decide the
-     * open light's cones without rays, as the contract says */
-    const uint32_t spp[4] = {1, 4, 31, 64};
+    /* the open light is exactly 1 on every path; where the cone walks
+     * (forced, or from CONE_WALK_FROM samples on) it decides the open
+     * light's cones without rays; below CONE_WALK_FROM the cheap test sends
+     * every sample to the any-hit bundles instead (both lights are wide:
+     * from CONE_WALK_WIDE_FROM on, AUTO walks too) */
+    const uint32_t spp[4] = {1, 4, 31, CONE_WALK_WIDE_FROM};
     kdr_shadow_query q = make_query(pts, 16, lights, 2, 64);
-    for (int k = 0; k < 4; k++) {
+    for (int k = 0; k < 8; k++) {
         float vis[32];
         kdr_shadow_stats st = {0};
-        q.samples = spp[k];
-        CHECK(kdr_shadow_trace(s, &q, 0, 16, KDR_SHADOW_CONE, vis, &st) == KDR_OK,
+        const int walk = k >= 4 || spp[k % 4] >= CONE_WALK_WIDE_FROM;
+        q.samples = spp[k % 4];
+        CHECK(kd_shadow_trace_policy(s, &q, 0, 16, KDR_SHADOW_CONE,
+                                     k >= 4 ? KD_WALK_ALWAYS : KD_WALK_AUTO, vis,
+                                     &st) == KDR_OK,
               "ok");
         for (int i = 0; i < 16; i++) {
             CHECK(vis[2 * i] == 0.0f, "under the roof: %g", vis[2 * i]);
             CHECK(vis[2 * i + 1] == 1.0f, "open light: %g", vis[2 * i + 1]);
         }
-        CHECK(st.cones_decided == 16, "open cones decided at %u spp: %llu", spp[k],
-              (unsigned long long)st.cones_decided);
-        CHECK(st.rays_traced <= 16u * spp[k], "rays only toward the roofed light: %llu",
-              (unsigned long long)st.rays_traced);
+        if (walk) {
+            CHECK(st.cones_decided == 16, "open cones decided at %u spp: %llu",
+                  spp[k % 4], (unsigned long long)st.cones_decided);
+            CHECK(st.rays_traced <= 16u * spp[k % 4],
+                  "rays only toward the roofed light: %llu",
+                  (unsigned long long)st.rays_traced);
+        } else {
+            CHECK(st.cones_decided == 0 && st.rays_traced == 32u * spp[k % 4],
+                  "no walk at %u spp: decided %llu, rays %llu", spp[k % 4],
+                  (unsigned long long)st.cones_decided,
+                  (unsigned long long)st.rays_traced);
+        }
     }
     q.samples = 64;
     check_modes("analytic roof", s, &b, &q);
@@ -568,10 +597,15 @@ static void test_adversarial(void) {
                     pts[3 * i + i1] = -3.0f - (float)i;
             }
         }
-        kdr_shadow_query q = make_query(pts, NP, lights, 5, 32);
         char label[64];
-        snprintf(label, sizeof label, "split %zu axis %d at %g", c, k, pos[c]);
-        check_modes(label, s, &b, &q);
+        /* 32 spp walks; 4 and 16 take the cheap test's any-hit bundles */
+        const uint32_t spp[3] = {32, 4, 16};
+        for (int j = 0; j < 3; j++) {
+            kdr_shadow_query q = make_query(pts, NP, lights, 5, spp[j]);
+            snprintf(label, sizeof label, "split %zu axis %d at %g, %u spp", c, k,
+                     pos[c], spp[j]);
+            check_modes(label, s, &b, &q);
+        }
     }
     kdr_scene_free(s);
     free(b.v);
