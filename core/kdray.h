@@ -117,6 +117,8 @@ typedef struct kdr_hit {
 typedef enum kdr_query {
     KDR_CLOSEST = 0, /* nearest hit */
     KDR_ANY = 1,     /* occlusion: any hit in [tmin, tmax] */
+    KDR_ALL = 2,     /* every hit, capped (kdr_all_batch only) */
+    KDR_COUNT = 3,   /* number of hits (kdr_count_batch only) */
 } kdr_query;
 
 /* Closest hit; returns 1 on hit, 0 on miss (hit filled either way). A ray
@@ -162,6 +164,40 @@ int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
 
 /* 1 if the CPU runs the 8-wide (AVX2) bundle code. */
 int kdr_cpu_has_avx2(void);
+
+/* ---- all hits and hit counts (core/kd_all.c) -------------------------------
+ * A hit is a triangle that the watertight test (core/kd_tri.h) accepts with
+ * tmin <= t <= tmax. Nothing is merged: a ray through an edge shared by two
+ * triangles hits both (two hits at the same t), through a vertex shared by
+ * k triangles up to k; each triangle counts once however many leaves hold
+ * it. The first of the all-hits list is kdr_intersect1's hit. */
+#define KDR_MAX_HITS_LIMIT 1024u
+
+/* The first min(max_hits, all) hits of the ray in increasing t, ties by
+ * smaller prim, into hits[0..*nhits). max_hits in 1..KDR_MAX_HITS_LIMIT,
+ * else KDR_EINVAL. An invalid ray (as for kdr_intersect1) has no hit. */
+int kdr_intersect_all1(const kdr_scene *scene, const kdr_ray *ray, uint32_t max_hits,
+                       kdr_hit *hits, uint32_t *nhits, kdr_trav_stats *stats);
+/* The number of hits, no cap. KDR_ENOMEM when its scratch list (one entry
+ * per triangle test that hits) cannot grow. */
+int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
+               kdr_trav_stats *stats);
+
+/* All hits of rays [first, first+count) of a batch: ray i's hits go to
+ * slots [i*max_hits, i*max_hits + nhits[i]) of t, prim, u, v (each
+ * n*max_hits long; slots past nhits[i] are not written). */
+typedef struct kdr_all_hits {
+    uint32_t *nhits; /* n */
+    float *t, *u, *v;
+    int32_t *prim;
+} kdr_all_hits;
+
+int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                  size_t count, uint32_t max_hits, kdr_all_hits *out,
+                  kdr_trav_stats *stats);
+/* counts[i] = kdr_count1 of ray i. */
+int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                    size_t count, uint32_t *counts, kdr_trav_stats *stats);
 
 /* ---- cone-shadow queries -------------------------------------------------- */
 

@@ -54,3 +54,13 @@ add_test(NAME accuracy_single COMMAND test_accuracy --caps accuracy_single singl
 add_test(NAME embree_stress COMMAND test_embree --caps embree_stress stress)
 add_test(NAME embree_stress_brute COMMAND test_embree --caps embree_stress stress 3000 brute)
 set_tests_properties(embree_stress_brute PROPERTIES DISABLED TRUE)
+
+# All hits and hit counts (issue 15) against brute force and Embree's
+# collected hits: the stress corpus, then the bundled default scene.
+add_executable(test_all ${CMAKE_CURRENT_SOURCE_DIR}/test_all.c)
+target_link_libraries(test_all PRIVATE kdray_testsupport)
+target_include_directories(test_all PRIVATE ${CMAKE_SOURCE_DIR}/core)
+if(TARGET kdray_scenes)
+  target_compile_definitions(test_all PRIVATE KDRAY_HAVE_GLTF=1)
+endif()
+add_test(NAME all_hits COMMAND test_all 1500 ${CMAKE_SOURCE_DIR}/scenes/default.glb)

@@ -26,6 +26,7 @@ void oracle_opts_default(oracle_opts *opts) {
     opts->robust = 1;
     opts->quality = RTC_BUILD_QUALITY_HIGH;
     opts->device_config = NULL;
+    opts->context_filter = 0;
 }
 
 void oracle_opts_judge(oracle_opts *opts) {
@@ -98,8 +99,10 @@ oracle *oracle_create(const float *tris, size_t ntris, const oracle_opts *opts) 
     rtcSetDeviceErrorFunction(o->device, on_error, NULL);
     rtcSetDeviceMemoryMonitorFunction(o->device, on_memory, o);
     o->scene = rtcNewScene(o->device);
-    rtcSetSceneFlags(o->scene, opts->robust ? RTC_SCENE_FLAG_ROBUST
-                                            : RTC_SCENE_FLAG_NONE);
+    rtcSetSceneFlags(o->scene,
+                     (opts->robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE) |
+                         (opts->context_filter ? RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION
+                                               : RTC_SCENE_FLAG_NONE));
     rtcSetSceneBuildQuality(o->scene, opts->quality);
     if (ntris > 0 && attach_triangles(o, tris, ntris, opts->quality) != 0) {
         oracle_free(o);
@@ -193,4 +196,77 @@ int oracle_occluded1(const oracle *o, const kdr_ray *ray) {
     rtcOccluded1(o->scene, &ctx, &r);
     /* Embree marks an occluded ray by setting tfar to -inf */
     return r.tfar == -INFINITY;
+}
+
+/* ---- every hit along a ray ------------------------------------------------ */
+
+typedef struct all_ctx {
+    struct RTCIntersectContext ctx; /* first: Embree hands this pointer back */
+    kdr_hit *hits;
+    size_t n, cap;
+    int oom;
+} all_ctx;
+
+/* rtcIntersect1 calls filters with N == 1: ray and hit are then an RTCRay
+ * and an RTCHit (the RTCRayN/RTCHitN accessors are C++ only). */
+static void record_hit(const struct RTCFilterFunctionNArguments *args) {
+    all_ctx *c = (all_ctx *)args->context;
+    if (args->N != 1 || !args->valid[0])
+        return;
+    args->valid[0] = 0; /* reject: traversal goes on */
+    const struct RTCHit *hit = (const struct RTCHit *)args->hit;
+    const struct RTCRay *ray = (const struct RTCRay *)args->ray;
+    for (size_t i = 0; i < c->n; i++)
+        if (c->hits[i].prim == (int32_t)hit->primID)
+            return;
+    if (c->n == c->cap) {
+        const size_t cap = c->cap ? 2 * c->cap : 64;
+        kdr_hit *h = realloc(c->hits, cap * sizeof *h);
+        if (!h) {
+            c->oom = 1;
+            return;
+        }
+        c->hits = h;
+        c->cap = cap;
+    }
+    c->hits[c->n++] = (kdr_hit){ray->tfar, hit->u, hit->v, (int32_t)hit->primID};
+}
+
+static int hit_order(const void *a, const void *b) {
+    const kdr_hit *x = a, *y = b;
+    if (x->t != y->t)
+        return x->t < y->t ? -1 : 1;
+    return (x->prim > y->prim) - (x->prim < y->prim);
+}
+
+size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap) {
+    if (!ray_is_valid(ray))
+        return 0;
+    all_ctx c = {.hits = NULL};
+    rtcInitIntersectContext(&c.ctx);
+    c.ctx.filter = record_hit;
+    struct RTCRayHit rh;
+    to_rtc_ray(ray, &rh.ray);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(o->scene, &c.ctx, &rh);
+    if (c.n > 1)
+        qsort(c.hits, c.n, sizeof *c.hits, hit_order);
+    for (size_t i = 0; i < c.n && i < cap; i++)
+        out[i] = c.hits[i];
+    free(c.hits);
+    return c.oom ? 0 : c.n;
+}
+
+size_t oracle_all_requery(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap) {
+    size_t n = 0;
+    kdr_ray r = *ray;
+    while (n < cap && oracle_intersect1(o, &r, &out[n])) {
+        r.tmin = nextafterf(out[n].t, INFINITY);
+        n++;
+        if (!(r.tmin <= r.tmax))
+            break;
+    }
+    return n;
 }
