@@ -73,22 +73,20 @@ static void keep_all(all_sink *s, float t, int32_t prim, float u, float v) {
     memmove(s->hits + lo + 1, s->hits + lo, (keep - lo) * sizeof *s->hits);
     s->hits[lo] = (kdr_hit){t, u, v, prim};
     s->n = keep + 1;
-    if (s->n == s->cap)
-        s->bound = s->hits[s->n - 1].t;
+    if (s->n == s->cap) s->bound = s->hits[s->n - 1].t;
 }
 
 /* count: appends prim, growing the buffer (first move: off the stack). */
 static void keep_prim(all_sink *s, int32_t prim) {
     if (s->np == s->pcap) {
         const size_t cap = 2 * s->pcap;
-        uint32_t *p = s->heap ? realloc(s->prims, cap * sizeof *p)
-                              : malloc(cap * sizeof *p);
+        uint32_t *p =
+            s->heap ? realloc(s->prims, cap * sizeof *p) : malloc(cap * sizeof *p);
         if (!p) {
             s->oom = 1;
             return;
         }
-        if (!s->heap)
-            memcpy(p, s->prims, s->np * sizeof *p);
+        if (!s->heap) memcpy(p, s->prims, s->np * sizeof *p);
         s->prims = p;
         s->pcap = cap;
         s->heap = 1;
@@ -104,8 +102,8 @@ static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *p
     for (uint32_t i = 0; i < count && !s->oom; i++) {
         float t, u, v;
         const int32_t prim = (int32_t)ref[i];
-        if (!kd_tri_intersect(pre, sc->tris + 9 * (size_t)prim, tmin, s->bound, &t,
-                              &u, &v))
+        if (!kd_tri_intersect(pre, sc->tris + 9 * (size_t)prim, tmin, s->bound, &t, &u,
+                              &v))
             continue;
         if (s->hits)
             keep_all(s, t, prim, u, v);
@@ -117,8 +115,7 @@ static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *p
 /* The front-to-back walk over every leaf the ray passes (within the slack)
  * that can still hold a hit at or before the bound. */
 static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
-    if (!sc || !sc->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax))
-        return;
+    if (!sc || !sc->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax)) return;
     float inv[3], ss[3], tn, tf;
     for (int k = 0; k < 3; k++)
         inv[k] = 1.0f / r->dir[k];
@@ -165,13 +162,11 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
         if (n) {
             s->nodes++;
             test_leaf(sc, n, &pre, r->tmin, s);
-            if (s->oom)
-                return;
+            if (s->oom) return;
         }
         const float bound = kd_term_bound(s->bound);
         do {
-            if (sp == 0)
-                return;
+            if (sp == 0) return;
             --sp;
         } while (!(stack[sp].tn <= bound));
         n = stack[sp].node;
@@ -181,8 +176,7 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
 }
 
 static void add_stats(kdr_trav_stats *st, const all_sink *s) {
-    if (!st)
-        return;
+    if (!st) return;
     st->rays++;
     st->nodes_visited += s->nodes;
     st->tri_tests += s->tests;
@@ -190,8 +184,7 @@ static void add_stats(kdr_trav_stats *st, const all_sink *s) {
 
 int kdr_intersect_all1(const kdr_scene *scene, const kdr_ray *ray, uint32_t max_hits,
                        kdr_hit *hits, uint32_t *nhits, kdr_trav_stats *stats) {
-    if (nhits)
-        *nhits = 0;
+    if (nhits) *nhits = 0;
     if (!scene || !ray || !hits || !nhits || max_hits == 0 ||
         max_hits > KDR_MAX_HITS_LIMIT)
         return KDR_EINVAL;
@@ -209,23 +202,18 @@ static int cmp_u32(const void *a, const void *b) {
 
 int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
                kdr_trav_stats *stats) {
-    if (count)
-        *count = 0;
-    if (!scene || !ray || !count)
-        return KDR_EINVAL;
+    if (count) *count = 0;
+    if (!scene || !ray || !count) return KDR_EINVAL;
     uint32_t local[KD_COUNT_STACK];
     all_sink s = {.prims = local, .pcap = KD_COUNT_STACK, .bound = ray->tmax};
     walk(scene, ray, &s);
     add_stats(stats, &s);
-    if (!s.oom && s.np > 1)
-        qsort(s.prims, s.np, sizeof *s.prims, cmp_u32);
+    if (!s.oom && s.np > 1) qsort(s.prims, s.np, sizeof *s.prims, cmp_u32);
     uint32_t distinct = 0;
     for (size_t i = 0; i < s.np; i++)
         distinct += i == 0 || s.prims[i] != s.prims[i - 1];
-    if (s.heap)
-        free(s.prims);
-    if (s.oom)
-        return KDR_ENOMEM;
+    if (s.heap) free(s.prims);
+    if (s.oom) return KDR_ENOMEM;
     *count = distinct;
     return KDR_OK;
 }
@@ -242,12 +230,9 @@ static void batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
 }
 
 static int batch_ok(const kdr_ray_batch *b, size_t first, size_t count) {
-    if (!b || !b->org || !b->dir)
-        return 0;
-    if (b->org_stride != 0 && b->org_stride != 3)
-        return 0;
-    if ((b->tmin && b->tmin_stride > 1) || (b->tmax && b->tmax_stride > 1))
-        return 0;
+    if (!b || !b->org || !b->dir) return 0;
+    if (b->org_stride != 0 && b->org_stride != 3) return 0;
+    if ((b->tmin && b->tmin_stride > 1) || (b->tmax && b->tmax_stride > 1)) return 0;
     return first <= b->n && count <= b->n - first;
 }
 
@@ -278,14 +263,12 @@ int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t fir
 
 int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
                     size_t count, uint32_t *counts, kdr_trav_stats *stats) {
-    if (!scene || !batch_ok(batch, first, count) || !counts)
-        return KDR_EINVAL;
+    if (!scene || !batch_ok(batch, first, count) || !counts) return KDR_EINVAL;
     for (size_t i = first; i < first + count; i++) {
         kdr_ray r;
         batch_ray(batch, i, &r);
         const int rc = kdr_count1(scene, &r, &counts[i], stats);
-        if (rc != KDR_OK)
-            return rc;
+        if (rc != KDR_OK) return rc;
     }
     return KDR_OK;
 }

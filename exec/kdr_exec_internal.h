@@ -73,7 +73,9 @@ struct kdr_exec_job {
     union {
         struct {
             kdr_bundle_request req;
-            kdr_hits hits;
+            kdr_hits hits;     /* closest, any */
+            kdr_all_hits all;  /* all: max_hits slots per ray; count: nhits */
+            int32_t *offset;   /* all: n + 1, filled when encoding */
         } bundle;
         struct {
             kdr_frustum_request req;

@@ -87,8 +87,14 @@ static int bundle_parse(kdr_exec_job *j) {
     j->parsed_bytes = 0;
     for (int i = 0; i < 4; i++)
         if (r->owned[i]) j->parsed_bytes += floats[i] * sizeof(float);
-    j->answer_estimate =
-        hits_estimate(b->n, r->query, r->fields, answer_encoding(j, r->encoding));
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    if (r->query == KDR_ALL) /* slots, offsets, answer */
+        j->answer_estimate = b->n * (size_t)r->max_hits * 16 + (2 * b->n + 1) * 4 +
+                             kdr_proto_all_answer_max(b->n, r->max_hits, r->fields, enc);
+    else if (r->query == KDR_COUNT)
+        j->answer_estimate = b->n * 4 + kdr_proto_counts_answer_max(b->n, enc);
+    else
+        j->answer_estimate = hits_estimate(b->n, r->query, r->fields, enc);
     j->nchunks = chunks_of(b->n, KDR_EXEC_CHUNK_RAYS);
     j->work_rays = b->n;
     j->deadline_ms = r->deadline_ms;
@@ -96,22 +102,85 @@ static int bundle_parse(kdr_exec_job *j) {
 }
 
 static int bundle_alloc(kdr_exec_job *j) {
-    return hits_alloc(&j->k.bundle.hits, j->k.bundle.req.batch.n, j->k.bundle.req.query);
+    const kdr_bundle_request *r = &j->k.bundle.req;
+    kdr_all_hits *a = &j->k.bundle.all;
+    memset(a, 0, sizeof *a);
+    j->k.bundle.offset = NULL;
+    memset(&j->k.bundle.hits, 0, sizeof j->k.bundle.hits);
+    const size_t n = r->batch.n ? r->batch.n : 1;
+    if (r->query == KDR_COUNT)
+        return (a->nhits = malloc(n * sizeof *a->nhits)) ? 0 : KDR_ENOMEM;
+    if (r->query != KDR_ALL)
+        return hits_alloc(&j->k.bundle.hits, r->batch.n, r->query);
+    const size_t slots = n * r->max_hits;
+    a->nhits = malloc(n * sizeof *a->nhits);
+    a->t = malloc(slots * sizeof *a->t);
+    a->u = malloc(slots * sizeof *a->u);
+    a->v = malloc(slots * sizeof *a->v);
+    a->prim = malloc(slots * sizeof *a->prim);
+    j->k.bundle.offset = malloc((n + 1) * sizeof *j->k.bundle.offset);
+    return a->nhits && a->t && a->u && a->v && a->prim && j->k.bundle.offset ? 0
+                                                                            : KDR_ENOMEM;
 }
 
 static void bundle_chunk(kdr_exec_job *j, size_t c) {
     const kdr_bundle_request *r = &j->k.bundle.req;
     size_t first, count;
     kdr_exec_chunk_range(r->batch.n, KDR_EXEC_CHUNK_RAYS, c, &first, &count);
+    if (r->query == KDR_ALL) { /* one way to walk: both modes are the same */
+        kdr_exec_note_rc(j, kdr_all_batch(j->q->scene, &r->batch, first, count, r->max_hits,
+                                          &j->k.bundle.all, NULL));
+        return;
+    }
+    if (r->query == KDR_COUNT) {
+        kdr_exec_note_rc(j, kdr_count_batch(j->q->scene, &r->batch, first, count,
+                                            j->k.bundle.all.nhits, NULL));
+        return;
+    }
     kdr_trav_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE;
     kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &r->batch, first, count, r->query,
                                         mode, &j->k.bundle.hits, NULL));
+}
+
+/* The all answer's flat arrays: each ray's hits moved down from its slots
+ * (ray i's slots start at i * max_hits >= its flat offset, so moving in
+ * ray order never overwrites what is still to be moved). */
+static void all_compact(kdr_exec_job *j) {
+    const kdr_bundle_request *r = &j->k.bundle.req;
+    kdr_all_hits *a = &j->k.bundle.all;
+    int32_t *off = j->k.bundle.offset;
+    size_t at = 0;
+    for (size_t i = 0; i < r->batch.n; i++) {
+        off[i] = (int32_t)at;
+        const size_t from = i * (size_t)r->max_hits, m = a->nhits[i];
+        if (from != at) {
+            memmove(a->t + at, a->t + from, m * sizeof *a->t);
+            memmove(a->u + at, a->u + from, m * sizeof *a->u);
+            memmove(a->v + at, a->v + from, m * sizeof *a->v);
+            memmove(a->prim + at, a->prim + from, m * sizeof *a->prim);
+        }
+        at += m;
+    }
+    off[r->batch.n] = (int32_t)at;
 }
 
 static int bundle_encode(kdr_exec_job *j) {
     const kdr_bundle_request *r = &j->k.bundle.req;
     const kdr_encoding enc = answer_encoding(j, r->encoding);
     j->q->result.rays = r->batch.n;
+    if (r->query == KDR_COUNT)
+        return encoded(j,
+                       kdr_proto_encode_counts(j->k.bundle.all.nhits, r->batch.n, enc,
+                                               &j->q->result.body),
+                       enc);
+    if (r->query == KDR_ALL) {
+        all_compact(j);
+        const kdr_all_hits *a = &j->k.bundle.all;
+        const kdr_all_answer ans = {r->batch.n, (const int32_t *)(const void *)a->nhits,
+                                    j->k.bundle.offset, a->t, a->u, a->v, a->prim};
+        return encoded(j, kdr_proto_encode_all(&ans, r->fields, enc, &j->q->result.body),
+                       enc);
+    }
     return encoded(j,
                    kdr_proto_encode_hits_fields(&j->k.bundle.hits, r->batch.n, r->query,
                                                 r->fields, enc, &j->q->result.body),
@@ -120,6 +189,15 @@ static int bundle_encode(kdr_exec_job *j) {
 
 static void bundle_release(kdr_exec_job *j) {
     hits_free(&j->k.bundle.hits);
+    kdr_all_hits *a = &j->k.bundle.all;
+    free(a->nhits);
+    free(a->t);
+    free(a->u);
+    free(a->v);
+    free(a->prim);
+    memset(a, 0, sizeof *a);
+    free(j->k.bundle.offset);
+    j->k.bundle.offset = NULL;
     kdr_bundle_request_free(&j->k.bundle.req);
 }
 

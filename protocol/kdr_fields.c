@@ -307,6 +307,22 @@ int kdr_pf_query(const cJSON *root, kdr_query *out, kdr_proto_error *err) {
     return 0;
 }
 
+int kdr_pf_bundle_query(const cJSON *root, kdr_query *out, kdr_proto_error *err) {
+    static const char *const names[] = {"closest", "any", "all", "count"};
+    static const kdr_query values[] = {KDR_CLOSEST, KDR_ANY, KDR_ALL, KDR_COUNT};
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(root, "query");
+    *out = KDR_CLOSEST;
+    if (!it)
+        return 0;
+    for (size_t k = 0; k < 4; k++)
+        if (cJSON_IsString(it) && it->valuestring && strcmp(it->valuestring, names[k]) == 0) {
+            *out = values[k];
+            return 0;
+        }
+    return kdr_proto_error_set(err, 400,
+                               "query: must be \"closest\", \"any\", \"all\" or \"count\"");
+}
+
 int kdr_pf_encoding(const cJSON *root, kdr_encoding *out, kdr_proto_error *err) {
     int v;
     if (pf_choice(root, "encoding", "json", "base64", &v, err))
@@ -348,9 +364,13 @@ const kdr_field_info kdr_field_table[KDR_FIELD_COUNT] = {
 int kdr_pf_fields(const cJSON *root, kdr_query query, unsigned *out,
                   kdr_proto_error *err) {
     const cJSON *fs = cJSON_GetObjectItemCaseSensitive(root, "fields");
-    *out = query == KDR_ANY ? KDR_FIELDS_ANY : KDR_FIELDS_CLOSEST;
+    *out = query == KDR_ANY ? KDR_FIELDS_ANY : query == KDR_COUNT ? 0 : KDR_FIELDS_CLOSEST;
     if (!fs)
         return 0;
+    if (query == KDR_COUNT)
+        return kdr_proto_error_set(err, 400,
+                                   "fields: not used by \"query\": \"count\" (its answer "
+                                   "is nhits)");
     if (!cJSON_IsArray(fs) || !fs->child)
         return kdr_proto_error_set(err, 400,
                                    "fields: expected a non-empty array of field names");
@@ -368,6 +388,11 @@ int kdr_pf_fields(const cJSON *root, kdr_query query, unsigned *out,
                                        "fields[%zu]: unknown field \"%.40s\" (t, prim, u, v, "
                                        "hit)",
                                        i, it->valuestring);
+        if (query == KDR_ALL && fi->bit == KDR_FIELD_HIT)
+            return kdr_proto_error_set(err, 400,
+                                       "fields[%zu]: \"hit\" is not a field of \"query\": "
+                                       "\"all\" (t, prim, u, v)",
+                                       i);
         if (fi->closest_only && query == KDR_ANY)
             return kdr_proto_error_set(err, 400,
                                        "fields[%zu]: \"%s\" needs \"query\": \"closest\"", i,

@@ -149,6 +149,8 @@ int kdr_pf_float(const cJSON *item, const char *name, float *out,
 int kdr_pf_int(const cJSON *item, const char *name, double lo, double hi,
                const char *range_text, uint64_t *out, kdr_proto_error *err);
 int kdr_pf_query(const cJSON *root, kdr_query *out, kdr_proto_error *err);
+/* The bundle's "query": closest, any, all or count. */
+int kdr_pf_bundle_query(const cJSON *root, kdr_query *out, kdr_proto_error *err);
 int kdr_pf_encoding(const cJSON *root, kdr_encoding *out, kdr_proto_error *err);
 /* "fields" for a bundle / frustum query: KDR_FIELD_* bits, the query's
  * defaults when absent. */

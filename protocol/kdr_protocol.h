@@ -61,6 +61,8 @@ extern "C" {
 #define KDR_PROTO_MAX_SAMPLES 4096
 #define KDR_PROTO_DEFAULT_SEED 1
 #define KDR_PROTO_DEFAULT_EPSILON 1e-4f
+/* bundle "query": "all": "max_hits" default and limit (the core's) */
+#define KDR_PROTO_DEFAULT_MAX_HITS 16u
 #define KDR_PROTO_DEFAULT_TILE 8
 #define KDR_PROTO_MIN_TILE 4
 #define KDR_PROTO_MAX_TILE 64
@@ -160,7 +162,8 @@ const char *kdr_proto_encoding_media(kdr_encoding enc);
 /* ---- answer fields ("fields": [...]) ----------------------------------------- */
 
 /* What a bundle or frustum answer holds, as a bit set. Defaults: closest ->
- * t, prim, u, v; any -> hit. "hit" (0/1) may also be asked of a closest
+ * t, prim, u, v; any -> hit; all (bundle) -> t, prim, u, v of every hit
+ * ("hit" not allowed); count (bundle) -> no fields (0: "fields" refused). "hit" (0/1) may also be asked of a closest
  * query (1 where prim >= 0); t, prim, u, v only of closest queries. New
  * per-ray attributes get the next bits and a row in kdr_fields.c. */
 #define KDR_FIELD_T (1u << 0)
@@ -173,8 +176,9 @@ const char *kdr_proto_encoding_media(kdr_encoding enc);
 
 /* POST /v1/scenes/{name}/bundle */
 typedef struct kdr_bundle_request {
-    kdr_ray_batch batch; /* ready for kdr_trace_batch */
-    kdr_query query;
+    kdr_ray_batch batch; /* ready for kdr_trace_batch / kdr_all_batch */
+    kdr_query query;     /* closest, any, all or count */
+    uint32_t max_hits;   /* all: 1..KDR_MAX_HITS_LIMIT (default 16); else 0 */
     kdr_encoding encoding;
     unsigned fields;     /* KDR_FIELD_* bits, never 0 */
     double deadline_ms;  /* "deadline_ms": 0 when absent */
@@ -241,6 +245,27 @@ int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
  * be valid for the query (the parsers ensure it): else KDR_EINVAL. */
 int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query,
                                  unsigned fields, kdr_encoding enc, kdr_buf *out);
+
+/* Bundle "query": "all": {"count":N,"nhits":[N],"offset":[N+1], then the
+ * chosen fields of t, prim, u, v, each offset[N] long}: ray i's hits are
+ * entries offset[i] .. offset[i+1]-1, in increasing t (ties by prim).
+ * nhits and offset are int32 ({"i32": ...} in base64, tag 78 in CBOR). */
+typedef struct kdr_all_answer {
+    size_t n;               /* rays */
+    const int32_t *nhits;   /* n */
+    const int32_t *offset;  /* n + 1 */
+    const float *t, *u, *v; /* offset[n] each (only the chosen fields read) */
+    const int32_t *prim;
+} kdr_all_answer;
+int kdr_proto_encode_all(const kdr_all_answer *a, unsigned fields, kdr_encoding enc,
+                         kdr_buf *out);
+/* Bound for n rays of at most max_hits hits each (see the hits bound). */
+size_t kdr_proto_all_answer_max(size_t n, size_t max_hits, unsigned fields,
+                                kdr_encoding enc);
+/* Bundle "query": "count": {"count":N,"nhits":[N int32]}. */
+int kdr_proto_encode_counts(const uint32_t *counts, size_t n, kdr_encoding enc,
+                            kdr_buf *out);
+size_t kdr_proto_counts_answer_max(size_t n, kdr_encoding enc);
 
 /* {"count":N,"visibility":[N*nlights floats]} plus "stats" when stats is
  * not NULL. */

@@ -274,6 +274,66 @@ int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
         hits, n, query, query == KDR_ANY ? KDR_FIELDS_ANY : KDR_FIELDS_CLOSEST, enc, out);
 }
 
+/* ---- all hits and counts ------------------------------------------------------- */
+
+size_t kdr_proto_all_answer_max(size_t n, size_t max_hits, unsigned fields,
+                                kdr_encoding enc) {
+    const array_src ints = field_kind(KDR_FIELD_PRIM);
+    size_t total = KDR_ANSWER_FIXED + array_max(&ints, n, enc) + array_max(&ints, n + 1, enc);
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
+        if (fields & kdr_field_table[k].bit) {
+            const array_src s = field_kind(kdr_field_table[k].bit);
+            total += array_max(&s, n * max_hits, enc);
+        }
+    return total;
+}
+
+int kdr_proto_encode_all(const kdr_all_answer *a, unsigned fields, kdr_encoding enc,
+                         kdr_buf *out) {
+    if (!a || !a->nhits || !a->offset || fields == 0 || (fields & ~KDR_FIELDS_CLOSEST))
+        return KDR_EINVAL;
+    size_t members = 2, max_hits = 0;
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
+        members += (fields & kdr_field_table[k].bit) != 0;
+    for (size_t i = 0; i < a->n; i++)
+        max_hits = (size_t)a->nhits[i] > max_hits ? (size_t)a->nhits[i] : max_hits;
+    const size_t total = (size_t)a->offset[a->n];
+    const array_src nh = {.i = a->nhits}, off = {.i = a->offset};
+    if (presize(out, kdr_proto_all_answer_max(a->n, max_hits, fields, enc)) ||
+        count_head(out, a->n, members, enc) || named_array(out, "nhits", &nh, a->n, enc) ||
+        named_array(out, "offset", &off, a->n + 1, enc))
+        return KDR_ENOMEM;
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
+        const unsigned bit = kdr_field_table[k].bit;
+        if (!(fields & bit))
+            continue;
+        const array_src s = bit == KDR_FIELD_T      ? (array_src){.f = a->t}
+                            : bit == KDR_FIELD_PRIM ? (array_src){.i = a->prim}
+                            : bit == KDR_FIELD_U    ? (array_src){.f = a->u}
+                                                    : (array_src){.f = a->v};
+        if (named_array(out, kdr_field_table[k].name, &s, total, enc))
+            return KDR_ENOMEM;
+    }
+    return close_answer(out, enc);
+}
+
+size_t kdr_proto_counts_answer_max(size_t n, kdr_encoding enc) {
+    const array_src ints = field_kind(KDR_FIELD_PRIM);
+    return KDR_ANSWER_FIXED + array_max(&ints, n, enc);
+}
+
+int kdr_proto_encode_counts(const uint32_t *counts, size_t n, kdr_encoding enc,
+                            kdr_buf *out) {
+    if (!counts)
+        return KDR_EINVAL;
+    /* counts are at most the triangle count (< 2^30): int32 on the wire */
+    const array_src s = {.i = (const int32_t *)(const void *)counts};
+    if (presize(out, kdr_proto_counts_answer_max(n, enc)) || count_head(out, n, 1, enc) ||
+        named_array(out, "nhits", &s, n, enc))
+        return KDR_ENOMEM;
+    return close_answer(out, enc);
+}
+
 static int shadow_stats(kdr_buf *out, const kdr_shadow_stats *stats, kdr_encoding enc) {
     if (enc == KDR_ENCODING_CBOR)
         return kdr_cbor_text(out, "stats") || kdr_cbor_map(out, 3) ||

@@ -56,3 +56,11 @@ add_test(NAME server_install
          COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_install.py
                  ${CMAKE_BINARY_DIR} "${KDRAY_SYSTEMD_ANALYZE}" ${PROJECT_SOURCE_DIR}/clients)
 set_tests_properties(server_install PROPERTIES TIMEOUT 300)
+
+# Bundle "query": "all" / "count" (issue 15) over HTTP, JSON, base64 and
+# CBOR (Debian's python3 for python3-cbor2, as server_codecs).
+add_test(NAME server_queries
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_server_queries.py
+                 $<TARGET_FILE:kdrayd> $<TARGET_FILE:kdray_trace>
+                 ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(server_queries PROPERTIES TIMEOUT 600)

@@ -44,34 +44,31 @@ static int g_printed;
 static void bad(tally *t, const char *what, const kdr_ray *r) {
     t->bad++;
     if (g_printed++ < 10)
-        fprintf(stderr,
-                "  UNEXPLAINED %s: org %a %a %a dir %a %a %a [%a, %a]\n", what,
-                r->org[0], r->org[1], r->org[2], r->dir[0], r->dir[1], r->dir[2],
-                r->tmin, r->tmax);
+        fprintf(stderr, "  UNEXPLAINED %s: org %a %a %a dir %a %a %a [%a, %a]\n", what,
+                r->org[0], r->org[1], r->org[2], r->dir[0], r->dir[1], r->dir[2], r->tmin,
+                r->tmax);
 }
 
 static int by_t_prim(const void *a, const void *b) {
     const kdr_hit *x = a, *y = b;
-    if (x->t != y->t)
-        return x->t < y->t ? -1 : 1;
+    if (x->t != y->t) return x->t < y->t ? -1 : 1;
     return (x->prim > y->prim) - (x->prim < y->prim);
 }
 
 /* Every hit by brute force, sorted; returns the count (<= cap written). */
 static size_t brute_all(const float *tris, size_t ntris, const kdr_ray *r, kdr_hit *out,
                         size_t cap) {
-    if (!kd_ray_valid(r->org, r->dir, r->tmin, r->tmax))
-        return 0;
+    if (!kd_ray_valid(r->org, r->dir, r->tmin, r->tmax)) return 0;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
     size_t n = 0;
     for (size_t p = 0; p < ntris; p++) {
         const float *tri = tris + 9 * p;
         float t, u, v;
-        if (kd_tri_degenerate(tri) || !kd_tri_intersect(&pre, tri, r->tmin, r->tmax, &t, &u, &v))
+        if (kd_tri_degenerate(tri) ||
+            !kd_tri_intersect(&pre, tri, r->tmin, r->tmax, &t, &u, &v))
             continue;
-        if (n < cap)
-            out[n] = (kdr_hit){t, u, v, (int32_t)p};
+        if (n < cap) out[n] = (kdr_hit){t, u, v, (int32_t)p};
         n++;
     }
     qsort(out, n < cap ? n : cap, sizeof *out, by_t_prim);
@@ -84,8 +81,7 @@ static int same_hit(const kdr_hit *a, const kdr_hit *b) {
 
 static const kdr_hit *find_prim(const kdr_hit *h, size_t n, int32_t prim) {
     for (size_t i = 0; i < n; i++)
-        if (h[i].prim == prim)
-            return &h[i];
+        if (h[i].prim == prim) return &h[i];
     return NULL;
 }
 
@@ -181,8 +177,7 @@ static void check_batch(const kdr_scene *sc, const kdr_ray *rays, size_t n, tall
         }
         for (size_t i = 0; i < n; i++) {
             kdr_ray r = rays[i];
-            if (shared)
-                memcpy(r.org, org, sizeof r.org);
+            if (shared) memcpy(r.org, org, sizeof r.org);
             kdr_hit h[4];
             uint32_t m = 0, c = 0;
             kdr_intersect_all1(sc, &r, K, h, &m, NULL);
@@ -191,8 +186,7 @@ static void check_batch(const kdr_scene *sc, const kdr_ray *rays, size_t n, tall
             for (uint32_t k = 0; ok && k < m; k++)
                 ok = ht[i * K + k] == h[k].t && hp[i * K + k] == h[k].prim &&
                      hu[i * K + k] == h[k].u && hv[i * K + k] == h[k].v;
-            if (!ok)
-                bad(t, "batch answer differs from the single-ray one", &r);
+            if (!ok) bad(t, "batch answer differs from the single-ray one", &r);
         }
     }
     free(org), free(dir), free(tmin), free(tmax), free(nh), free(cnt);
@@ -238,14 +232,14 @@ static int run_scene(const char *label, const float *tris, size_t ntris,
 static int api_errors(void) {
     const float tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
     kdr_scene *sc = NULL;
-    if (kdr_scene_build(tri, 1, NULL, NULL, NULL, &sc) != KDR_OK)
-        return 1;
+    if (kdr_scene_build(tri, 1, NULL, NULL, NULL, &sc) != KDR_OK) return 1;
     kdr_ray r = {{0.25f, 0.25f, 1}, {0, 0, -1}, 0, INFINITY};
     kdr_hit h[2];
     uint32_t n = 7, c = 0;
     int fails = 0;
     fails += kdr_intersect_all1(sc, &r, 0, h, &n, NULL) != KDR_EINVAL || n != 0;
-    fails += kdr_intersect_all1(sc, &r, KDR_MAX_HITS_LIMIT + 1, h, &n, NULL) != KDR_EINVAL;
+    fails +=
+        kdr_intersect_all1(sc, &r, KDR_MAX_HITS_LIMIT + 1, h, &n, NULL) != KDR_EINVAL;
     fails += kdr_intersect_all1(NULL, &r, 1, h, &n, NULL) != KDR_EINVAL;
     fails += kdr_count1(sc, NULL, &c, NULL) != KDR_EINVAL;
     fails += kdr_intersect_all1(sc, &r, 2, h, &n, NULL) != KDR_OK || n != 1 ||
@@ -258,8 +252,7 @@ static int api_errors(void) {
     r.dir[2] = 0.0f;
     fails += kdr_intersect_all1(sc, &r, 2, h, &n, NULL) != KDR_OK || n != 0;
     kdr_scene_free(sc);
-    if (fails)
-        fprintf(stderr, "api_errors: %d checks failed\n", fails);
+    if (fails) fprintf(stderr, "api_errors: %d checks failed\n", fails);
     return fails;
 }
 
@@ -268,18 +261,16 @@ static int api_errors(void) {
 static int shared_edge(void) {
     const float tris[18] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
     kdr_scene *sc = NULL;
-    if (kdr_scene_build(tris, 2, NULL, NULL, NULL, &sc) != KDR_OK)
-        return 1;
+    if (kdr_scene_build(tris, 2, NULL, NULL, NULL, &sc) != KDR_OK) return 1;
     kdr_ray r = {{0.5f, 0.5f, 1}, {0, 0, -1}, 0, INFINITY};
     kdr_hit h[4];
     uint32_t n = 0, c = 0;
     kdr_intersect_all1(sc, &r, 4, h, &n, NULL);
     kdr_count1(sc, &r, &c, NULL);
     kdr_scene_free(sc);
-    const int ok = n == 2 && c == 2 && h[0].prim == 0 && h[1].prim == 1 && h[0].t == 1.0f &&
-                   h[1].t == 1.0f;
-    if (!ok)
-        fprintf(stderr, "shared_edge: n %u count %u\n", n, c);
+    const int ok = n == 2 && c == 2 && h[0].prim == 0 && h[1].prim == 1 &&
+                   h[0].t == 1.0f && h[1].t == 1.0f;
+    if (!ok) fprintf(stderr, "shared_edge: n %u count %u\n", n, c);
     return !ok;
 }
 
@@ -290,8 +281,7 @@ int main(int argc, char **argv) {
     kdr_ray *rays = malloc((nrays + 400) * sizeof *rays);
     for (int k = 0; k < STRESS_NSCENES; k++) {
         stress_scene s;
-        if (stress_scene_make((stress_scene_kind)k, SEED, &s) != 0)
-            return 1;
+        if (stress_scene_make((stress_scene_kind)k, SEED, &s) != 0) return 1;
         stress_rays(&s, STRESS_RAYS_MIXED, SEED + (uint64_t)k, nrays, rays);
         const size_t ni = stress_inside_rays(&s, SEED, 400, rays + nrays);
         fails += run_scene(stress_scene_name((stress_scene_kind)k), s.tris, s.ntris, rays,
@@ -308,7 +298,8 @@ int main(int argc, char **argv) {
         }
         stress_rng rng;
         stress_rng_seed(&rng, SEED);
-        kdr_bounds bb = {{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+        kdr_bounds bb = {{INFINITY, INFINITY, INFINITY},
+                         {-INFINITY, -INFINITY, -INFINITY}};
         for (size_t i = 0; i < 3 * g->ntris; i++)
             for (int k = 0; k < 3; k++) {
                 const float x = g->tris[3 * i + k];
@@ -317,7 +308,8 @@ int main(int argc, char **argv) {
             }
         for (size_t i = 0; i < nrays; i++) {
             for (int k = 0; k < 3; k++)
-                rays[i].org[k] = bb.min[k] + (bb.max[k] - bb.min[k]) * stress_rng_float(&rng);
+                rays[i].org[k] =
+                    bb.min[k] + (bb.max[k] - bb.min[k]) * stress_rng_float(&rng);
             stress_rng_dir(&rng, rays[i].dir);
             rays[i].tmin = 0.0f;
             rays[i].tmax = INFINITY;

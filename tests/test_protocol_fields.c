@@ -186,10 +186,72 @@ static void test_answer_bounds(void) {
     }
 }
 
+/* "all" and "count" answers (issue 15): n rays of 0..4 hits with the
+ * longest values, every field set and encoding, stay within their bounds. */
+static void test_all_bounds(void) {
+    static const size_t sizes[] = {1, 2, 1000, 3073};
+    static const kdr_encoding encs[] = {KDR_ENCODING_JSON, KDR_ENCODING_BASE64,
+                                        KDR_ENCODING_CBOR};
+    char what[128];
+    for (size_t si = 0; si < sizeof sizes / sizeof sizes[0]; si++) {
+        const size_t n = sizes[si];
+        int32_t *nh = xmalloc(4 * n), *off = xmalloc(4 * (n + 1)), *prim = xmalloc(16 * n);
+        uint32_t *cnt = xmalloc(4 * n);
+        float *f = xmalloc(16 * n);
+        off[0] = 0;
+        for (size_t i = 0; i < n; i++) {
+            nh[i] = (int32_t)(n == 1 ? 4 : i % 5);
+            off[i + 1] = off[i] + nh[i];
+            cnt[i] = 1u << 30;
+        }
+        for (size_t k = 0; k < 4 * n; k++) {
+            f[k] = k % 2 ? -1.23456875e-5f : -9.87654321e-38f;
+            prim[k] = 1073741823;
+        }
+        const kdr_all_answer a = {n, nh, off, f, f, f, prim};
+        const size_t maxh = n < 5 ? (size_t)nh[n - 1] : 4; /* the encoder's own bound */
+        for (int e = 0; e < 3; e++) {
+            for (unsigned fs = 1; fs <= KDR_FIELDS_CLOSEST; fs++) {
+                kdr_buf out;
+                kdr_buf_init(&out);
+                snprintf(what, sizeof what, "all n=%zu enc %d fields %u", n, e, fs);
+                check_bound(&out, kdr_proto_all_answer_max(n, maxh, fs, encs[e]),
+                            kdr_proto_encode_all(&a, fs, encs[e], &out), what);
+                kdr_buf_free(&out);
+            }
+            kdr_buf out;
+            kdr_buf_init(&out);
+            snprintf(what, sizeof what, "count n=%zu enc %d", n, e);
+            check_bound(&out, kdr_proto_counts_answer_max(n, encs[e]),
+                        kdr_proto_encode_counts(cnt, n, encs[e], &out), what);
+            kdr_buf_free(&out);
+        }
+        kdr_buf out;
+        kdr_buf_init(&out);
+        CHECK(kdr_proto_encode_all(&a, KDR_FIELD_HIT, KDR_ENCODING_JSON, &out) == KDR_EINVAL,
+              "all refuses the hit field");
+        kdr_buf_free(&out);
+        free(nh), free(off), free(prim), free(cnt), free(f);
+    }
+    /* the JSON text of a small answer, exactly */
+    const int32_t nh[2] = {2, 0}, off[3] = {0, 2, 2}, prim[2] = {5, 9};
+    const float t[2] = {1.5f, 2.0f}, u[2] = {0.25f, 0.0f}, v[2] = {0.5f, 1.0f};
+    const kdr_all_answer a = {2, nh, off, t, u, v, prim};
+    kdr_buf out;
+    kdr_buf_init(&out);
+    CHECK(kdr_proto_encode_all(&a, KDR_FIELD_T | KDR_FIELD_PRIM, KDR_ENCODING_JSON, &out) ==
+                  0 &&
+              !strcmp(kdr_buf_cstr(&out), "{\"count\":2,\"nhits\":[2,0],\"offset\":[0,2,2],"
+                                          "\"t\":[1.5,2],\"prim\":[5,9]}"),
+          "all answer text: %s", out.data ? out.data : "(none)");
+    kdr_buf_free(&out);
+}
+
 int main(void) {
     test_fields_json();
     test_media();
     test_answer_bounds();
+    test_all_bounds();
     if (failures) {
         fprintf(stderr, "test_protocol_fields: %d checks failed\n", failures);
         return 1;

@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""test_server_queries.py - bundle "query": "all" and "count" over HTTP.
+
+    test_server_queries.py KDRAYD KDRAY_TRACE CLIENTS_DIR
+
+Starts kdrayd on the bundled default scene (--max-rays 6000000, so the
+rays * max_hits limit can be reached) and checks: the answers equal the
+executor's direct-core answers (kdray-trace) byte for byte; each ray's list
+is in increasing t (ties by prim), holds no prim twice and at most max_hits
+hits; its first hit is the closest query's hit bit for bit; nhits of
+"count" equals the uncapped list's length; offsets are the prefix sums;
+base64 and CBOR answers equal JSON ones; bad input gets a 400 or 413 that
+names the field. Run by Debian's /usr/bin/python3 (python3-cbor2).
+"""
+
+import json
+import os
+import struct
+import sys
+import urllib.request
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import test_server_lib as lib  # noqa: E402
+
+KDRAYD, TRACE, CLIENTS = sys.argv[1], sys.argv[2], sys.argv[3]
+lib.add_client_path(CLIENTS)
+from kdray_client import Client  # noqa: E402
+import cbor2  # noqa: E402
+
+SCENE = "default"
+PATH = "/v1/scenes/%s/bundle" % SCENE
+N = 5000  # two chunks
+
+
+def f32(x):
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+def post(c, body, accept=None):
+    headers = {"Accept": accept} if accept else None
+    return c.request("POST", PATH, json.dumps(body).encode(), "application/json",
+                     headers=headers)
+
+
+def problem(t, c, body, status, has):
+    code, _, data = post(c, body)
+    t.eq(code, status, "status for %s" % has)
+    detail = json.loads(data).get("detail", "")
+    t.check(has in detail, "detail %r names %r" % (detail, has))
+
+
+def test_all_and_count(t, c):
+    bounds = c.scene(SCENE)["bounds"]
+    o, d = lib.rays_into_box(bounds, N, seed=15)
+    payloads = [{"origins": o, "directions": d, "query": "all", "max_hits": k}
+                for k in (1, 4, 1024)] + [{"origins": o, "directions": d,
+                                            "query": "count"}]
+    core = lib.core_answers(TRACE, [("bundle", p, "fast") for p in payloads])
+    answers = []
+    for p, want in zip(payloads, core):
+        code, _, body = post(c, p)
+        t.eq(code, 200, "status of %s" % p.get("max_hits", "count"))
+        t.eq(body, want, "%s %s == kdray-trace bytes" % (p["query"], p.get("max_hits")))
+        answers.append(json.loads(body))
+    closest = c.bundle(SCENE, o, d, encoding="base64")
+    counts = answers[3]["nhits"]
+    t.eq(answers[3]["count"], N, "count answer's count")
+    full = answers[2]
+    multi = 0
+    for k, a in zip((1, 4, 1024), answers[:3]):
+        t.eq(len(a["nhits"]), N, "nhits length")
+        t.eq(len(a["offset"]), N + 1, "offset length")
+        t.eq(a["offset"][0], 0, "offset[0]")
+        bad_order = bad_first = bad_prefix = bad_count = 0
+        for i in range(N):
+            lo, hi = a["offset"][i], a["offset"][i + 1]
+            if hi - lo != a["nhits"][i] or a["nhits"][i] > k:
+                bad_count += 1
+            if k == 1024 and a["nhits"][i] != counts[i]:
+                bad_count += 1
+            if k < 1024 and a["nhits"][i] != min(k, counts[i]):
+                bad_count += 1
+            ts, ps = a["t"][lo:hi], a["prim"][lo:hi]
+            if len(set(ps)) != len(ps) or any(
+                    (ts[j], ps[j]) >= (ts[j + 1], ps[j + 1]) for j in range(len(ts) - 1)):
+                bad_order += 1
+            if hi > lo:
+                multi += k == 1024 and hi - lo > 1
+                if (ps[0] != closest["prim"][i] or f32(ts[0]) != closest["t"][i]
+                        or f32(a["u"][lo]) != closest["u"][i]):
+                    bad_first += 1
+            elif closest["prim"][i] >= 0:
+                bad_first += 1
+            flo = full["offset"][i]
+            if (ts != full["t"][flo:flo + hi - lo] or ps != full["prim"][flo:flo + hi - lo]):
+                bad_prefix += 1
+        t.eq(bad_count, 0, "max_hits %d: rays with a wrong nhits/offset" % k)
+        t.eq(bad_order, 0, "max_hits %d: rays not in (t, prim) order or a prim twice" % k)
+        t.eq(bad_first, 0, "max_hits %d: first hit != closest hit" % k)
+        t.eq(bad_prefix, 0, "max_hits %d: list != prefix of the full list" % k)
+    t.check(multi > N // 10, "many rays have several hits (%d)" % multi)
+    # the same answers in base64 and CBOR
+    b64 = c.bundle(SCENE, o, d, query="all", max_hits=4, encoding="base64")
+    t.eq(b64["prim"], answers[1]["prim"], "base64 prim")
+    t.eq(b64["nhits"], answers[1]["nhits"], "base64 nhits")
+    t.eq(b64["t"], [f32(x) for x in answers[1]["t"]], "base64 t")
+    code, hdr, body = post(c, payloads[1], accept="application/cbor")
+    t.eq(code, 200, "CBOR status")
+    cb = cbor2.loads(body)
+    ints = lambda tag: list(struct.unpack("<%di" % (len(tag.value) // 4), tag.value))
+    floats = lambda tag: list(struct.unpack("<%df" % (len(tag.value) // 4), tag.value))
+    t.eq(ints(cb["offset"]), answers[1]["offset"], "CBOR offset")
+    t.eq(ints(cb["prim"]), answers[1]["prim"], "CBOR prim")
+    t.eq(floats(cb["v"]), [f32(x) for x in answers[1]["v"]], "CBOR v")
+    cc = cbor2.loads(post(c, payloads[3], accept="application/cbor")[2])
+    t.eq(ints(cc["nhits"]), counts, "CBOR count nhits")
+    # a CBOR request (typed arrays, max_hits as a CBOR integer)
+    cbin = Client(c.url, binary=True)
+    got = cbin.bundle(SCENE, o, d, query="all", max_hits=4)
+    t.eq(list(got["prim"]), answers[1]["prim"], "CBOR request: prim")
+    t.eq(list(got["nhits"]), answers[1]["nhits"], "CBOR request: nhits")
+    sel = c.bundle(SCENE, o[:3], d[:30], query="all", fields=["prim"])
+    t.eq(sorted(sel), ["count", "nhits", "offset", "prim"], "fields select the arrays")
+
+
+def test_bad(t, c):
+    base = {"origins": [0, 0, 10], "directions": [0, 0, -1]}
+    problem(t, c, dict(base, query="all", max_hits=0), 400, "max_hits")
+    problem(t, c, dict(base, query="all", max_hits=1025), 400, "max_hits")
+    problem(t, c, dict(base, query="all", max_hits=2.5), 400, "max_hits")
+    problem(t, c, dict(base, query="closest", max_hits=3), 400, "max_hits")
+    problem(t, c, dict(base, query="count", fields=["t"]), 400, "fields")
+    problem(t, c, dict(base, query="all", fields=["hit"]), 400, "fields[0]")
+    problem(t, c, dict(base, query="every"), 400, "query")
+    many = {"origins": [0, 0, 10], "directions": [0, 0, -1] * 6000, "query": "all",
+            "max_hits": 1001}
+    problem(t, c, many, 413, "rays * max_hits")
+    many["max_hits"] = 1000
+    code, _, body = post(c, many)
+    t.eq(code, 200, "6000 rays * 1000 hits within --max-rays 6000000")
+    t.eq(json.loads(body)["nhits"], [3] * 6000, "three hits at a shared vertex")
+
+
+def main():
+    t = lib.Runner()
+    d = lib.Daemon(KDRAYD, ["--threads", "2", "--max-rays", "6000000"])
+    c = Client(d.url)
+    try:
+        t.run(test_all_and_count, c)
+        t.run(test_bad, c)
+    finally:
+        rc = d.stop()
+    if rc != 0:
+        print("FAIL kdrayd exited %s\n%s" % (rc, d.log_text()))
+        t.failures.append("exit status")
+    return t.finish()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
