@@ -32,6 +32,7 @@
 #include "kd_internal.h"
 #include "kd_traverse.h"
 #include "kd_tri.h"
+#include "kd_tri_ntri.h"
 
 #define KD_COUNT_STACK 256
 
@@ -94,21 +95,91 @@ static void keep_prim(all_sink *s, int32_t prim) {
     s->prims[s->np++] = (uint32_t)prim;
 }
 
+/* One accepted hit into the sink. */
+static inline void keep(all_sink *s, float t, int32_t prim, float u, float v) {
+    if (s->hits)
+        keep_all(s, t, prim, u, v);
+    else
+        keep_prim(s, prim);
+}
+
+/* Four references at once (the last group repeats its final reference: a
+ * hit found twice is kept once); the same float operations as
+ * kd_tri_intersect, so t, u, v are bit for bit the scalar ones. */
+static void test_group4(const kdr_scene *sc, const uint32_t *ref, uint32_t left,
+                        const kd_ntri_pre4 *pre4, float tmin, all_sink *s) {
+    const float *rows[4];
+    int32_t prims[4];
+    for (uint32_t j = 0; j < 4; j++) {
+        prims[j] = (int32_t)ref[j < left ? j : left - 1];
+        rows[j] = sc->tris + 9 * (size_t)prims[j];
+    }
+    f4 t, V, W, det;
+    const int hits =
+        kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(s->bound), &t, &V, &W, &det);
+    if (!hits) return;
+    _Alignas(16) float tv[4], vv[4], wv[4], dv[4];
+    f4_store(tv, t);
+    f4_store(vv, V);
+    f4_store(wv, W);
+    f4_store(dv, det);
+    for (int j = 0; j < 4; j++)
+        if ((hits >> j) & 1 && tv[j] <= s->bound)
+            keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+}
+
+/* Eight at a time (AVX2); the last group is the last eight references. Not
+ * inlined: the caller is not compiled for AVX2. */
+KD_AVX2 __attribute__((noinline)) static void
+test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
+           const kd_ray_pre *pre, float tmin, all_sink *s) {
+    kd_ntri_pre8 pre8;
+    kd_ntri_pre_init8(pre, &pre8);
+    const f8 tmin8 = f8_set1(tmin);
+    for (uint32_t i = 0; i < count && !s->oom; i += 8) {
+        const uint32_t base = i + 8 <= count ? i : count - 8;
+        const float *rows[8];
+        for (int j = 0; j < 8; j++)
+            rows[j] = sc->tris + 9 * (size_t)ref[base + j];
+        f8 t, V, W, det;
+        const int hits =
+            kd_ntri_test8(&pre8, rows, tmin8, f8_set1(s->bound), &t, &V, &W, &det);
+        if (!hits) continue;
+        _Alignas(32) float tv[8], vv[8], wv[8], dv[8];
+        f8_store(tv, t);
+        f8_store(vv, V);
+        f8_store(wv, W);
+        f8_store(dv, det);
+        for (int j = 0; j < 8; j++)
+            if ((hits >> j) & 1 && tv[j] <= s->bound)
+                keep(s, tv[j], (int32_t)ref[base + j], vv[j] / dv[j], wv[j] / dv[j]);
+    }
+}
+
+/* Every reference of leaf n over [tmin, bound]; leaves of at least
+ * KD_LEAF_AVX2_MIN / KD_LEAF_SIMD_MIN references eight / four at a time,
+ * as the single-ray walk does. */
 static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *pre,
-                      float tmin, all_sink *s) {
+                      const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s) {
     const uint32_t *ref = sc->refs + n->u.first;
     const uint32_t count = kd_count(n);
     s->tests += count;
+    if (sc->prefetch_leaves) kd_prefetch_tris(sc, ref, count);
+    if (avx2 && count >= KD_LEAF_AVX2_MIN) {
+        test_leaf8(sc, ref, count, pre, tmin, s);
+        return;
+    }
+    if (count >= KD_LEAF_SIMD_MIN) {
+        for (uint32_t i = 0; i < count && !s->oom; i += 4)
+            test_group4(sc, ref + i, count - i, pre4, tmin, s);
+        return;
+    }
     for (uint32_t i = 0; i < count && !s->oom; i++) {
         float t, u, v;
         const int32_t prim = (int32_t)ref[i];
-        if (!kd_tri_intersect(pre, sc->tris + 9 * (size_t)prim, tmin, s->bound, &t, &u,
-                              &v))
-            continue;
-        if (s->hits)
-            keep_all(s, t, prim, u, v);
-        else
-            keep_prim(s, prim);
+        if (kd_tri_intersect(pre, sc->tris + 9 * (size_t)prim, tmin, s->bound, &t, &u,
+                             &v))
+            keep(s, t, prim, u, v);
     }
 }
 
@@ -125,6 +196,9 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
         return;
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
+    kd_ntri_pre4 pre4;
+    kd_ntri_pre_init4(&pre, &pre4);
+    const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     all_todo stack[KD_MAX_DEPTH];
     int sp = 0;
     const kd_node *nodes = sc->nodes, *n = nodes;
@@ -161,7 +235,7 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
         }
         if (n) {
             s->nodes++;
-            test_leaf(sc, n, &pre, r->tmin, s);
+            test_leaf(sc, n, &pre, &pre4, avx2, r->tmin, s);
             if (s->oom) return;
         }
         const float bound = kd_term_bound(s->bound);

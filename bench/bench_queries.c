@@ -1,0 +1,180 @@
+/*
+ * bench_queries.c — the "queries" section (issue 15): every hit along a ray
+ * and hit counts, kdray against the two ways Embree users collect hits, in
+ * the same process and run, one thread, CPU time (bench.h's rules):
+ *  - capped lists (16 hits per ray): kdr_intersect_all1 against the
+ *    re-query loop on the rival's fast scene (closest hit, then again from
+ *    the next float past it; oracle_all_requery, which loses hits that
+ *    share a t, so it does less work than kdray's exact list);
+ *  - every hit (uncapped) and counts: kdr_intersect_all1 with cap 1024 and
+ *    kdr_count1 against a context filter that records every hit and
+ *    rejects it (oracle_all_filter) on the same fast HIGH-quality BVH with
+ *    the context-filter flag it needs.
+ * Workloads: "camera" (primary rays from outside through the scene: many
+ * surfaces per ray) and "random" (origins in the box). Checks: kdray's hit
+ * total equals the filter's within 0.1% (they differ only on rounding
+ * cases), and the re-query loop's is no larger than kdray's capped one.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bench.h"
+#include "oracle.h"
+#include "rival.h"
+
+#define CAPPED 16u
+
+typedef struct q_ctx {
+    const bench_scene *s;
+    const bench_workload *w;
+    const oracle *fast, *filter;
+    kdr_hit *buf;
+    uint64_t hits; /* the last pass's total */
+} q_ctx;
+
+static void kd_capped(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++) {
+        uint32_t n = 0;
+        kdr_intersect_all1(c->s->kd, &c->w->rays[i], CAPPED, c->buf, &n, NULL);
+        h += n;
+    }
+    c->hits = h;
+}
+
+static void kd_every(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++) {
+        uint32_t n = 0;
+        kdr_intersect_all1(c->s->kd, &c->w->rays[i], KDR_MAX_HITS_LIMIT, c->buf, &n,
+                           NULL);
+        h += n;
+    }
+    c->hits = h;
+}
+
+static void kd_count(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++) {
+        uint32_t n = 0;
+        kdr_count1(c->s->kd, &c->w->rays[i], &n, NULL);
+        h += n;
+    }
+    c->hits = h;
+}
+
+static void emb_requery(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++)
+        h += oracle_all_requery(c->fast, &c->w->rays[i], c->buf, CAPPED);
+    c->hits = h;
+}
+
+static void emb_filter(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++)
+        h += oracle_all_filter(c->filter, &c->w->rays[i], c->buf, KDR_MAX_HITS_LIMIT);
+    c->hits = h;
+}
+
+static const char *const q_workloads[] = {"camera", "random"};
+#define NWORK (sizeof q_workloads / sizeof *q_workloads)
+#define MAX_SCENES 32
+static char g_scene[MAX_SCENES][64];
+static int g_nscenes;
+
+static int queries_run(const bench_scene *s, const bench_opts *o) {
+    rival *filt = rival_create_filter(s->tris, s->ntris, RIVAL_QUALITY);
+    kdr_hit *buf = malloc(KDR_MAX_HITS_LIMIT * sizeof *buf);
+    if (!filt || !buf) {
+        rival_free(filt);
+        free(buf);
+        return -1;
+    }
+    if (g_nscenes < MAX_SCENES)
+        snprintf(g_scene[g_nscenes++], sizeof g_scene[0], "%s", s->name);
+    printf("\n== %s: %zu triangles, all hits and counts (CPU ms, best of %d)\n", s->name,
+           s->ntris, o->repeat);
+    int rc = 0;
+    for (size_t k = 0; k < NWORK && rc == 0; k++) {
+        bench_workload w;
+        if (bench_workload_make(&w, s->kd, q_workloads[k], o->rays) != 0) {
+            rc = -1;
+            break;
+        }
+        q_ctx ctx[5];
+        for (int m = 0; m < 5; m++)
+            ctx[m] = (q_ctx){s, &w, rival_oracle(s->emb), rival_oracle(filt), buf, 0};
+        bench_method m[5] = {
+            {"kd_all16", 0, NULL, kd_capped, &ctx[0], 0},
+            {"embree_requery16", BENCH_RIVAL, NULL, emb_requery, &ctx[1], 0},
+            {"kd_all", 0, NULL, kd_every, &ctx[2], 0},
+            {"kd_count", 0, NULL, kd_count, &ctx[3], 0},
+            {"embree_filter_all", BENCH_RIVAL, NULL, emb_filter, &ctx[4], 0},
+        };
+        bench_measure(m, 5, o->repeat, 200.0);
+        char wk[64];
+        for (int i = 0; i < 5; i++) {
+            const int capped = i < 2;
+            snprintf(wk, sizeof wk, "%s_%s", capped ? "all16" : "all", q_workloads[k]);
+            bench_summary_add(s, wk, m[i].name, w.n, m[i].best_ms, -1.0);
+        }
+        printf("%-8s hits: kd_all16 %llu, requery16 %llu, kd_all %llu, kd_count %llu, "
+               "filter %llu\n",
+               q_workloads[k], (unsigned long long)ctx[0].hits,
+               (unsigned long long)ctx[1].hits, (unsigned long long)ctx[2].hits,
+               (unsigned long long)ctx[3].hits, (unsigned long long)ctx[4].hits);
+        printf("%-8s ms:   kd_all16 %.1f, requery16 %.1f (kd %.2fx) | kd_all %.1f, "
+               "kd_count %.1f, filter %.1f (kd_all %.2fx, kd_count %.2fx)\n",
+               q_workloads[k], m[0].best_ms, m[1].best_ms, m[1].best_ms / m[0].best_ms,
+               m[2].best_ms, m[3].best_ms, m[4].best_ms, m[4].best_ms / m[2].best_ms,
+               m[4].best_ms / m[3].best_ms);
+        const double d = fabs((double)ctx[2].hits - (double)ctx[4].hits);
+        if (ctx[2].hits != ctx[3].hits || d > 0.001 * (double)ctx[4].hits + 2)
+            bench_fail("%s %s: kd_all %llu / kd_count %llu hits vs the filter's %llu",
+                       s->name, q_workloads[k], (unsigned long long)ctx[2].hits,
+                       (unsigned long long)ctx[3].hits, (unsigned long long)ctx[4].hits);
+        if (ctx[1].hits > ctx[0].hits)
+            bench_fail(
+                "%s %s: the re-query loop found more hits (%llu) than kd_all16 (%llu)",
+                s->name, q_workloads[k], (unsigned long long)ctx[1].hits,
+                (unsigned long long)ctx[0].hits);
+        bench_workload_free(&w);
+    }
+    rival_free(filt);
+    free(buf);
+    return rc;
+}
+
+static void queries_finish(const bench_opts *o) {
+    (void)o;
+    printf("\n== all hits: Embree ms / kdray ms (> 1: kdray faster)\n");
+    printf("%-10s | %-22s | %-22s | %-22s | %-22s\n", "scene", "all16 camera (requery)",
+           "all16 random (requery)", "all camera (filter)", "all random (filter)");
+    for (int i = 0; i < g_nscenes; i++) {
+        printf("%-10s", g_scene[i]);
+        static const char *const rows[4][3] = {
+            {"all16_camera", "kd_all16", "embree_requery16"},
+            {"all16_random", "kd_all16", "embree_requery16"},
+            {"all_camera", "kd_all", "embree_filter_all"},
+            {"all_random", "kd_all", "embree_filter_all"}};
+        for (int r = 0; r < 4; r++) {
+            const double kd = bench_summary_ms(g_scene[i], rows[r][0], rows[r][1]);
+            const double em = bench_summary_ms(g_scene[i], rows[r][0], rows[r][2]);
+            if (kd > 0 && em > 0)
+                printf(" | %22.2f", em / kd);
+            else
+                printf(" | %22s", "-");
+        }
+        printf("\n");
+    }
+}
+
+const bench_section bench_queries_section = {"queries", queries_run, queries_finish};
