@@ -199,6 +199,34 @@ int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t fir
 int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
                     size_t count, uint32_t *counts, kdr_trav_stats *stats);
 
+/* ---- closest points (core/kd_closest.c) ------------------------------------
+ * The point of the scene nearest to a query point: its triangle (prim),
+ * barycentrics (point = (1-u-v)*p0 + u*p1 + v*p2) and distance, found by a
+ * nearest-triangle search of the kd-tree. Distances are computed in double
+ * precision (kdr_point_triangle); among triangles at exactly the same
+ * distance the smallest prim wins. Zero-area triangles are never found. */
+typedef struct kdr_closest {
+    float point[3];
+    float distance; /* -1: nothing within max_distance */
+    float u, v;
+    int32_t prim;   /* -1: nothing within max_distance */
+} kdr_closest;
+
+/* The closest point within max_distance (>= 0; +inf: no limit; a triangle
+ * at exactly max_distance counts). KDR_EINVAL for a non-finite point or a
+ * negative / NaN max_distance. stats count points as rays. */
+int kdr_closest_point1(const kdr_scene *scene, const float point[3], float max_distance,
+                       kdr_closest *out, kdr_trav_stats *stats);
+/* Points [first, first+count) of points (3 floats each) into out[i]. */
+int kdr_closest_point_batch(const kdr_scene *scene, const float *points, size_t first,
+                            size_t count, float max_distance, kdr_closest *out,
+                            kdr_trav_stats *stats);
+/* The exact closest point q of triangle tri (9 floats) to p, in double:
+ * q = (1-u-v)*p0 + u*p1 + v*p2 and d2 = |p - q|^2. The one distance every
+ * search (and the Embree point-query callback of the benchmark) uses. */
+void kdr_point_triangle(const float p[3], const float *tri, double q[3], double *u,
+                        double *v, double *d2);
+
 /* ---- cone-shadow queries -------------------------------------------------- */
 
 typedef struct kdr_sphere_light {

@@ -64,3 +64,13 @@ if(TARGET kdray_scenes)
   target_compile_definitions(test_all PRIVATE KDRAY_HAVE_GLTF=1)
 endif()
 add_test(NAME all_hits COMMAND test_all 1500 ${CMAKE_SOURCE_DIR}/scenes/default.glb)
+
+# Closest points (issue 15): the distance against an independent double
+# reference, the kd search against brute force bit for bit and against
+# Embree's rtcPointQuery, on the stress corpus and the default scene.
+add_executable(test_closest ${CMAKE_CURRENT_SOURCE_DIR}/test_closest.c)
+target_link_libraries(test_closest PRIVATE kdray_testsupport)
+if(TARGET kdray_scenes)
+  target_compile_definitions(test_closest PRIVATE KDRAY_HAVE_GLTF=1)
+endif()
+add_test(NAME closest_point COMMAND test_closest 2000 ${CMAKE_SOURCE_DIR}/scenes/default.glb)

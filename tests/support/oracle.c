@@ -7,6 +7,7 @@
  */
 #define _POSIX_C_SOURCE 200809L
 #include "oracle.h"
+#include "kd_traverse.h"
 
 #include <math.h>
 #include <stdatomic.h>
@@ -269,4 +270,51 @@ size_t oracle_all_requery(const oracle *o, const kdr_ray *ray, kdr_hit *out, siz
             break;
     }
     return n;
+}
+
+/* ---- closest point: rtcPointQuery with a closest-triangle callback ------- */
+
+typedef struct cp_user {
+    const float *tris;
+    const float *p;
+    double d2;
+    kdr_closest best;
+} cp_user;
+
+static bool closest_triangle(struct RTCPointQueryFunctionArguments *args) {
+    cp_user *u = args->userPtr;
+    const unsigned prim = args->primID;
+    const float *tri = u->tris + 9 * (size_t)prim;
+    if (kd_tri_degenerate(tri))
+        return false;
+    double q[3], bu, bv, d2;
+    kdr_point_triangle(u->p, tri, q, &bu, &bv, &d2);
+    if (!(d2 < u->d2 || (d2 == u->d2 && (int32_t)prim < u->best.prim)))
+        return false;
+    u->d2 = d2;
+    u->best.prim = (int32_t)prim;
+    u->best.u = (float)bu;
+    u->best.v = (float)bv;
+    for (int k = 0; k < 3; k++)
+        u->best.point[k] = (float)q[k];
+    const float r = (float)sqrt(d2);
+    /* the query sphere shrinks to the best distance (rounded up: a tie at
+     * exactly that distance must still be reported) */
+    args->query->radius = nextafterf(r, INFINITY);
+    return true;
+}
+
+int oracle_closest_point(const oracle *o, const float *tris, const float p[3],
+                         float max_distance, kdr_closest *out) {
+    cp_user u = {tris, p, (double)max_distance * max_distance, {{0, 0, 0}, -1, 0, 0, -1}};
+    if (u.d2 > 0 && isinf(max_distance))
+        u.d2 = INFINITY;
+    struct RTCPointQuery q = {p[0], p[1], p[2], 0.0f, max_distance};
+    struct RTCPointQueryContext ctx;
+    rtcInitPointQueryContext(&ctx);
+    rtcPointQuery(o->scene, &q, &ctx, closest_triangle, &u);
+    *out = u.best;
+    if (u.best.prim >= 0)
+        out->distance = (float)sqrt(u.d2);
+    return u.best.prim >= 0;
 }

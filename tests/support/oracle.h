@@ -83,4 +83,12 @@ size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size
  * way. Returns the number written (<= cap). Any oracle. */
 size_t oracle_all_requery(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap);
 
+/* The closest point of the scene to p within max_distance, the way an
+ * Embree user gets it: rtcPointQuery with a callback that computes each
+ * candidate's distance (kdr_point_triangle, the core's double-precision
+ * distance, so answers compare bit for bit) and shrinks the query radius.
+ * tris: the triangles the oracle was built from. Returns 1 if found. */
+int oracle_closest_point(const oracle *o, const float *tris, const float p[3],
+                         float max_distance, kdr_closest *out);
+
 #endif /* KDRAY_TEST_ORACLE_H */
