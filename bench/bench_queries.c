@@ -10,6 +10,12 @@
  *    kdr_count1 against a context filter that records every hit and
  *    rejects it (oracle_all_filter) on the same fast HIGH-quality BVH with
  *    the context-filter flag it needs.
+ *  - closest points: kdr_closest_point1 against rtcPointQuery with a
+ *    closest-triangle callback (oracle_closest_point: the core's double
+ *    distance, the query radius shrunk to each better distance) on the
+ *    rival's fast scene; points half on/near the surfaces (offset up to
+ *    1e-3 of the diagonal), half uniform in the box. Check: the same
+ *    distance for every point, bit for bit.
  * Workloads: "camera" (primary rays from outside through the scene: many
  * surfaces per ray) and "random" (origins in the box). Checks: kdray's hit
  * total equals the filter's within 0.1% (they differ only on rounding
@@ -84,6 +90,83 @@ static void emb_filter(void *p) {
     c->hits = h;
 }
 
+typedef struct cp_ctx {
+    const bench_scene *s;
+    const oracle *fast;
+    const float *pts;
+    size_t n;
+    float *dist; /* per point, the last pass */
+} cp_ctx;
+
+static void kd_closest(void *p) {
+    cp_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++) {
+        kdr_closest r;
+        kdr_closest_point1(c->s->kd, c->pts + 3 * i, INFINITY, &r, NULL);
+        c->dist[i] = r.distance;
+    }
+}
+
+static void emb_closest(void *p) {
+    cp_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++) {
+        kdr_closest r;
+        oracle_closest_point(c->fast, c->s->tris, c->pts + 3 * i, INFINITY, &r);
+        c->dist[i] = r.distance;
+    }
+}
+
+static int closest_run(const bench_scene *s, const bench_opts *o) {
+    const size_t n = o->rays / 4 ? o->rays / 4 : 1;
+    float *pts = malloc(3 * n * sizeof *pts), *d0 = malloc(n * sizeof *d0),
+          *d1 = malloc(n * sizeof *d1);
+    if (!pts || !d0 || !d1) {
+        free(pts), free(d0), free(d1);
+        return -1;
+    }
+    kdr_bounds bb;
+    kdr_scene_bounds(s->kd, &bb);
+    const float diag = kdr_scene_diagonal(s->kd);
+    uint64_t x = 0x9e3779b97f4a7c15ull;
+    for (size_t i = 0; i < n; i++) {
+        float r[6];
+        for (int k = 0; k < 6; k++) {
+            x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+            r[k] = (float)(x >> 40) / 16777216.0f;
+        }
+        float *p = pts + 3 * i;
+        if (i % 2) {
+            for (int k = 0; k < 3; k++)
+                p[k] = bb.min[k] + (bb.max[k] - bb.min[k]) * r[k];
+            continue;
+        }
+        const float *t = s->tris + 9 * (size_t)(x % s->ntris);
+        float a = r[0], b = r[1];
+        if (a + b > 1) a = 1 - a, b = 1 - b;
+        for (int k = 0; k < 3; k++)
+            p[k] = (1 - a - b) * t[k] + a * t[3 + k] + b * t[6 + k] +
+                   1e-3f * diag * (r[3 + k] - 0.5f);
+    }
+    cp_ctx c0 = {s, rival_oracle(s->emb), pts, n, d0}, c1 = c0;
+    c1.dist = d1;
+    bench_method m[2] = {{"kd_closest", 0, NULL, kd_closest, &c0, 0},
+                         {"embree_point_query", BENCH_RIVAL, NULL, emb_closest, &c1, 0}};
+    bench_measure(m, 2, o->repeat, 200.0);
+    bench_summary_add(s, "closest_point", m[0].name, n, m[0].best_ms, -1.0);
+    bench_summary_add(s, "closest_point", m[1].name, n, m[1].best_ms, -1.0);
+    size_t differ = 0;
+    for (size_t i = 0; i < n; i++)
+        differ += d0[i] != d1[i];
+    printf("closest  %zu points: kd %.1f ms, rtcPointQuery %.1f ms (kd %.2fx), distances "
+           "differing: %zu\n",
+           n, m[0].best_ms, m[1].best_ms, m[1].best_ms / m[0].best_ms, differ);
+    if (differ)
+        bench_fail("%s: %zu closest-point distances differ from rtcPointQuery's", s->name,
+                   differ);
+    free(pts), free(d0), free(d1);
+    return 0;
+}
+
 static const char *const q_workloads[] = {"camera", "random"};
 #define NWORK (sizeof q_workloads / sizeof *q_workloads)
 #define MAX_SCENES 32
@@ -150,22 +233,25 @@ static int queries_run(const bench_scene *s, const bench_opts *o) {
     }
     rival_free(filt);
     free(buf);
+    if (rc == 0) rc = closest_run(s, o);
     return rc;
 }
 
 static void queries_finish(const bench_opts *o) {
     (void)o;
     printf("\n== all hits: Embree ms / kdray ms (> 1: kdray faster)\n");
-    printf("%-10s | %-22s | %-22s | %-22s | %-22s\n", "scene", "all16 camera (requery)",
-           "all16 random (requery)", "all camera (filter)", "all random (filter)");
+    printf("%-10s | %-22s | %-22s | %-22s | %-22s | %-22s\n", "scene",
+           "all16 camera (requery)", "all16 random (requery)", "all camera (filter)",
+           "all random (filter)", "closest (point query)");
     for (int i = 0; i < g_nscenes; i++) {
         printf("%-10s", g_scene[i]);
-        static const char *const rows[4][3] = {
+        static const char *const rows[5][3] = {
             {"all16_camera", "kd_all16", "embree_requery16"},
             {"all16_random", "kd_all16", "embree_requery16"},
             {"all_camera", "kd_all", "embree_filter_all"},
-            {"all_random", "kd_all", "embree_filter_all"}};
-        for (int r = 0; r < 4; r++) {
+            {"all_random", "kd_all", "embree_filter_all"},
+            {"closest_point", "kd_closest", "embree_point_query"}};
+        for (int r = 0; r < 5; r++) {
             const double kd = bench_summary_ms(g_scene[i], rows[r][0], rows[r][1]);
             const double em = bench_summary_ms(g_scene[i], rows[r][0], rows[r][2]);
             if (kd > 0 && em > 0)

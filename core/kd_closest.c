@@ -116,15 +116,37 @@ static int worth(double cell_d2, double best_d2, double slack) {
     return cell_d2 <= r * r;
 }
 
+/* Squared distance from p to the bounding box of tri, in float, without
+ * branches (ternaries of floats become min/max instructions): at most the
+ * distance to any point of tri up to float rounding, so a triangle whose
+ * box is farther than the best by a relative margin far above that
+ * rounding (2^-16) cannot win or tie and is skipped without the exact test. */
+static inline float tri_box_d2(const float p[3], const float *tri) {
+    float d2 = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        const float a = tri[k], b = tri[3 + k], c = tri[6 + k];
+        const float ab_lo = a < b ? a : b, ab_hi = a > b ? a : b;
+        const float lo = ab_lo < c ? ab_lo : c, hi = ab_hi > c ? ab_hi : c;
+        const float below = lo - p[k], above = p[k] - hi;
+        float e = below > above ? below : above;
+        e = e > 0.0f ? e : 0.0f;
+        d2 += e * e;
+    }
+    return d2;
+}
+
 static void test_leaf(const kdr_scene *s, const kd_node *n, const float p[3],
                       cp_best *b) {
     const uint32_t *ref = s->refs + n->u.first;
     const uint32_t count = kd_count(n);
-    b->tests += count;
     for (uint32_t i = 0; i < count; i++) {
         const int32_t prim = (int32_t)ref[i];
+        const float *tri = s->tris + 9 * (size_t)prim;
+        const float box = tri_box_d2(p, tri); /* +inf on overflow: never culls */
+        if (box < INFINITY && (double)box > b->d2 * (1.0 + 0x1p-16)) continue;
+        b->tests++;
         double q[3], u, v, d2;
-        kdr_point_triangle(p, s->tris + 9 * (size_t)prim, q, &u, &v, &d2);
+        kdr_point_triangle(p, tri, q, &u, &v, &d2);
         if (d2 < b->d2 || (d2 == b->d2 && (uint32_t)prim < (uint32_t)b->prim)) {
             b->d2 = d2;
             b->prim = prim;
