@@ -58,6 +58,8 @@ extern "C" {
 #define KDR_EXEC_CHUNK_TILES 16
 #define KDR_EXEC_CHUNK_POINTS 64
 #define KDR_EXEC_CHUNK_SHADOW_RAYS 65536
+/* closest-point: points per chunk (a few microseconds each) */
+#define KDR_EXEC_CHUNK_CLOSEST 2048
 /* Bytes charged per body byte for parsing it, up front: what a JSON body of
  * usual decimals takes (1.3 per byte while its float arrays grow; CBOR
  * typed arrays take none). A parse that needs more is charged more as it
@@ -120,6 +122,7 @@ typedef enum kdr_exec_kind {
     KDR_EXEC_BUNDLE,
     KDR_EXEC_CONE_SHADOW,
     KDR_EXEC_FRUSTUM,
+    KDR_EXEC_CLOSEST_POINT, /* issue 15: nearest triangle of each point */
 } kdr_exec_kind;
 
 typedef enum kdr_exec_mode {

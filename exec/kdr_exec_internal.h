@@ -87,6 +87,10 @@ struct kdr_exec_job {
             kdr_shadow_stats *stats; /* one per chunk, summed by encode */
             size_t per_chunk;        /* points */
         } shadow;
+        struct {
+            kdr_closest_request req;
+            kdr_closest *out; /* one per point */
+        } closest;
     } k;
 };
 

@@ -110,8 +110,7 @@ static int bundle_alloc(kdr_exec_job *j) {
     const size_t n = r->batch.n ? r->batch.n : 1;
     if (r->query == KDR_COUNT)
         return (a->nhits = malloc(n * sizeof *a->nhits)) ? 0 : KDR_ENOMEM;
-    if (r->query != KDR_ALL)
-        return hits_alloc(&j->k.bundle.hits, r->batch.n, r->query);
+    if (r->query != KDR_ALL) return hits_alloc(&j->k.bundle.hits, r->batch.n, r->query);
     const size_t slots = n * r->max_hits;
     a->nhits = malloc(n * sizeof *a->nhits);
     a->t = malloc(slots * sizeof *a->t);
@@ -120,7 +119,7 @@ static int bundle_alloc(kdr_exec_job *j) {
     a->prim = malloc(slots * sizeof *a->prim);
     j->k.bundle.offset = malloc((n + 1) * sizeof *j->k.bundle.offset);
     return a->nhits && a->t && a->u && a->v && a->prim && j->k.bundle.offset ? 0
-                                                                            : KDR_ENOMEM;
+                                                                             : KDR_ENOMEM;
 }
 
 static void bundle_chunk(kdr_exec_job *j, size_t c) {
@@ -128,8 +127,8 @@ static void bundle_chunk(kdr_exec_job *j, size_t c) {
     size_t first, count;
     kdr_exec_chunk_range(r->batch.n, KDR_EXEC_CHUNK_RAYS, c, &first, &count);
     if (r->query == KDR_ALL) { /* one way to walk: both modes are the same */
-        kdr_exec_note_rc(j, kdr_all_batch(j->q->scene, &r->batch, first, count, r->max_hits,
-                                          &j->k.bundle.all, NULL));
+        kdr_exec_note_rc(j, kdr_all_batch(j->q->scene, &r->batch, first, count,
+                                          r->max_hits, &j->k.bundle.all, NULL));
         return;
     }
     if (r->query == KDR_COUNT) {
@@ -176,8 +175,13 @@ static int bundle_encode(kdr_exec_job *j) {
     if (r->query == KDR_ALL) {
         all_compact(j);
         const kdr_all_hits *a = &j->k.bundle.all;
-        const kdr_all_answer ans = {r->batch.n, (const int32_t *)(const void *)a->nhits,
-                                    j->k.bundle.offset, a->t, a->u, a->v, a->prim};
+        const kdr_all_answer ans = {r->batch.n,
+                                    (const int32_t *)(const void *)a->nhits,
+                                    j->k.bundle.offset,
+                                    a->t,
+                                    a->u,
+                                    a->v,
+                                    a->prim};
         return encoded(j, kdr_proto_encode_all(&ans, r->fields, enc, &j->q->result.body),
                        enc);
     }
@@ -344,6 +348,58 @@ static int shadow_core_error(kdr_exec_job *j, int rc) {
     return j->q->result.status == 400;
 }
 
+/* ---- closest-point ------------------------------------------------------------------
+ */
+
+static int closest_parse(kdr_exec_job *j) {
+    kdr_proto_error err = {0};
+    kdr_closest_request *r = &j->k.closest.req;
+    if (kdr_proto_parse_closest_as(j->q->media, j->q->body, j->q->len, j->q->max_rays, r,
+                                   &err) != 0) {
+        kdr_exec_fail_proto(j, &err);
+        return -1;
+    }
+    j->parsed_bytes = r->owned_points ? 3 * r->n * sizeof(float) : 0;
+    /* results, the encoder's per-member copy, the answer */
+    j->answer_estimate =
+        r->n * sizeof(kdr_closest) + 3 * r->n * sizeof(float) +
+        kdr_proto_closest_answer_max(r->n, answer_encoding(j, r->encoding));
+    j->nchunks = chunks_of(r->n, KDR_EXEC_CHUNK_CLOSEST);
+    j->work_rays = r->n;
+    j->deadline_ms = r->deadline_ms;
+    return 0;
+}
+
+static int closest_alloc(kdr_exec_job *j) {
+    const size_t n = j->k.closest.req.n;
+    j->k.closest.out = malloc((n ? n : 1) * sizeof *j->k.closest.out);
+    return j->k.closest.out ? 0 : KDR_ENOMEM;
+}
+
+/* One way to search: fast and reference modes are the same. */
+static void closest_chunk(kdr_exec_job *j, size_t c) {
+    const kdr_closest_request *r = &j->k.closest.req;
+    size_t first, count;
+    kdr_exec_chunk_range(r->n, KDR_EXEC_CHUNK_CLOSEST, c, &first, &count);
+    kdr_exec_note_rc(j, kdr_closest_point_batch(j->q->scene, r->points, first, count,
+                                                r->max_distance, j->k.closest.out, NULL));
+}
+
+static int closest_encode(kdr_exec_job *j) {
+    const kdr_closest_request *r = &j->k.closest.req;
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    j->q->result.rays = r->n;
+    return encoded(
+        j, kdr_proto_encode_closest(j->k.closest.out, r->n, enc, &j->q->result.body),
+        enc);
+}
+
+static void closest_release(kdr_exec_job *j) {
+    free(j->k.closest.out);
+    j->k.closest.out = NULL;
+    kdr_closest_request_free(&j->k.closest.req);
+}
+
 /* ---- the table -------------------------------------------------------------------- */
 
 static const kdr_exec_kind_ops BUNDLE = {bundle_parse,  bundle_alloc,   bundle_chunk,
@@ -354,6 +410,9 @@ static const kdr_exec_kind_ops SHADOW = {shadow_parse,   shadow_alloc,
                                          shadow_chunk,   shadow_encode,
                                          shadow_release, shadow_core_error};
 
+static const kdr_exec_kind_ops CLOSEST = {closest_parse,  closest_alloc,   closest_chunk,
+                                          closest_encode, closest_release, NULL};
+
 const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
     switch (kind) {
     case KDR_EXEC_BUNDLE:
@@ -362,6 +421,8 @@ const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
         return &FRUSTUM;
     case KDR_EXEC_CONE_SHADOW:
         return &SHADOW;
+    case KDR_EXEC_CLOSEST_POINT:
+        return &CLOSEST;
     }
     return NULL;
 }

@@ -230,6 +230,25 @@ int kdr_proto_parse_frustum_as(kdr_media media, const char *body, size_t len,
                                size_t max_rays, kdr_frustum_request *out,
                                kdr_proto_error *err);
 
+/* POST /v1/scenes/{name}/closest-point (protocol/kdr_points.c): N points
+ * (counted as N rays against the limit), "max_distance" >= 0 (default and
+ * huge values: +inf). "signed" is refused (400) until occupancy exists. */
+typedef struct kdr_closest_request {
+    const float *points; /* 3*n, ready for kdr_closest_point_batch */
+    size_t n;
+    float max_distance;
+    kdr_encoding encoding;
+    double deadline_ms;  /* "deadline_ms": 0 when absent */
+    float *owned_points; /* internal */
+} kdr_closest_request;
+
+int kdr_proto_parse_closest(const char *body, size_t len, size_t max_rays,
+                            kdr_closest_request *out, kdr_proto_error *err);
+int kdr_proto_parse_closest_as(kdr_media media, const char *body, size_t len,
+                               size_t max_rays, kdr_closest_request *out,
+                               kdr_proto_error *err);
+void kdr_closest_request_free(kdr_closest_request *req);
+
 /* ---- responses ------------------------------------------------------------------ */
 
 /* Bundle / frustum results for rays [0, n): closest ->
@@ -266,6 +285,13 @@ size_t kdr_proto_all_answer_max(size_t n, size_t max_hits, unsigned fields,
 int kdr_proto_encode_counts(const uint32_t *counts, size_t n, kdr_encoding enc,
                             kdr_buf *out);
 size_t kdr_proto_counts_answer_max(size_t n, kdr_encoding enc);
+
+/* closest-point: {"count":N,"prim":[N int32],"distance":[N],"point":[3N],
+ * "u":[N],"v":[N]}; a point with nothing within max_distance has prim -1,
+ * distance -1, point 0,0,0, u = v = 0 (as the core leaves it). */
+int kdr_proto_encode_closest(const kdr_closest *c, size_t n, kdr_encoding enc,
+                             kdr_buf *out);
+size_t kdr_proto_closest_answer_max(size_t n, kdr_encoding enc);
 
 /* {"count":N,"visibility":[N*nlights floats]} plus "stats" when stats is
  * not NULL. */

@@ -28,9 +28,10 @@ static const size_t INLINE_RAYS_MAX = 4096; /* one bundle chunk */
 static const unsigned COST_SHIFT = 3;
 
 static kdr_exec_kind kind_of(kdr_endpoint ep) {
-    return ep == KDR_EP_FRUSTUM       ? KDR_EXEC_FRUSTUM
-           : ep == KDR_EP_CONE_SHADOW ? KDR_EXEC_CONE_SHADOW
-                                      : KDR_EXEC_BUNDLE;
+    return ep == KDR_EP_FRUSTUM         ? KDR_EXEC_FRUSTUM
+           : ep == KDR_EP_CONE_SHADOW   ? KDR_EXEC_CONE_SHADOW
+           : ep == KDR_EP_CLOSEST_POINT ? KDR_EXEC_CLOSEST_POINT
+                                        : KDR_EXEC_BUNDLE;
 }
 
 static size_t inline_rays(const kdr_scene_version *v, kdr_endpoint ep) {
@@ -59,9 +60,10 @@ static void learn_cost(kdr_scene_version *v, kdr_endpoint ep, const kdr_exec_res
 }
 
 static kdr_ray_kind ray_kind_of(kdr_endpoint ep) {
-    return ep == KDR_EP_FRUSTUM       ? KDR_RAYS_FRUSTUM
-           : ep == KDR_EP_CONE_SHADOW ? KDR_RAYS_SHADOW
-                                      : KDR_RAYS_BUNDLE;
+    return ep == KDR_EP_FRUSTUM         ? KDR_RAYS_FRUSTUM
+           : ep == KDR_EP_CONE_SHADOW   ? KDR_RAYS_SHADOW
+           : ep == KDR_EP_CLOSEST_POINT ? KDR_RAYS_POINTS
+                                        : KDR_RAYS_BUNDLE;
 }
 
 /* Holds the scene's current version and fills the executor query. */

@@ -28,7 +28,8 @@ typedef struct route {
 } route;
 
 static int is_post_endpoint(kdr_endpoint ep) {
-    return ep == KDR_EP_BUNDLE || ep == KDR_EP_CONE_SHADOW || ep == KDR_EP_FRUSTUM;
+    return ep == KDR_EP_BUNDLE || ep == KDR_EP_CONE_SHADOW || ep == KDR_EP_FRUSTUM ||
+           ep == KDR_EP_CLOSEST_POINT;
 }
 
 int kdr_route_is_query(kdr_endpoint ep) { return is_post_endpoint(ep); }
@@ -44,6 +45,7 @@ static kdr_endpoint query_endpoint(const char *op) {
     if (!strcmp(op, "bundle")) return KDR_EP_BUNDLE;
     if (!strcmp(op, "cone-shadow")) return KDR_EP_CONE_SHADOW;
     if (!strcmp(op, "frustum")) return KDR_EP_FRUSTUM;
+    if (!strcmp(op, "closest-point")) return KDR_EP_CLOSEST_POINT;
     return KDR_EP_OTHER;
 }
 
@@ -137,10 +139,12 @@ int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long conten
         problemf(out, 404, "scene %s: no such scene", r.scene, r.scene_len);
         return 1;
     }
-    if (is_post_endpoint(r.ep) && kdr_proto_media_of(req->content_type) == KDR_MEDIA_OTHER) {
+    if (is_post_endpoint(r.ep) &&
+        kdr_proto_media_of(req->content_type) == KDR_MEDIA_OTHER) {
         const char *ct = req->content_type ? req->content_type : "(none)";
-        problemf(out, 415, "Content-Type %s: expected application/json or application/cbor",
-                 ct, strlen(ct));
+        problemf(out, 415,
+                 "Content-Type %s: expected application/json or application/cbor", ct,
+                 strlen(ct));
         return 1;
     }
     if (content_length >= 0 && (unsigned long long)content_length > srv->max_body) {

@@ -5,7 +5,7 @@
  * integration tests compare the daemon's answers with these byte for byte;
  * the service benchmark uses --repeat to time the tracing in-process.
  *
- *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum
+ *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum|closest-point
  *               [--mode reference|fast] [--threads T] [--repeat R]
  *               [--content-type TYPE] [--accept TYPE] REQUEST.json|REQUEST.cbor
  *   kdray-trace [--scene PATH] KIND:MODE:REQUEST.json...   (-> REQUEST.json.out)
@@ -64,6 +64,8 @@ static int kind_of(const char *name, kdr_exec_kind *out) {
         *out = KDR_EXEC_FRUSTUM;
     else if (!strcmp(name, "cone-shadow"))
         *out = KDR_EXEC_CONE_SHADOW;
+    else if (!strcmp(name, "closest-point"))
+        *out = KDR_EXEC_CLOSEST_POINT;
     else
         return -1;
     return 0;
@@ -82,6 +84,10 @@ static size_t rays_of(kdr_exec_kind kind, kdr_media media, const char *body, siz
     } else if (kind == KDR_EXEC_FRUSTUM) {
         kdr_frustum_request r;
         if (!kdr_proto_parse_frustum_as(media, body, len, max, &r, &err)) n = r.rays;
+    } else if (kind == KDR_EXEC_CLOSEST_POINT) {
+        kdr_closest_request r;
+        if (!kdr_proto_parse_closest_as(media, body, len, max, &r, &err)) n = r.n;
+        kdr_closest_request_free(&r);
     } else {
         kdr_shadow_request r;
         if (!kdr_proto_parse_shadow_as(media, body, len, max, &r, &err))
@@ -130,7 +136,8 @@ static void run(kdr_exec *ex, kdr_exec_query *q, unsigned repeat) {
 static int usage(void) {
     fprintf(
         stderr,
-        "usage: kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum "
+        "usage: kdray-trace [--scene PATH] --kind "
+        "bundle|cone-shadow|frustum|closest-point "
         "[--mode reference|fast] [--threads T] [--repeat R]\n"
         "                   [--content-type TYPE] [--accept TYPE] REQUEST.json|.cbor\n"
         "       kdray-trace [--scene PATH] [--threads T] KIND:MODE:REQUEST.json...\n"

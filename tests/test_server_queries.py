@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""test_server_queries.py - bundle "query": "all" and "count" over HTTP.
+"""test_server_queries.py - bundle "query": "all" and "count", and
+closest-point, over HTTP.
 
     test_server_queries.py KDRAYD KDRAY_TRACE CLIENTS_DIR
 
@@ -10,7 +11,10 @@ is in increasing t (ties by prim), holds no prim twice and at most max_hits
 hits; its first hit is the closest query's hit bit for bit; nhits of
 "count" equals the uncapped list's length; offsets are the prefix sums;
 base64 and CBOR answers equal JSON ones; bad input gets a 400 or 413 that
-names the field. Run by Debian's /usr/bin/python3 (python3-cbor2).
+names the field. closest-point: answers equal kdray-trace's bytes, each
+point lies at the answered distance, max_distance keeps exactly the answers
+within it, base64 and CBOR equal JSON, bad input is a 400 naming the field.
+Run by Debian's /usr/bin/python3 (python3-cbor2).
 """
 
 import json
@@ -142,6 +146,64 @@ def test_bad(t, c):
     t.eq(json.loads(body)["nhits"], [3] * 6000, "three hits at a shared vertex")
 
 
+CP_PATH = "/v1/scenes/%s/closest-point" % SCENE
+
+
+def test_closest_point(t, c):
+    import math
+    import random
+    rng = random.Random(7)
+    bounds = c.scene(SCENE)["bounds"]
+    lo, hi = bounds["min"], bounds["max"]
+    pts = [rng.uniform(a - 2, b + 2) for _ in range(3000) for a, b in zip(lo, hi)]
+    payloads = [{"points": pts}, {"points": pts, "max_distance": 0.5}]
+    core = lib.core_answers(TRACE, [("closest-point", p, "fast") for p in payloads])
+    answers = []
+    for p, want in zip(payloads, core):
+        code, _, body = c.request("POST", CP_PATH, json.dumps(p).encode(),
+                                  "application/json")
+        t.eq(code, 200, "closest-point status")
+        t.eq(body, want, "closest-point == kdray-trace bytes")
+        answers.append(json.loads(body))
+    a, lim = answers
+    t.eq(a["count"], 3000, "count")
+    bad = found = 0
+    for i in range(3000):
+        q, p = a["point"][3 * i:3 * i + 3], pts[3 * i:3 * i + 3]
+        d = math.dist(q, p)
+        if a["prim"][i] < 0 or abs(d - a["distance"][i]) > 1e-5 * max(1.0, d):
+            bad += 1
+        # with a limit: the same answer where within it, none elsewhere
+        if a["distance"][i] <= 0.5:
+            found += 1
+            bad += lim["prim"][i] != a["prim"][i] or lim["distance"][i] != a["distance"][i]
+        else:
+            bad += lim["prim"][i] != -1 or lim["distance"][i] != -1
+    t.eq(bad, 0, "closest points at their distance, max_distance respected")
+    t.check(0 < found < 3000, "some points within 0.5 (%d)" % found)
+    code, _, body = c.request("POST", CP_PATH, json.dumps(dict(payloads[0], encoding="base64"))
+                              .encode(), "application/json")
+    from kdray_client import decode_answer
+    b = decode_answer(json.loads(body))
+    t.eq(b["prim"], a["prim"], "base64 prim")
+    t.eq(b["distance"], [f32(x) for x in a["distance"]], "base64 distance")
+    code, _, body = c.request("POST", CP_PATH, json.dumps(payloads[0]).encode(),
+                              "application/json", headers={"Accept": "application/cbor"})
+    cb = cbor2.loads(body)
+    t.eq(list(struct.unpack("<%df" % (3 * 3000), cb["point"].value)),
+         [f32(x) for x in a["point"]], "CBOR point")
+    for body, has in (({"points": [0, 1]}, "points"), ({}, "points"),
+                      ({"points": [0, 1, 2], "max_distance": -1}, "max_distance"),
+                      ({"points": [0, 1, 2], "max_distance": "far"}, "max_distance"),
+                      ({"points": [0, 1, 2], "signed": True}, "signed"),
+                      ({"points": [0, 1, float("inf")]}, "points[2]")):
+        raw = json.dumps(body).replace("Infinity", "1e999").encode()
+        code, _, data = c.request("POST", CP_PATH, raw, "application/json")
+        t.eq(code, 400, "closest-point 400 for %s" % has)
+        detail = json.loads(data).get("detail", "")
+        t.check(has in detail, "detail %r names %r" % (detail, has))
+
+
 def main():
     t = lib.Runner()
     d = lib.Daemon(KDRAYD, ["--threads", "2", "--max-rays", "6000000"])
@@ -149,6 +211,7 @@ def main():
     try:
         t.run(test_all_and_count, c)
         t.run(test_bad, c)
+        t.run(test_closest_point, c)
     finally:
         rc = d.stop()
     if rc != 0:
