@@ -227,6 +227,24 @@ int kdr_closest_point_batch(const kdr_scene *scene, const float *points, size_t 
 void kdr_point_triangle(const float p[3], const float *tri, double q[3], double *u,
                         double *v, double *d2);
 
+/* ---- occupancy (core/kd_occupancy.c) ------------------------------------------
+ * Inside (1) or outside (0) the scene's closed meshes: each of
+ * KDR_OCCUPANCY_RAYS rays from the point in fixed, well-spread directions
+ * counts its hits (kdr_count1) and votes "inside" when the count is odd;
+ * the majority decides. A point inside two overlapping closed meshes is
+ * outside (parity). Meaningless for open meshes. */
+#define KDR_OCCUPANCY_RAYS 9
+
+/* votes (may be NULL): how many rays voted inside. KDR_EINVAL for a
+ * non-finite point; KDR_ENOMEM as kdr_count1. */
+int kdr_occupancy1(const kdr_scene *scene, const float point[3], uint8_t *inside,
+                   uint8_t *votes, kdr_trav_stats *stats);
+/* Points [first, first+count) of points (3 floats each) into inside[i]. */
+int kdr_occupancy_batch(const kdr_scene *scene, const float *points, size_t first,
+                        size_t count, uint8_t *inside, kdr_trav_stats *stats);
+/* Direction r (0..KDR_OCCUPANCY_RAYS-1) of the vote (unit length). */
+void kdr_occupancy_direction(int r, float dir[3]);
+
 /* ---- cone-shadow queries -------------------------------------------------- */
 
 typedef struct kdr_sphere_light {

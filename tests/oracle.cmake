@@ -74,3 +74,15 @@ if(TARGET kdray_scenes)
   target_compile_definitions(test_closest PRIVATE KDRAY_HAVE_GLTF=1)
 endif()
 add_test(NAME closest_point COMMAND test_closest 2000 ${CMAKE_SOURCE_DIR}/scenes/default.glb)
+
+# Occupancy by voting (issue 15) against the winding number in double:
+# closed stress scenes and real models, 0 wrong answers outside the band.
+add_executable(test_occupancy ${CMAKE_CURRENT_SOURCE_DIR}/test_occupancy.c)
+target_link_libraries(test_occupancy PRIVATE kdray_testsupport)
+if(TARGET kdray_scenes)
+  target_compile_definitions(test_occupancy PRIVATE KDRAY_HAVE_GLTF=1)
+endif()
+# duck.glb (ladder) is closed: judged; the default scene is open: reported.
+add_test(NAME occupancy COMMAND test_occupancy 1500 ${CMAKE_SOURCE_DIR}/scenes/default.glb
+                                  closed:${KDRAY_SCENE_DIR}/duck.glb)
+set_tests_properties(occupancy PROPERTIES FIXTURES_REQUIRED scenes_fetch)
