@@ -60,6 +60,8 @@ extern "C" {
 #define KDR_EXEC_CHUNK_SHADOW_RAYS 65536
 /* closest-point: points per chunk (a few microseconds each) */
 #define KDR_EXEC_CHUNK_CLOSEST 2048
+/* occupancy: points per chunk (9 hit counts each) */
+#define KDR_EXEC_CHUNK_OCCUPANCY 512
 /* Bytes charged per body byte for parsing it, up front: what a JSON body of
  * usual decimals takes (1.3 per byte while its float arrays grow; CBOR
  * typed arrays take none). A parse that needs more is charged more as it
@@ -123,6 +125,7 @@ typedef enum kdr_exec_kind {
     KDR_EXEC_CONE_SHADOW,
     KDR_EXEC_FRUSTUM,
     KDR_EXEC_CLOSEST_POINT, /* issue 15: nearest triangle of each point */
+    KDR_EXEC_OCCUPANCY,     /* issue 15: inside/outside by voting */
 } kdr_exec_kind;
 
 typedef enum kdr_exec_mode {

@@ -91,6 +91,10 @@ struct kdr_exec_job {
             kdr_closest_request req;
             kdr_closest *out; /* one per point */
         } closest;
+        struct {
+            kdr_occupancy_request req;
+            uint8_t *inside; /* one per point */
+        } occupancy;
     } k;
 };
 

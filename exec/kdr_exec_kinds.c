@@ -365,7 +365,7 @@ static int closest_parse(kdr_exec_job *j) {
         r->n * sizeof(kdr_closest) + 3 * r->n * sizeof(float) +
         kdr_proto_closest_answer_max(r->n, answer_encoding(j, r->encoding));
     j->nchunks = chunks_of(r->n, KDR_EXEC_CHUNK_CLOSEST);
-    j->work_rays = r->n;
+    j->work_rays = r->n * (r->is_signed ? 1 + (uint64_t)KDR_OCCUPANCY_RAYS : 1);
     j->deadline_ms = r->deadline_ms;
     return 0;
 }
@@ -383,6 +383,18 @@ static void closest_chunk(kdr_exec_job *j, size_t c) {
     kdr_exec_chunk_range(r->n, KDR_EXEC_CHUNK_CLOSEST, c, &first, &count);
     kdr_exec_note_rc(j, kdr_closest_point_batch(j->q->scene, r->points, first, count,
                                                 r->max_distance, j->k.closest.out, NULL));
+    if (!r->is_signed) return;
+    /* signed: negative inside the closed meshes (the occupancy vote) */
+    for (size_t i = first; i < first + count; i++) {
+        uint8_t inside = 0;
+        const int rc =
+            kdr_occupancy1(j->q->scene, r->points + 3 * i, &inside, NULL, NULL);
+        if (rc != KDR_OK) {
+            kdr_exec_note_rc(j, rc);
+            return;
+        }
+        if (inside) j->k.closest.out[i].distance = -j->k.closest.out[i].distance;
+    }
 }
 
 static int closest_encode(kdr_exec_job *j) {
@@ -400,6 +412,56 @@ static void closest_release(kdr_exec_job *j) {
     kdr_closest_request_free(&j->k.closest.req);
 }
 
+/* ---- occupancy ------------------------------------------------------------------------
+ */
+
+static int occupancy_parse(kdr_exec_job *j) {
+    kdr_proto_error err = {0};
+    kdr_occupancy_request *r = &j->k.occupancy.req;
+    if (kdr_proto_parse_occupancy_as(j->q->media, j->q->body, j->q->len, j->q->max_rays,
+                                     r, &err) != 0) {
+        kdr_exec_fail_proto(j, &err);
+        return -1;
+    }
+    j->parsed_bytes = r->owned_points ? 3 * r->n * sizeof(float) : 0;
+    j->answer_estimate =
+        r->n + kdr_proto_occupancy_answer_max(r->n, answer_encoding(j, r->encoding));
+    j->nchunks = chunks_of(r->n, KDR_EXEC_CHUNK_OCCUPANCY);
+    j->work_rays = r->n * (uint64_t)KDR_OCCUPANCY_RAYS;
+    j->deadline_ms = r->deadline_ms;
+    return 0;
+}
+
+static int occupancy_alloc(kdr_exec_job *j) {
+    const size_t n = j->k.occupancy.req.n;
+    j->k.occupancy.inside = malloc(n ? n : 1);
+    return j->k.occupancy.inside ? 0 : KDR_ENOMEM;
+}
+
+static void occupancy_chunk(kdr_exec_job *j, size_t c) {
+    const kdr_occupancy_request *r = &j->k.occupancy.req;
+    size_t first, count;
+    kdr_exec_chunk_range(r->n, KDR_EXEC_CHUNK_OCCUPANCY, c, &first, &count);
+    kdr_exec_note_rc(j, kdr_occupancy_batch(j->q->scene, r->points, first, count,
+                                            j->k.occupancy.inside, NULL));
+}
+
+static int occupancy_encode(kdr_exec_job *j) {
+    const kdr_occupancy_request *r = &j->k.occupancy.req;
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    j->q->result.rays = r->n * (uint64_t)KDR_OCCUPANCY_RAYS;
+    return encoded(
+        j,
+        kdr_proto_encode_occupancy(j->k.occupancy.inside, r->n, enc, &j->q->result.body),
+        enc);
+}
+
+static void occupancy_release(kdr_exec_job *j) {
+    free(j->k.occupancy.inside);
+    j->k.occupancy.inside = NULL;
+    kdr_occupancy_request_free(&j->k.occupancy.req);
+}
+
 /* ---- the table -------------------------------------------------------------------- */
 
 static const kdr_exec_kind_ops BUNDLE = {bundle_parse,  bundle_alloc,   bundle_chunk,
@@ -413,6 +475,10 @@ static const kdr_exec_kind_ops SHADOW = {shadow_parse,   shadow_alloc,
 static const kdr_exec_kind_ops CLOSEST = {closest_parse,  closest_alloc,   closest_chunk,
                                           closest_encode, closest_release, NULL};
 
+static const kdr_exec_kind_ops OCCUPANCY = {occupancy_parse,   occupancy_alloc,
+                                            occupancy_chunk,   occupancy_encode,
+                                            occupancy_release, NULL};
+
 const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
     switch (kind) {
     case KDR_EXEC_BUNDLE:
@@ -423,6 +489,8 @@ const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
         return &SHADOW;
     case KDR_EXEC_CLOSEST_POINT:
         return &CLOSEST;
+    case KDR_EXEC_OCCUPANCY:
+        return &OCCUPANCY;
     }
     return NULL;
 }

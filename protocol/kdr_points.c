@@ -1,7 +1,8 @@
 /*
  * kdr_points.c — the point-query bodies (issue 15): POST
- * /v1/scenes/{name}/closest-point {points, max_distance?, encoding?,
- * deadline_ms?}, in JSON or CBOR, through the same field readers as the
+ * /v1/scenes/{name}/closest-point {points, max_distance?, signed?,
+ * encoding?, deadline_ms?} and POST /v1/scenes/{name}/occupancy {points,
+ * encoding?, deadline_ms?}, in JSON or CBOR, through the same field readers as the
  * ray queries (kdr_fields.c), so "points" has every form and error message
  * of the cone-shadow's points. Shapes and limits are checked before the
  * array is decoded: N points count as N rays against the ray limit.
@@ -52,10 +53,16 @@ int kdr_proto_parse_closest_as(kdr_media media, const char *body, size_t len,
     err->detail[0] = '\0';
     if (kdr_pf_parse_body(media, body, len, &doc, err)) return err->status;
     int st = read_max_distance(doc.root, &out->max_distance, err);
-    if (!st && cJSON_GetObjectItemCaseSensitive(doc.root, "signed"))
-        st = kdr_proto_error_set(err, 400,
-                                 "signed: not supported by this server (signed distances "
-                                 "need the occupancy query, which it does not have yet)");
+    const cJSON *sg = cJSON_GetObjectItemCaseSensitive(doc.root, "signed");
+    if (!st && sg && !cJSON_IsBool(sg))
+        st = kdr_proto_error_set(err, 400, "signed: must be true or false");
+    out->is_signed = sg && cJSON_IsTrue(sg);
+    if (!st && out->is_signed &&
+        cJSON_GetObjectItemCaseSensitive(doc.root, "max_distance"))
+        st = kdr_proto_error_set(
+            err, 400,
+            "max_distance: not with \"signed\": true (a signed answer "
+            "has no miss marker)");
     if (!st) st = kdr_pf_encoding(doc.root, &out->encoding, err);
     if (!st) st = kdr_pf_deadline(doc.root, &out->deadline_ms, err);
     if (!st)
@@ -72,6 +79,30 @@ int kdr_proto_parse_closest(const char *body, size_t len, size_t max_rays,
 }
 
 void kdr_closest_request_free(kdr_closest_request *req) {
+    if (!req) return;
+    kdr_pf_free(req->owned_points);
+    memset(req, 0, sizeof *req);
+}
+
+int kdr_proto_parse_occupancy_as(kdr_media media, const char *body, size_t len,
+                                 size_t max_rays, kdr_occupancy_request *out,
+                                 kdr_proto_error *err) {
+    kdr_pf_doc doc;
+    memset(out, 0, sizeof *out);
+    err->status = 0;
+    err->detail[0] = '\0';
+    if (kdr_pf_parse_body(media, body, len, &doc, err)) return err->status;
+    int st = kdr_pf_encoding(doc.root, &out->encoding, err);
+    if (!st) st = kdr_pf_deadline(doc.root, &out->deadline_ms, err);
+    if (!st)
+        st = read_points(&doc, limit_of(max_rays), &out->owned_points, &out->points,
+                         &out->n, err);
+    kdr_pf_doc_free(&doc);
+    if (st) kdr_occupancy_request_free(out);
+    return st;
+}
+
+void kdr_occupancy_request_free(kdr_occupancy_request *req) {
     if (!req) return;
     kdr_pf_free(req->owned_points);
     memset(req, 0, sizeof *req);

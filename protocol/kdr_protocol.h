@@ -232,11 +232,13 @@ int kdr_proto_parse_frustum_as(kdr_media media, const char *body, size_t len,
 
 /* POST /v1/scenes/{name}/closest-point (protocol/kdr_points.c): N points
  * (counted as N rays against the limit), "max_distance" >= 0 (default and
- * huge values: +inf). "signed" is refused (400) until occupancy exists. */
+ * huge values: +inf), "signed" (boolean; not together with max_distance):
+ * distances negative inside (kdr_occupancy1). */
 typedef struct kdr_closest_request {
     const float *points; /* 3*n, ready for kdr_closest_point_batch */
     size_t n;
     float max_distance;
+    int is_signed;
     kdr_encoding encoding;
     double deadline_ms;  /* "deadline_ms": 0 when absent */
     float *owned_points; /* internal */
@@ -248,6 +250,21 @@ int kdr_proto_parse_closest_as(kdr_media media, const char *body, size_t len,
                                size_t max_rays, kdr_closest_request *out,
                                kdr_proto_error *err);
 void kdr_closest_request_free(kdr_closest_request *req);
+
+/* POST /v1/scenes/{name}/occupancy: N points (N rays against the limit;
+ * each costs KDR_OCCUPANCY_RAYS hit counts). */
+typedef struct kdr_occupancy_request {
+    const float *points; /* 3*n */
+    size_t n;
+    kdr_encoding encoding;
+    double deadline_ms;
+    float *owned_points; /* internal */
+} kdr_occupancy_request;
+
+int kdr_proto_parse_occupancy_as(kdr_media media, const char *body, size_t len,
+                                 size_t max_rays, kdr_occupancy_request *out,
+                                 kdr_proto_error *err);
+void kdr_occupancy_request_free(kdr_occupancy_request *req);
 
 /* ---- responses ------------------------------------------------------------------ */
 
@@ -292,6 +309,11 @@ size_t kdr_proto_counts_answer_max(size_t n, kdr_encoding enc);
 int kdr_proto_encode_closest(const kdr_closest *c, size_t n, kdr_encoding enc,
                              kdr_buf *out);
 size_t kdr_proto_closest_answer_max(size_t n, kdr_encoding enc);
+/* occupancy: {"count":N,"inside":[N 0|1]} (uint8, tag 64 in CBOR; base64
+ * as {"i32": ...} like "hit"). */
+int kdr_proto_encode_occupancy(const uint8_t *inside, size_t n, kdr_encoding enc,
+                               kdr_buf *out);
+size_t kdr_proto_occupancy_answer_max(size_t n, kdr_encoding enc);
 
 /* {"count":N,"visibility":[N*nlights floats]} plus "stats" when stats is
  * not NULL. */

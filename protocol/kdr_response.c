@@ -389,6 +389,21 @@ int kdr_proto_encode_closest(const kdr_closest *c, size_t n, kdr_encoding enc,
     return close_answer(out, enc);
 }
 
+size_t kdr_proto_occupancy_answer_max(size_t n, kdr_encoding enc) {
+    const array_src s = field_kind(KDR_FIELD_HIT);
+    return KDR_ANSWER_FIXED + array_max(&s, n, enc);
+}
+
+int kdr_proto_encode_occupancy(const uint8_t *inside, size_t n, kdr_encoding enc,
+                               kdr_buf *out) {
+    if (!inside) return KDR_EINVAL;
+    const array_src s = {.u8 = inside};
+    if (presize(out, kdr_proto_occupancy_answer_max(n, enc)) ||
+        count_head(out, n, 1, enc) || named_array(out, "inside", &s, n, enc))
+        return KDR_ENOMEM;
+    return close_answer(out, enc);
+}
+
 static int shadow_stats(kdr_buf *out, const kdr_shadow_stats *stats, kdr_encoding enc) {
     if (enc == KDR_ENCODING_CBOR)
         return kdr_cbor_text(out, "stats") || kdr_cbor_map(out, 3) ||

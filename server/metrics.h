@@ -24,6 +24,7 @@ typedef enum kdr_endpoint {
     KDR_EP_CONE_SHADOW,
     KDR_EP_FRUSTUM,
     KDR_EP_CLOSEST_POINT,
+    KDR_EP_OCCUPANCY,
     KDR_EP_OTHER, /* unknown paths */
     KDR_EP_COUNT
 } kdr_endpoint;
@@ -32,7 +33,8 @@ typedef enum kdr_ray_kind {
     KDR_RAYS_BUNDLE,
     KDR_RAYS_SHADOW,
     KDR_RAYS_FRUSTUM,
-    KDR_RAYS_POINTS, /* closest-point: points searched */
+    KDR_RAYS_POINTS,    /* closest-point: points searched */
+    KDR_RAYS_OCCUPANCY, /* occupancy: points x vote rays */
     KDR_RAYS_COUNT
 } kdr_ray_kind;
 

@@ -31,6 +31,7 @@ static kdr_exec_kind kind_of(kdr_endpoint ep) {
     return ep == KDR_EP_FRUSTUM         ? KDR_EXEC_FRUSTUM
            : ep == KDR_EP_CONE_SHADOW   ? KDR_EXEC_CONE_SHADOW
            : ep == KDR_EP_CLOSEST_POINT ? KDR_EXEC_CLOSEST_POINT
+           : ep == KDR_EP_OCCUPANCY     ? KDR_EXEC_OCCUPANCY
                                         : KDR_EXEC_BUNDLE;
 }
 
@@ -63,6 +64,7 @@ static kdr_ray_kind ray_kind_of(kdr_endpoint ep) {
     return ep == KDR_EP_FRUSTUM         ? KDR_RAYS_FRUSTUM
            : ep == KDR_EP_CONE_SHADOW   ? KDR_RAYS_SHADOW
            : ep == KDR_EP_CLOSEST_POINT ? KDR_RAYS_POINTS
+           : ep == KDR_EP_OCCUPANCY     ? KDR_RAYS_OCCUPANCY
                                         : KDR_RAYS_BUNDLE;
 }
 

@@ -184,7 +184,7 @@ static kdr_scene_version *load_version(entry *e, unsigned generation, char *why,
     v->nranges = g.nranges;
     v->generation = generation;
     atomic_init(&v->refs, 1);
-    for (int k = 0; k < 3; k++)
+    for (size_t k = 0; k < sizeof v->ns_per_ray / sizeof v->ns_per_ray[0]; k++)
         atomic_init(&v->ns_per_ray[k], 0);
     g.ranges = NULL;
     g.nranges = 0;

@@ -35,7 +35,7 @@ typedef struct kdr_scene_version {
     /* Running mean cost of one ray of work, in ns of one thread, per query
      * kind (bundle, cone-shadow, frustum; 0 = not measured yet): how much a
      * query of N rays would hold an HTTP thread if answered inline. */
-    atomic_uint ns_per_ray[4]; /* by kdr_exec_kind */
+    atomic_uint ns_per_ray[5]; /* by kdr_exec_kind */
 } kdr_scene_version;
 
 typedef struct kdr_registry kdr_registry;

@@ -29,7 +29,7 @@ typedef struct route {
 
 static int is_post_endpoint(kdr_endpoint ep) {
     return ep == KDR_EP_BUNDLE || ep == KDR_EP_CONE_SHADOW || ep == KDR_EP_FRUSTUM ||
-           ep == KDR_EP_CLOSEST_POINT;
+           ep == KDR_EP_CLOSEST_POINT || ep == KDR_EP_OCCUPANCY;
 }
 
 int kdr_route_is_query(kdr_endpoint ep) { return is_post_endpoint(ep); }
@@ -46,6 +46,7 @@ static kdr_endpoint query_endpoint(const char *op) {
     if (!strcmp(op, "cone-shadow")) return KDR_EP_CONE_SHADOW;
     if (!strcmp(op, "frustum")) return KDR_EP_FRUSTUM;
     if (!strcmp(op, "closest-point")) return KDR_EP_CLOSEST_POINT;
+    if (!strcmp(op, "occupancy")) return KDR_EP_OCCUPANCY;
     return KDR_EP_OTHER;
 }
 

@@ -5,7 +5,7 @@
  * integration tests compare the daemon's answers with these byte for byte;
  * the service benchmark uses --repeat to time the tracing in-process.
  *
- *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum|closest-point
+ *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum|closest-point|occupancy
  *               [--mode reference|fast] [--threads T] [--repeat R]
  *               [--content-type TYPE] [--accept TYPE] REQUEST.json|REQUEST.cbor
  *   kdray-trace [--scene PATH] KIND:MODE:REQUEST.json...   (-> REQUEST.json.out)
@@ -66,6 +66,8 @@ static int kind_of(const char *name, kdr_exec_kind *out) {
         *out = KDR_EXEC_CONE_SHADOW;
     else if (!strcmp(name, "closest-point"))
         *out = KDR_EXEC_CLOSEST_POINT;
+    else if (!strcmp(name, "occupancy"))
+        *out = KDR_EXEC_OCCUPANCY;
     else
         return -1;
     return 0;
@@ -84,6 +86,10 @@ static size_t rays_of(kdr_exec_kind kind, kdr_media media, const char *body, siz
     } else if (kind == KDR_EXEC_FRUSTUM) {
         kdr_frustum_request r;
         if (!kdr_proto_parse_frustum_as(media, body, len, max, &r, &err)) n = r.rays;
+    } else if (kind == KDR_EXEC_OCCUPANCY) {
+        kdr_occupancy_request r;
+        if (!kdr_proto_parse_occupancy_as(media, body, len, max, &r, &err)) n = r.n;
+        kdr_occupancy_request_free(&r);
     } else if (kind == KDR_EXEC_CLOSEST_POINT) {
         kdr_closest_request r;
         if (!kdr_proto_parse_closest_as(media, body, len, max, &r, &err)) n = r.n;
@@ -137,7 +143,7 @@ static int usage(void) {
     fprintf(
         stderr,
         "usage: kdray-trace [--scene PATH] --kind "
-        "bundle|cone-shadow|frustum|closest-point "
+        "bundle|cone-shadow|frustum|closest-point|occupancy "
         "[--mode reference|fast] [--threads T] [--repeat R]\n"
         "                   [--content-type TYPE] [--accept TYPE] REQUEST.json|.cbor\n"
         "       kdray-trace [--scene PATH] [--threads T] KIND:MODE:REQUEST.json...\n"

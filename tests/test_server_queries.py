@@ -14,7 +14,10 @@ base64 and CBOR answers equal JSON ones; bad input gets a 400 or 413 that
 names the field. closest-point: answers equal kdray-trace's bytes, each
 point lies at the answered distance, max_distance keeps exactly the answers
 within it, base64 and CBOR equal JSON, bad input is a 400 naming the field.
-Run by Debian's /usr/bin/python3 (python3-cbor2).
+occupancy: answers equal kdray-trace's bytes, 0/1, CBOR uint8; signed
+closest-point: |distance| equals the unsigned answer and is negative
+exactly where occupancy says inside. Run by Debian's /usr/bin/python3
+(python3-cbor2).
 """
 
 import json
@@ -195,11 +198,56 @@ def test_closest_point(t, c):
     for body, has in (({"points": [0, 1]}, "points"), ({}, "points"),
                       ({"points": [0, 1, 2], "max_distance": -1}, "max_distance"),
                       ({"points": [0, 1, 2], "max_distance": "far"}, "max_distance"),
-                      ({"points": [0, 1, 2], "signed": True}, "signed"),
                       ({"points": [0, 1, float("inf")]}, "points[2]")):
         raw = json.dumps(body).replace("Infinity", "1e999").encode()
         code, _, data = c.request("POST", CP_PATH, raw, "application/json")
         t.eq(code, 400, "closest-point 400 for %s" % has)
+        detail = json.loads(data).get("detail", "")
+        t.check(has in detail, "detail %r names %r" % (detail, has))
+
+
+OCC_PATH = "/v1/scenes/%s/occupancy" % SCENE
+
+
+def test_occupancy_and_signed(t, c):
+    import random
+    rng = random.Random(9)
+    bounds = c.scene(SCENE)["bounds"]
+    lo, hi = bounds["min"], bounds["max"]
+    n = 1500
+    pts = [rng.uniform(a - 1, b + 1) for _ in range(n) for a, b in zip(lo, hi)]
+    occ_body, cp_body = {"points": pts}, {"points": pts, "signed": True}
+    core = lib.core_answers(TRACE, [("occupancy", occ_body, "fast"),
+                                    ("closest-point", cp_body, "fast"),
+                                    ("closest-point", {"points": pts}, "fast")])
+    got = []
+    for path, body, want in ((OCC_PATH, occ_body, core[0]), (CP_PATH, cp_body, core[1])):
+        code, _, data = c.request("POST", path, json.dumps(body).encode(), "application/json")
+        t.eq(code, 200, "%s status" % path)
+        t.eq(data, want, "%s == kdray-trace bytes" % path)
+        got.append(json.loads(data))
+    occ, sgn = got
+    plain = json.loads(core[2])
+    t.eq(occ["count"], n, "occupancy count")
+    t.check(set(occ["inside"]) <= {0, 1}, "inside is 0/1")
+    t.check(0 < sum(occ["inside"]) < n, "some points inside (%d)" % sum(occ["inside"]))
+    bad = sum(1 for i in range(n)
+              if abs(sgn["distance"][i]) != plain["distance"][i]
+              or (sgn["distance"][i] < 0) != (occ["inside"][i] == 1 and plain["distance"][i] > 0)
+              or sgn["prim"][i] != plain["prim"][i])
+    t.eq(bad, 0, "signed distance = unsigned, negative exactly where inside")
+    code, _, data = c.request("POST", OCC_PATH, json.dumps(occ_body).encode(),
+                              "application/json", headers={"Accept": "application/cbor"})
+    cb = cbor2.loads(data)
+    t.eq(cb["inside"].tag, 64, "CBOR inside is a uint8 typed array")
+    t.eq(list(cb["inside"].value), occ["inside"], "CBOR inside")
+    for path, body, has in ((OCC_PATH, {"points": [1, 2]}, "points"),
+                            (OCC_PATH, {}, "points"),
+                            (CP_PATH, {"points": [0, 1, 2], "signed": 1}, "signed"),
+                            (CP_PATH, {"points": [0, 1, 2], "signed": True, "max_distance": 1},
+                             "max_distance")):
+        code, _, data = c.request("POST", path, json.dumps(body).encode(), "application/json")
+        t.eq(code, 400, "400 for %s" % has)
         detail = json.loads(data).get("detail", "")
         t.check(has in detail, "detail %r names %r" % (detail, has))
 
@@ -212,6 +260,7 @@ def main():
         t.run(test_all_and_count, c)
         t.run(test_bad, c)
         t.run(test_closest_point, c)
+        t.run(test_occupancy_and_signed, c)
     finally:
         rc = d.stop()
     if rc != 0:
