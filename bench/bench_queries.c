@@ -16,6 +16,11 @@
  *    rival's fast scene; points half on/near the surfaces (offset up to
  *    1e-3 of the diagonal), half uniform in the box. Check: the same
  *    distance for every point, bit for bit.
+ *  - occupancy: kdr_occupancy1 against the same 9-ray vote with the
+ *    collecting filter (points uniform in the box; answers compared and
+ *    the number differing printed: the two triangle tests may disagree on
+ *    rays through shared edges, which the vote is there to outvote).
+ *    Correctness against the winding number is tests/test_occupancy.c's.
  * Workloads: "camera" (primary rays from outside through the scene: many
  * surfaces per ray) and "random" (origins in the box). Checks: kdray's hit
  * total equals the filter's within 0.1% (they differ only on rounding
@@ -167,6 +172,78 @@ static int closest_run(const bench_scene *s, const bench_opts *o) {
     return 0;
 }
 
+/* ---- occupancy: kdr_occupancy1 against the same vote with Embree's
+ * collecting filter (9 rays, parity of each ray's hit count, majority) ---- */
+
+typedef struct occ_ctx {
+    const bench_scene *s;
+    const oracle *filter;
+    const float *pts;
+    size_t n;
+    uint8_t *inside;
+    kdr_hit *buf;
+} occ_ctx;
+
+static void kd_occ(void *p) {
+    occ_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++)
+        kdr_occupancy1(c->s->kd, c->pts + 3 * i, &c->inside[i], NULL, NULL);
+}
+
+static void emb_occ(void *p) {
+    occ_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++) {
+        int odd = 0;
+        for (int r = 0; r < KDR_OCCUPANCY_RAYS; r++) {
+            kdr_ray ray = {{c->pts[3 * i], c->pts[3 * i + 1], c->pts[3 * i + 2]},
+                           {0, 0, 0},
+                           0.0f,
+                           INFINITY};
+            kdr_occupancy_direction(r, ray.dir);
+            odd +=
+                (int)(oracle_all_filter(c->filter, &ray, c->buf, KDR_MAX_HITS_LIMIT) & 1);
+        }
+        c->inside[i] = 2 * odd > KDR_OCCUPANCY_RAYS;
+    }
+}
+
+static int occupancy_run(const bench_scene *s, const bench_opts *o, const oracle *filter,
+                         kdr_hit *buf) {
+    const size_t n = o->rays / 16 ? o->rays / 16 : 1;
+    float *pts = malloc(3 * n * sizeof *pts);
+    uint8_t *a = malloc(n), *b = malloc(n);
+    if (!pts || !a || !b) {
+        free(pts), free(a), free(b);
+        return -1;
+    }
+    kdr_bounds bb;
+    kdr_scene_bounds(s->kd, &bb);
+    uint64_t x = 0x2545f4914f6cdd1dull;
+    for (size_t i = 0; i < 3 * n; i++) {
+        x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+        const int k = (int)(i % 3);
+        pts[i] = bb.min[k] + (bb.max[k] - bb.min[k]) * ((float)(x >> 40) / 16777216.0f);
+    }
+    occ_ctx c0 = {s, filter, pts, n, a, buf}, c1 = c0;
+    c1.inside = b;
+    bench_method m[2] = {{"kd_occupancy", 0, NULL, kd_occ, &c0, 0},
+                         {"embree_filter_occupancy", BENCH_RIVAL, NULL, emb_occ, &c1, 0}};
+    bench_measure(m, 2, o->repeat, 200.0);
+    bench_summary_add(s, "occupancy", m[0].name, n, m[0].best_ms, -1.0);
+    bench_summary_add(s, "occupancy", m[1].name, n, m[1].best_ms, -1.0);
+    size_t differ = 0, inside = 0;
+    for (size_t i = 0; i < n; i++) {
+        differ += a[i] != b[i];
+        inside += a[i];
+    }
+    printf(
+        "occupancy %zu points (%zu inside): kd %.1f ms, Embree filter vote %.1f ms (kd "
+        "%.2fx), answers differing: %zu\n",
+        n, inside, m[0].best_ms, m[1].best_ms, m[1].best_ms / m[0].best_ms, differ);
+    free(pts), free(a), free(b);
+    return 0;
+}
+
 static const char *const q_workloads[] = {"camera", "random"};
 #define NWORK (sizeof q_workloads / sizeof *q_workloads)
 #define MAX_SCENES 32
@@ -231,6 +308,7 @@ static int queries_run(const bench_scene *s, const bench_opts *o) {
                 (unsigned long long)ctx[0].hits);
         bench_workload_free(&w);
     }
+    if (rc == 0) rc = occupancy_run(s, o, rival_oracle(filt), buf);
     rival_free(filt);
     free(buf);
     if (rc == 0) rc = closest_run(s, o);
@@ -240,18 +318,19 @@ static int queries_run(const bench_scene *s, const bench_opts *o) {
 static void queries_finish(const bench_opts *o) {
     (void)o;
     printf("\n== all hits: Embree ms / kdray ms (> 1: kdray faster)\n");
-    printf("%-10s | %-22s | %-22s | %-22s | %-22s | %-22s\n", "scene",
+    printf("%-10s | %-22s | %-22s | %-22s | %-22s | %-22s | %-22s\n", "scene",
            "all16 camera (requery)", "all16 random (requery)", "all camera (filter)",
-           "all random (filter)", "closest (point query)");
+           "all random (filter)", "closest (point query)", "occupancy (filter)");
     for (int i = 0; i < g_nscenes; i++) {
         printf("%-10s", g_scene[i]);
-        static const char *const rows[5][3] = {
+        static const char *const rows[6][3] = {
             {"all16_camera", "kd_all16", "embree_requery16"},
             {"all16_random", "kd_all16", "embree_requery16"},
             {"all_camera", "kd_all", "embree_filter_all"},
             {"all_random", "kd_all", "embree_filter_all"},
-            {"closest_point", "kd_closest", "embree_point_query"}};
-        for (int r = 0; r < 5; r++) {
+            {"closest_point", "kd_closest", "embree_point_query"},
+            {"occupancy", "kd_occupancy", "embree_filter_occupancy"}};
+        for (int r = 0; r < 6; r++) {
             const double kd = bench_summary_ms(g_scene[i], rows[r][0], rows[r][1]);
             const double em = bench_summary_ms(g_scene[i], rows[r][0], rows[r][2]);
             if (kd > 0 && em > 0)
