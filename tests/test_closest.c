@@ -218,7 +218,8 @@ static void run(const char *label, const float *tris, size_t ntris, size_t npts,
     kdr_scene_bounds(sc, &bb);
     float *pts = malloc(3 * (npts + nextra) * sizeof *pts);
     make_points(tris, ntris, &bb, npts, pts);
-    memcpy(pts + 3 * npts, extra, 3 * nextra * sizeof *pts);
+    if (nextra) /* memcpy from NULL is undefined even for 0 bytes */
+        memcpy(pts + 3 * npts, extra, 3 * nextra * sizeof *pts);
     const size_t n = npts + nextra;
     kdr_closest *batch = malloc(n * sizeof *batch);
     unsigned long bad = 0, ties = 0, limited = 0;

@@ -112,7 +112,8 @@ static void run(const char *label, const float *tris, size_t ntris, const float 
         for (int k = 0; k < 3; k++)
             p[k] = (float)((1 - a - b) * t[k] + a * t[3 + k] + b * t[6 + k] + off * d[k]);
     }
-    memcpy(pts + 3 * npts, extra, 3 * nextra * sizeof *pts);
+    if (nextra) /* memcpy from NULL is undefined even for 0 bytes */
+        memcpy(pts + 3 * npts, extra, 3 * nextra * sizeof *pts);
     uint8_t *batch = malloc(n);
     if (kdr_occupancy_batch(sc, pts, 0, n, batch, NULL) != KDR_OK) g_fail++;
     occ_tally t = {0};
