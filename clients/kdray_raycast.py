@@ -12,8 +12,8 @@ base64 of their little-endian bytes ({"f32": ...}), never as decimal text.
 Conventions follow Open3D where kdray has the same notion: a miss has
 t_hit = inf and primitive_ids = INVALID_ID (2**32 - 1); leading dimensions
 of the input are kept; geometry_ids are 0 for every hit (a kdrayd scene is
-one geometry: the glTF node/mesh/primitive of a prim is in the scene's
-"meshes" table, GET /v1/scenes/NAME). Differences: list_intersections
+one geometry: the glTF node/mesh/primitive of a hit is the bundle's "mesh"
+field, or the scene's "meshes" table, GET /v1/scenes/NAME). Differences: list_intersections
 returns at most max_hits hits per ray (kdray's "all" query; pass a larger
 max_hits, up to 1024, or check count_intersections); compute_occupancy and
 the sign of compute_signed_distance come from kdray's 9-ray parity vote.
@@ -86,10 +86,10 @@ class RaycastingScene:
 
     def cast_rays(self, rays):
         """Closest hits: t_hit (inf: miss), geometry_ids, primitive_ids
-        (INVALID_ID: miss), primitive_uvs (..., 2). Open3D's
-        primitive_normals is not returned (kdrayd has no normal field yet)."""
+        (INVALID_ID: miss), primitive_uvs (..., 2), primitive_normals
+        (..., 3: the triangle's unit geometric normal; 0 on a miss)."""
         flat, lead = self._rays(rays)
-        a = self._bundle(flat, "closest")
+        a = self._bundle(flat, "closest", fields=["t", "prim", "u", "v", "normal"])
         prim = _arr(a["prim"], np.int64)
         hit = prim >= 0
         t = np.where(hit, _arr(a["t"], np.float32), np.float32(np.inf))
@@ -98,7 +98,8 @@ class RaycastingScene:
                 "geometry_ids": np.where(hit, 0, INVALID_ID).astype(np.uint32).reshape(lead),
                 "primitive_ids": np.where(hit, prim, INVALID_ID).astype(np.uint32)
                 .reshape(lead),
-                "primitive_uvs": uv.reshape(lead + (2,))}
+                "primitive_uvs": uv.reshape(lead + (2,)),
+                "primitive_normals": _arr(a["normal"], np.float32).reshape(lead + (3,))}
 
     def test_occlusions(self, rays, tnear=0.0, tfar=np.inf):
         """True where any hit lies in [tnear, tfar]."""

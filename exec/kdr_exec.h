@@ -164,6 +164,10 @@ typedef struct kdr_exec_query {
     kdr_exec_kind kind;
     kdr_exec_mode mode;
     const kdr_scene *scene;
+    /* the scene's glTF (node, mesh, primitive) ranges, for the "mesh"
+     * answer field; NULL / 0: every hit's mesh is -1,-1,-1 */
+    const kdr_proto_mesh_range *meshes;
+    size_t nmeshes;
     const char *body; /* not NUL-terminated; a CBOR body's float arrays
                          are read in place, so it must outlive q (above) */
     size_t len;

@@ -8,6 +8,7 @@
  * media type is CBOR. Bodies are parsed by their media type (JSON or CBOR).
  * Fast and reference modes differ only in the core mode a chunk asks for.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -69,6 +70,82 @@ static int encoded(kdr_exec_job *j, int rc, kdr_encoding enc) {
     return rc;
 }
 
+/* ---- per-hit attributes ("normal", "mesh") ------------------------------------------
+ */
+
+/* Bytes of the attribute arrays for entries hits (3 floats + 3 int32). */
+static size_t attrs_bytes(unsigned fields, size_t entries) {
+    return fields & KDR_FIELDS_ATTRS ? entries * 24 : 0;
+}
+
+/* The range holding prim (they tile [0, ntris) in order), or NULL. */
+static const kdr_proto_mesh_range *range_of(const kdr_exec_query *q, int32_t prim) {
+    size_t lo = 0, hi = q->nmeshes;
+    while (lo < hi) {
+        const size_t mid = lo + (hi - lo) / 2;
+        if ((uint64_t)prim < q->meshes[mid].first_prim)
+            hi = mid;
+        else if ((uint64_t)prim >= q->meshes[mid].first_prim + q->meshes[mid].count)
+            lo = mid + 1;
+        else
+            return &q->meshes[mid];
+    }
+    return NULL;
+}
+
+/* Fills normal / mesh (3 per entry) for prims[0..n): the unit normal of
+ * (p1-p0) x (p2-p0) computed in double, and the glTF indices; a miss (prim
+ * < 0) gets 0,0,0 and -1,-1,-1. Allocates both arrays (freed by the
+ * caller); KDR_ENOMEM. */
+static int attrs_fill(const kdr_exec_query *q, const int32_t *prims, size_t n,
+                      float **normal, int32_t **mesh) {
+    *normal = malloc((n ? 3 * n : 1) * sizeof **normal);
+    *mesh = malloc((n ? 3 * n : 1) * sizeof **mesh);
+    if (!*normal || !*mesh) return KDR_ENOMEM;
+    for (size_t i = 0; i < n; i++) {
+        float *nv = *normal + 3 * i;
+        int32_t *mv = *mesh + 3 * i;
+        nv[0] = nv[1] = nv[2] = 0.0f;
+        mv[0] = mv[1] = mv[2] = -1;
+        const float *t =
+            prims[i] >= 0 ? kdr_scene_triangle(q->scene, (size_t)prims[i]) : NULL;
+        if (!t) continue;
+        double e1[3], e2[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = (double)t[3 + k] - t[k];
+            e2[k] = (double)t[6 + k] - t[k];
+        }
+        const double c[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                             e1[0] * e2[1] - e1[1] * e2[0]};
+        const double len = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+        for (int k = 0; k < 3; k++)
+            nv[k] = len > 0 ? (float)(c[k] / len) : 0.0f;
+        const kdr_proto_mesh_range *r = range_of(q, prims[i]);
+        if (r) {
+            mv[0] = (int32_t)r->node;
+            mv[1] = (int32_t)r->mesh;
+            mv[2] = (int32_t)r->primitive;
+        }
+    }
+    return 0;
+}
+
+/* Encodes closest / any hits with the attributes the fields ask for. */
+static int encode_hits(kdr_exec_job *j, const kdr_hits *h, size_t n, kdr_query query,
+                       unsigned fields, kdr_encoding enc) {
+    float *normal = NULL;
+    int32_t *mesh = NULL;
+    int rc = 0;
+    if (fields & KDR_FIELDS_ATTRS) rc = attrs_fill(j->q, h->prim, n, &normal, &mesh);
+    const kdr_hit_attrs attrs = {normal, mesh};
+    if (rc == 0)
+        rc = kdr_proto_encode_hits_attrs(h, &attrs, n, query, fields, enc,
+                                         &j->q->result.body);
+    free(normal);
+    free(mesh);
+    return encoded(j, rc, enc);
+}
+
 /* ---- bundle ------------------------------------------------------------------ */
 
 static int bundle_parse(kdr_exec_job *j) {
@@ -88,13 +165,15 @@ static int bundle_parse(kdr_exec_job *j) {
     for (int i = 0; i < 4; i++)
         if (r->owned[i]) j->parsed_bytes += floats[i] * sizeof(float);
     const kdr_encoding enc = answer_encoding(j, r->encoding);
-    if (r->query == KDR_ALL) /* slots, offsets, answer */
+    if (r->query == KDR_ALL) /* slots, offsets, attributes, answer */
         j->answer_estimate = b->n * (size_t)r->max_hits * 16 + (2 * b->n + 1) * 4 +
+                             attrs_bytes(r->fields, b->n * (size_t)r->max_hits) +
                              kdr_proto_all_answer_max(b->n, r->max_hits, r->fields, enc);
     else if (r->query == KDR_COUNT)
         j->answer_estimate = b->n * 4 + kdr_proto_counts_answer_max(b->n, enc);
     else
-        j->answer_estimate = hits_estimate(b->n, r->query, r->fields, enc);
+        j->answer_estimate =
+            hits_estimate(b->n, r->query, r->fields, enc) + attrs_bytes(r->fields, b->n);
     j->nchunks = chunks_of(b->n, KDR_EXEC_CHUNK_RAYS);
     j->work_rays = b->n;
     j->deadline_ms = r->deadline_ms;
@@ -175,20 +254,26 @@ static int bundle_encode(kdr_exec_job *j) {
     if (r->query == KDR_ALL) {
         all_compact(j);
         const kdr_all_hits *a = &j->k.bundle.all;
+        float *normal = NULL;
+        int32_t *mesh = NULL;
+        int rc = 0;
+        if (r->fields & KDR_FIELDS_ATTRS)
+            rc = attrs_fill(j->q, a->prim, (size_t)j->k.bundle.offset[r->batch.n],
+                            &normal, &mesh);
         const kdr_all_answer ans = {r->batch.n,
                                     (const int32_t *)(const void *)a->nhits,
                                     j->k.bundle.offset,
                                     a->t,
                                     a->u,
                                     a->v,
-                                    a->prim};
-        return encoded(j, kdr_proto_encode_all(&ans, r->fields, enc, &j->q->result.body),
-                       enc);
+                                    a->prim,
+                                    {normal, mesh}};
+        if (rc == 0) rc = kdr_proto_encode_all(&ans, r->fields, enc, &j->q->result.body);
+        free(normal);
+        free(mesh);
+        return encoded(j, rc, enc);
     }
-    return encoded(j,
-                   kdr_proto_encode_hits_fields(&j->k.bundle.hits, r->batch.n, r->query,
-                                                r->fields, enc, &j->q->result.body),
-                   enc);
+    return encode_hits(j, &j->k.bundle.hits, r->batch.n, r->query, r->fields, enc);
 }
 
 static void bundle_release(kdr_exec_job *j) {
@@ -217,7 +302,8 @@ static int frustum_parse(kdr_exec_job *j) {
     }
     j->parsed_bytes = 0; /* a camera: nothing beyond the job itself */
     j->answer_estimate =
-        hits_estimate(r->rays, r->query, r->fields, answer_encoding(j, r->encoding));
+        hits_estimate(r->rays, r->query, r->fields, answer_encoding(j, r->encoding)) +
+        attrs_bytes(r->fields, r->rays);
     j->nchunks =
         chunks_of(kdr_frustum_tile_count(&r->camera, r->tile), KDR_EXEC_CHUNK_TILES);
     j->work_rays = r->rays;
@@ -244,10 +330,7 @@ static int frustum_encode(kdr_exec_job *j) {
     const kdr_frustum_request *r = &j->k.frustum.req;
     const kdr_encoding enc = answer_encoding(j, r->encoding);
     j->q->result.rays = r->rays;
-    return encoded(j,
-                   kdr_proto_encode_hits_fields(&j->k.frustum.hits, r->rays, r->query,
-                                                r->fields, enc, &j->q->result.body),
-                   enc);
+    return encode_hits(j, &j->k.frustum.hits, r->rays, r->query, r->fields, enc);
 }
 
 static void frustum_release(kdr_exec_job *j) { hits_free(&j->k.frustum.hits); }

@@ -162,8 +162,9 @@ typedef struct kdr_field_info {
     const char *name;
     unsigned bit;
     int closest_only;
+    unsigned width; /* values per ray / hit */
 } kdr_field_info;
-#define KDR_FIELD_COUNT 5
+#define KDR_FIELD_COUNT 7
 extern const kdr_field_info kdr_field_table[KDR_FIELD_COUNT];
 /* "deadline_ms": absent gives 0, else a number in (0, KDR_PROTO_MAX_DEADLINE_MS]. */
 int kdr_pf_deadline(const cJSON *root, double *out, kdr_proto_error *err);

@@ -171,6 +171,14 @@ const char *kdr_proto_encoding_media(kdr_encoding enc);
 #define KDR_FIELD_U (1u << 2)
 #define KDR_FIELD_V (1u << 3)
 #define KDR_FIELD_HIT (1u << 4)
+/* per hit, three values each (issue 15): the triangle's unit geometric
+ * normal (p1-p0) x (p2-p0), and the glTF node, mesh and primitive it came
+ * from; closest and all queries only, never defaults. A miss: 0,0,0 and
+ * -1,-1,-1. Encoded only with kdr_hit_attrs (kdr_proto_encode_hits_attrs,
+ * kdr_all_answer). */
+#define KDR_FIELD_NORMAL (1u << 5)
+#define KDR_FIELD_MESH (1u << 6)
+#define KDR_FIELDS_ATTRS (KDR_FIELD_NORMAL | KDR_FIELD_MESH)
 #define KDR_FIELDS_CLOSEST (KDR_FIELD_T | KDR_FIELD_PRIM | KDR_FIELD_U | KDR_FIELD_V)
 #define KDR_FIELDS_ANY KDR_FIELD_HIT
 
@@ -281,6 +289,17 @@ int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
  * be valid for the query (the parsers ensure it): else KDR_EINVAL. */
 int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query,
                                  unsigned fields, kdr_encoding enc, kdr_buf *out);
+/* The per-hit attributes of KDR_FIELDS_ATTRS: 3 values per ray (or per
+ * hit of an all answer), the executor fills them from the scene. */
+typedef struct kdr_hit_attrs {
+    const float *normal;  /* 3 per entry */
+    const int32_t *mesh;  /* 3 per entry: node, mesh, primitive */
+} kdr_hit_attrs;
+/* kdr_proto_encode_hits_fields with normal / mesh available (attrs may be
+ * NULL when fields asks for neither). */
+int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                                kdr_query query, unsigned fields, kdr_encoding enc,
+                                kdr_buf *out);
 
 /* Bundle "query": "all": {"count":N,"nhits":[N],"offset":[N+1], then the
  * chosen fields of t, prim, u, v, each offset[N] long}: ray i's hits are
@@ -292,6 +311,7 @@ typedef struct kdr_all_answer {
     const int32_t *offset;  /* n + 1 */
     const float *t, *u, *v; /* offset[n] each (only the chosen fields read) */
     const int32_t *prim;
+    kdr_hit_attrs attrs;    /* 3 * offset[n] each, when fields asks */
 } kdr_all_answer;
 int kdr_proto_encode_all(const kdr_all_answer *a, unsigned fields, kdr_encoding enc,
                          kdr_buf *out);

@@ -157,7 +157,7 @@ static array_src field_kind(unsigned bit) {
     static const int32_t i;
     static const uint8_t u8;
     array_src s = {0};
-    if (bit == KDR_FIELD_PRIM)
+    if (bit == KDR_FIELD_PRIM || bit == KDR_FIELD_MESH)
         s.i = &i;
     else if (bit == KDR_FIELD_HIT)
         s.u8 = &u8;
@@ -173,7 +173,7 @@ size_t kdr_proto_hits_answer_max(size_t n, kdr_query query, unsigned fields,
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
         if (fields & kdr_field_table[k].bit) {
             const array_src s = field_kind(kdr_field_table[k].bit);
-            total += array_max(&s, n, enc);
+            total += array_max(&s, n * kdr_field_table[k].width, enc);
         }
     return total;
 }
@@ -216,9 +216,16 @@ static int close_answer(kdr_buf *b, kdr_encoding enc) {
 }
 
 /* The source of answer field bit for a query. */
-static array_src field_src(const kdr_hits *h, kdr_query query, unsigned bit) {
+static array_src field_src(const kdr_hits *h, const kdr_hit_attrs *a, kdr_query query,
+                           unsigned bit) {
     array_src s = {0};
     switch (bit) {
+    case KDR_FIELD_NORMAL:
+        s = (array_src){.f = a->normal};
+        break;
+    case KDR_FIELD_MESH:
+        s = (array_src){.i = a->mesh};
+        break;
     case KDR_FIELD_T:
         s = (array_src){.f = h->t, .prim = h->prim, .miss_f = -1.0f};
         break;
@@ -243,6 +250,12 @@ static array_src field_src(const kdr_hits *h, kdr_query query, unsigned bit) {
 
 int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query,
                                  unsigned fields, kdr_encoding enc, kdr_buf *out) {
+    return kdr_proto_encode_hits_attrs(hits, NULL, n, query, fields, enc, out);
+}
+
+int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs,
+                                size_t n, kdr_query query, unsigned fields,
+                                kdr_encoding enc, kdr_buf *out) {
     size_t members = 0;
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
@@ -250,7 +263,11 @@ int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query
         if (fi->closest_only && query == KDR_ANY) return KDR_EINVAL;
         members++;
     }
-    if (members == 0 || (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY)))
+    if (members == 0 ||
+        (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY | KDR_FIELDS_ATTRS)))
+        return KDR_EINVAL;
+    if ((fields & KDR_FIELD_NORMAL && (!attrs || !attrs->normal)) ||
+        (fields & KDR_FIELD_MESH && (!attrs || !attrs->mesh)))
         return KDR_EINVAL;
     if (presize(out, kdr_proto_hits_answer_max(n, query, fields, enc)) ||
         count_head(out, n, members, enc))
@@ -258,8 +275,8 @@ int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
         if (!(fields & fi->bit)) continue;
-        const array_src s = field_src(hits, query, fi->bit);
-        if (named_array(out, fi->name, &s, n, enc)) return KDR_ENOMEM;
+        const array_src s = field_src(hits, attrs, query, fi->bit);
+        if (named_array(out, fi->name, &s, n * fi->width, enc)) return KDR_ENOMEM;
     }
     return close_answer(out, enc);
 }
@@ -280,14 +297,17 @@ size_t kdr_proto_all_answer_max(size_t n, size_t max_hits, unsigned fields,
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
         if (fields & kdr_field_table[k].bit) {
             const array_src s = field_kind(kdr_field_table[k].bit);
-            total += array_max(&s, n * max_hits, enc);
+            total += array_max(&s, n * max_hits * kdr_field_table[k].width, enc);
         }
     return total;
 }
 
 int kdr_proto_encode_all(const kdr_all_answer *a, unsigned fields, kdr_encoding enc,
                          kdr_buf *out) {
-    if (!a || !a->nhits || !a->offset || fields == 0 || (fields & ~KDR_FIELDS_CLOSEST))
+    if (!a || !a->nhits || !a->offset || fields == 0 ||
+        (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ATTRS)) ||
+        (fields & KDR_FIELD_NORMAL && !a->attrs.normal) ||
+        (fields & KDR_FIELD_MESH && !a->attrs.mesh))
         return KDR_EINVAL;
     size_t members = 2, max_hits = 0;
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
@@ -304,11 +324,15 @@ int kdr_proto_encode_all(const kdr_all_answer *a, unsigned fields, kdr_encoding 
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const unsigned bit = kdr_field_table[k].bit;
         if (!(fields & bit)) continue;
-        const array_src s = bit == KDR_FIELD_T      ? (array_src){.f = a->t}
-                            : bit == KDR_FIELD_PRIM ? (array_src){.i = a->prim}
-                            : bit == KDR_FIELD_U    ? (array_src){.f = a->u}
-                                                    : (array_src){.f = a->v};
-        if (named_array(out, kdr_field_table[k].name, &s, total, enc)) return KDR_ENOMEM;
+        const array_src s = bit == KDR_FIELD_T        ? (array_src){.f = a->t}
+                            : bit == KDR_FIELD_PRIM   ? (array_src){.i = a->prim}
+                            : bit == KDR_FIELD_U      ? (array_src){.f = a->u}
+                            : bit == KDR_FIELD_V      ? (array_src){.f = a->v}
+                            : bit == KDR_FIELD_NORMAL ? (array_src){.f = a->attrs.normal}
+                                                      : (array_src){.i = a->attrs.mesh};
+        if (named_array(out, kdr_field_table[k].name, &s,
+                        total * kdr_field_table[k].width, enc))
+            return KDR_ENOMEM;
     }
     return close_answer(out, enc);
 }

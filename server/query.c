@@ -85,6 +85,8 @@ static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoi
     call->q = (kdr_exec_query){.kind = kind_of(ep),
                                .mode = KDR_EXEC_FAST,
                                .scene = call->scene->scene,
+                               .meshes = call->scene->proto_ranges,
+                               .nmeshes = call->scene->nranges,
                                .body = req->body,
                                .len = req->len,
                                .media = media,

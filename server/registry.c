@@ -58,6 +58,7 @@ static void version_free(kdr_scene_version *v) {
     if (!v) return;
     kdr_scene_free(v->scene);
     free(v->ranges);
+    free(v->proto_ranges);
     free(v);
 }
 
@@ -182,6 +183,12 @@ static kdr_scene_version *load_version(entry *e, unsigned generation, char *why,
     v->load_ms = g.load_ms;
     v->ranges = g.ranges;
     v->nranges = g.nranges;
+    v->proto_ranges = calloc(g.nranges ? g.nranges : 1, sizeof *v->proto_ranges);
+    if (!v->proto_ranges && rc == KDR_OK) rc = KDR_ENOMEM;
+    for (size_t i = 0; v->proto_ranges && i < g.nranges; i++)
+        v->proto_ranges[i] = (kdr_proto_mesh_range){
+            g.ranges[i].node, g.ranges[i].mesh, g.ranges[i].primitive,
+            g.ranges[i].first_prim, g.ranges[i].count};
     v->generation = generation;
     atomic_init(&v->refs, 1);
     for (size_t k = 0; k < sizeof v->ns_per_ray / sizeof v->ns_per_ray[0]; k++)

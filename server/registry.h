@@ -21,6 +21,7 @@
 #include <stddef.h>
 
 #include "kdr_gltf.h"
+#include "kdr_protocol.h"
 #include "kdray.h"
 #include "textbuf.h"
 
@@ -28,6 +29,7 @@
 typedef struct kdr_scene_version {
     kdr_scene *scene;
     kdr_mesh_range *ranges;
+    kdr_proto_mesh_range *proto_ranges; /* the same, for the "mesh" field */
     size_t nranges;
     double load_ms, build_ms;
     unsigned generation; /* 1 for the start-up build, +1 per reload */

@@ -77,6 +77,9 @@ def checks(kdrayd):
             ids = ans["primitive_ids"].ravel()
             t.check(np.array_equal(ids[hit], prim[hit].astype(np.uint32)) and
                     np.all(ids[~hit] == INVALID_ID), "primitive_ids, INVALID_ID on a miss")
+            nrm = ans["primitive_normals"].reshape(-1, 3)
+            t.check(np.allclose(np.linalg.norm(nrm[hit], axis=1), 1, atol=1e-6) and
+                    not nrm[~hit].any(), "primitive_normals: unit on hits, 0 on misses")
             occl = scene.test_occlusions(rays)
             t.check(np.array_equal(occl, hit), "test_occlusions = a closest hit exists")
             cnt = scene.count_intersections(rays)

@@ -29,8 +29,10 @@ static void test_fields_json(void) {
         {"[]", "closest", 400, 0, "fields: expected a non-empty array of field names"},
         {"\"t\"", "closest", 400, 0, "fields: expected a non-empty array of field names"},
         {"[\"t\",1]", "closest", 400, 0, "fields[1]: expected a field name"},
-        {"[\"normal\"]", "closest", 400, 0,
-         "fields[0]: unknown field \"normal\" (t, prim, u, v, hit)"},
+        {"[\"normal\",\"mesh\"]", "closest", 0, KDR_FIELD_NORMAL | KDR_FIELD_MESH, ""},
+        {"[\"mesh\"]", "any", 400, 0, "fields[0]: \"mesh\" needs \"query\": \"closest\""},
+        {"[\"normals\"]", "closest", 400, 0,
+         "fields[0]: unknown field \"normals\" (t, prim, u, v, hit, normal, mesh)"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         char json[256];
@@ -215,10 +217,17 @@ static void test_all_bounds(void) {
             f[k] = k % 2 ? -1.23456875e-5f : -9.87654321e-38f;
             prim[k] = 1073741823;
         }
-        const kdr_all_answer a = {n, nh, off, f, f, f, prim};
+        float *nrm = xmalloc(48 * n);
+        int32_t *msh = xmalloc(48 * n);
+        for (size_t k = 0; k < 12 * n; k++) {
+            nrm[k] = k % 2 ? -1.23456875e-5f : -9.87654321e-38f;
+            msh[k] = k % 3 ? -1 : 2147483647;
+        }
+        const kdr_all_answer a = {n, nh, off, f, f, f, prim, {nrm, msh}};
         const size_t maxh = n < 5 ? (size_t)nh[n - 1] : 4; /* the encoder's own bound */
         for (int e = 0; e < 3; e++) {
-            for (unsigned fs = 1; fs <= KDR_FIELDS_CLOSEST; fs++) {
+            for (unsigned fs = 1; fs <= (KDR_FIELDS_CLOSEST | KDR_FIELDS_ATTRS); fs++) {
+                if (fs & KDR_FIELD_HIT) continue;
                 kdr_buf out;
                 kdr_buf_init(&out);
                 snprintf(what, sizeof what, "all n=%zu enc %d fields %u", n, e, fs);
@@ -239,12 +248,34 @@ static void test_all_bounds(void) {
                   KDR_EINVAL,
               "all refuses the hit field");
         kdr_buf_free(&out);
-        free(nh), free(off), free(prim), free(cnt), free(f);
+        /* closest answers with normal and mesh (3 values per ray) */
+        kdr_hits h = {f, prim, f, f, NULL};
+        const kdr_hit_attrs at = {nrm, msh};
+        for (int e = 0; e < 3; e++)
+            for (unsigned fs = 1;
+                 fs <= (KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY | KDR_FIELDS_ATTRS); fs++) {
+                if (!(fs & KDR_FIELDS_ATTRS)) continue;
+                kdr_buf o2;
+                kdr_buf_init(&o2);
+                snprintf(what, sizeof what, "attrs n=%zu enc %d fields %u", n, e, fs);
+                check_bound(&o2, kdr_proto_hits_answer_max(n, KDR_CLOSEST, fs, encs[e]),
+                            kdr_proto_encode_hits_attrs(&h, &at, n, KDR_CLOSEST, fs,
+                                                        encs[e], &o2),
+                            what);
+                kdr_buf_free(&o2);
+            }
+        kdr_buf o3;
+        kdr_buf_init(&o3);
+        CHECK(kdr_proto_encode_hits_fields(&h, n, KDR_CLOSEST, KDR_FIELD_NORMAL,
+                                           KDR_ENCODING_JSON, &o3) == KDR_EINVAL,
+              "normal without attributes is refused");
+        kdr_buf_free(&o3);
+        free(nh), free(off), free(prim), free(cnt), free(f), free(nrm), free(msh);
     }
     /* the JSON text of a small answer, exactly */
     const int32_t nh[2] = {2, 0}, off[3] = {0, 2, 2}, prim[2] = {5, 9};
     const float t[2] = {1.5f, 2.0f}, u[2] = {0.25f, 0.0f}, v[2] = {0.5f, 1.0f};
-    const kdr_all_answer a = {2, nh, off, t, u, v, prim};
+    const kdr_all_answer a = {2, nh, off, t, u, v, prim, {NULL, NULL}};
     kdr_buf out;
     kdr_buf_init(&out);
     CHECK(kdr_proto_encode_all(&a, KDR_FIELD_T | KDR_FIELD_PRIM, KDR_ENCODING_JSON,

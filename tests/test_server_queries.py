@@ -252,6 +252,79 @@ def test_occupancy_and_signed(t, c):
         t.check(has in detail, "detail %r names %r" % (detail, has))
 
 
+def test_normal_and_mesh(t):
+    """A scene whose normals and glTF indices are known: a quad at z = 0
+    (counter-clockwise seen from +z: normal +z) as node 0 / mesh 0, and a
+    tilted quad (normal (0, -0.6, 0.8)) as mesh 1, instanced by node 1 with a
+    translation; node 2 is their parent. Bundle closest and all answers and
+    a frustum answer carry the normals and (node, mesh, primitive) triples,
+    which also match the scene's meshes table."""
+    import math
+    import tempfile
+    sys.path.insert(0, os.path.join(HERE, "..", "scenes"))
+    import glbutil
+    g = glbutil.Glb("test_server_queries")
+    flat = g.add_mesh("flat", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [0, 1, 2, 0, 2, 3])
+    # tilted: spans x and the direction (0, 0.8, 0.6): normal x-axis cross that
+    tilt = g.add_mesh("tilt", [(0, 0, 0), (1, 0, 0), (1, 0.8, 0.6), (0, 0.8, 0.6)],
+                      [0, 1, 2, 0, 2, 3])
+    n1 = g.add_node("flat", mesh=flat)
+    n2 = g.add_node("tilt", mesh=tilt, translation=[3, 0, 0])
+    g.add_node("root", children=[n1, n2], root=True)
+    tmp = tempfile.mkdtemp(prefix="kdray-nm-")
+    path = os.path.join(tmp, "nm.glb")
+    g.write(path)
+    d = lib.Daemon(KDRAYD, ["--threads", "1", "--scene", "nm=" + path], default_scene=False)
+    try:
+        c = Client(d.url)
+        meshes = c.scene("nm")["meshes"]
+        # the last ray meets the tilted quad on its diagonal (an edge shared
+        # by its two triangles): two hits, as docs/API.md defines a hit
+        o = [0.3, 0.6, 5, 3.5, 0.2, 5, 3.3, 5, 0.3, 9, 9, 9, 3.5, 5, 0.3]
+        dirs = [0, 0, -1, 0, 0, -1, 0, -1, 0, 1, 0, 0, 0, -1, 0]
+        for query in ("closest", "all"):
+            a = c.bundle("nm", o, dirs, query=query, fields=["prim", "normal", "mesh"])
+            t.eq(sorted(a), sorted(["count", "prim", "normal", "mesh"] +
+                                   (["nhits", "offset"] if query == "all" else [])),
+                 query + ": the arrays asked for")
+            n, m = a["normal"], a["mesh"]
+            if query == "all":  # one hit per ray for the first three: the same order
+                t.eq(a["nhits"], [1, 1, 1, 0, 2], "all: hits per ray (2 on the shared edge)")
+            want_n = [(0, 0, 1), (0, -0.6, 0.8), (0, -0.6, 0.8)]
+            want_m = [(n1, flat, 0), (n2, tilt, 0), (n2, tilt, 0)]
+            for i in range(3):
+                got = n[3 * i:3 * i + 3]
+                t.check(all(abs(x - y) < 1e-6 for x, y in zip(got, want_n[i])),
+                        "%s ray %d: normal %r, want %r" % (query, i, got, want_n[i]))
+                t.eq(tuple(m[3 * i:3 * i + 3]), want_m[i], "%s ray %d: node, mesh, primitive"
+                     % (query, i))
+                r = [x for x in meshes if x["first_prim"] <= a["prim"][i] <
+                     x["first_prim"] + x["count"]][0]
+                t.eq(tuple(m[3 * i:3 * i + 3]), (r["node"], r["mesh"], r["primitive"]),
+                     "%s ray %d: mesh agrees with the scene's meshes table" % (query, i))
+            if query == "closest":
+                closest_mesh = m
+                t.eq(n[9:12], [0, 0, 0], "a miss: normal 0,0,0")
+                t.eq(m[9:12], [-1, -1, -1], "a miss: mesh -1,-1,-1")
+                t.check(abs(math.hypot(*n[3:6]) - 1) < 1e-6, "unit normal")
+        b64 = c.bundle("nm", o, dirs, fields=["normal", "mesh"], encoding="base64")
+        t.eq(b64["mesh"], closest_mesh, "base64 mesh")
+        code, _, body = c.request("POST", "/v1/scenes/nm/bundle", json.dumps(
+            {"origins": o, "directions": dirs, "query": "any", "fields": ["normal"]}).encode(),
+            "application/json")
+        t.eq(code, 400, "normal of an any query")
+        fr = c.call("POST", "/v1/scenes/nm/frustum",
+                    {"camera": {"eye": [0.5, 0.5, 5], "target": [0.5, 0.5, 0], "fov_y_deg": 10,
+                                "width": 4, "height": 4}, "fields": ["normal", "mesh"]})
+        t.eq(fr["normal"], [0, 0, 1] * 16, "frustum normals")
+        t.eq(fr["mesh"], [n1, flat, 0] * 16, "frustum meshes")
+    finally:
+        rc = d.stop()
+        os.unlink(path)
+        os.rmdir(tmp)
+    t.eq(rc, 0, "kdrayd exit status")
+
+
 def main():
     t = lib.Runner()
     d = lib.Daemon(KDRAYD, ["--threads", "2", "--max-rays", "6000000"])
@@ -266,6 +339,7 @@ def main():
     if rc != 0:
         print("FAIL kdrayd exited %s\n%s" % (rc, d.log_text()))
         t.failures.append("exit status")
+    t.run(test_normal_and_mesh)
     return t.finish()
 
 

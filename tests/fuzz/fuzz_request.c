@@ -109,7 +109,11 @@ static void fuzz_bundle(kdr_media media, const char *body, size_t len) {
         check(t && prim && hit);
         int32_t *off = calloc(b->n + 1, 4);
         check(off != NULL);
-        const kdr_all_answer all = {b->n, prim, off, t, t, t, prim};
+        float *n3 = calloc(3 * b->n, 4);
+        int32_t *m3 = calloc(3 * b->n, 4);
+        check(n3 && m3);
+        const kdr_all_answer all = {b->n, prim, off, t, t, t, prim, {n3, m3}};
+        const kdr_hit_attrs attrs = {n3, m3};
         for (int enc = 0; enc < 3; enc++) {
             kdr_buf out;
             kdr_buf_init(&out);
@@ -120,11 +124,11 @@ static void fuzz_bundle(kdr_media media, const char *body, size_t len) {
                 check(kdr_proto_encode_counts((const uint32_t *)prim, b->n, e, &out) ==
                       0);
             else
-                check(kdr_proto_encode_hits_fields(&h, b->n, r.query, r.fields, e,
-                                                   &out) == 0);
+                check(kdr_proto_encode_hits_attrs(&h, &attrs, b->n, r.query, r.fields, e,
+                                                  &out) == 0);
             kdr_buf_free(&out);
         }
-        free(t), free(prim), free(hit), free(off);
+        free(t), free(prim), free(hit), free(off), free(n3), free(m3);
     } else {
         check(st == 400 || st == 413);
         check(memchr(err.detail, '\0', sizeof err.detail) != NULL && err.detail[0]);
