@@ -4,7 +4,7 @@
  * the ray workloads, and the summary every program ends with.
  *
  * A program is a list of sections (bench_core.c, bench_bundle.c,
- * bench_frustum.c, bench_cone.c); bench_main.c is the one main, built once
+ * bench_frustum.c, bench_cone.c, bench_queries.c); bench_main.c is the one main, built once
  * per program with its default sections and scenes. Any program runs any
  * section (--section), so one process can load each scene once for all.
  *
@@ -83,7 +83,7 @@ typedef struct bench_section {
 } bench_section;
 
 extern const bench_section bench_core_section, bench_bundle_section,
-    bench_frustum_section, bench_cone_section;
+    bench_frustum_section, bench_cone_section, bench_queries_section;
 
 /* Parses the flags above; runs the selected sections on every selected
  * scene; prints the summary CSV. Returns the process exit code (nonzero if

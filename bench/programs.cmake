@@ -13,7 +13,8 @@ add_library(kdray_bench_lib STATIC
   ${CMAKE_CURRENT_SOURCE_DIR}/bench_core.c
   ${CMAKE_CURRENT_SOURCE_DIR}/bench_bundle.c
   ${CMAKE_CURRENT_SOURCE_DIR}/bench_frustum.c
-  ${CMAKE_CURRENT_SOURCE_DIR}/bench_cone.c)
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_cone.c
+  ${CMAKE_CURRENT_SOURCE_DIR}/bench_queries.c)
 target_include_directories(kdray_bench_lib PUBLIC ${CMAKE_CURRENT_SOURCE_DIR})
 target_link_libraries(kdray_bench_lib PUBLIC kdray_testsupport kdray_core embree m)
 target_compile_definitions(kdray_bench_lib PRIVATE
@@ -36,7 +37,7 @@ endforeach()
 # tests/CMakeLists.txt, which is read after this file, hence the path.
 add_test(NAME bench_smoke
   COMMAND kdray_bench --dir ${CMAKE_BINARY_DIR}/scene-ladder --only box --only teapots
-          --section core --section bundle --section frustum --section cone --quick
+          --section core --section bundle --section frustum --section cone --section queries --quick
           --rays 4096 --frame 64 --res 16 --samples 1,16 --ref-samples 64 --repeat 1)
 set_tests_properties(bench_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
 

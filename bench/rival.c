@@ -64,6 +64,29 @@ rival *rival_create(const float *tris, size_t ntris, int robust,
     return r;
 }
 
+rival *rival_create_filter(const float *tris, size_t ntris,
+                           enum RTCBuildQuality quality) {
+    rival *r = calloc(1, sizeof *r);
+    if (!r)
+        return NULL;
+    oracle_opts oo;
+    oracle_opts_default(&oo);
+    oo.robust = 0;
+    oo.quality = quality;
+    oo.device_config = RIVAL_DEVICE_CONFIG;
+    oo.context_filter = 1;
+    const rival_fp fp = rival_fp_enter();
+    r->o = oracle_create(tris, ntris, &oo);
+    rival_fp_leave(fp);
+    if (!r->o) {
+        free(r);
+        return NULL;
+    }
+    return r;
+}
+
+const struct oracle *rival_oracle(const rival *r) { return r->o; }
+
 void rival_free(rival *r) {
     if (!r)
         return;

@@ -53,6 +53,12 @@ double rival_build_ms(const rival *r); /* process CPU ms of rtcCommitScene */
 int64_t rival_bytes(const rival *r);   /* Embree's allocations for the scene */
 int rival_robust(const rival *r);
 RTCScene rival_rtc_scene(const rival *r);
+/* The same fast scene (flags NONE plus RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION,
+ * the flag a context filter needs), for collecting every hit with a filter
+ * (bench_queries.c). */
+rival *rival_create_filter(const float *tris, size_t ntris, enum RTCBuildQuality quality);
+/* The oracle under a rival (oracle_all_filter / oracle_all_requery). */
+const struct oracle *rival_oracle(const rival *r);
 
 /* Prints Embree's version, the device set-up, the kernels (and so the ISA)
  * Embree selected for each API, read from its own verbose report of a probe

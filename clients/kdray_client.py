@@ -252,10 +252,13 @@ class Client:
         return self.call("GET", "/v1/scenes/" + name)
 
     def bundle(self, scene, origins, directions, tmin=None, tmax=None,
-               query="closest", encoding="json", send="json", fields=None):
+               query="closest", encoding="json", send="json", fields=None,
+               max_hits=None):
         """Traces rays; origins is 3 floats (shared) or 3*N; send picks the
         request's float encoding, encoding the answer's (JSON mode); fields
-        lists the answer arrays wanted (t, prim, u, v, hit)."""
+        lists the answer arrays wanted (t, prim, u, v, hit). query "all"
+        (every hit, at most max_hits per ray: nhits, offset and flat arrays)
+        and "count" (nhits per ray) are answered too."""
         send = self._send(send)
         payload = {"origins": _floats(origins, send),
                    "directions": _floats(directions, send),
@@ -266,6 +269,8 @@ class Client:
                                 else _floats(value, send))
         if fields is not None:
             payload["fields"] = list(fields)
+        if max_hits is not None:
+            payload["max_hits"] = max_hits
         path = "/v1/scenes/%s/bundle" % scene
         return decode_answer(self.call("POST", path, payload))
 

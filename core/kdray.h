@@ -133,6 +133,8 @@ typedef struct kdr_hit {
 typedef enum kdr_query {
     KDR_CLOSEST = 0, /* nearest hit */
     KDR_ANY = 1,     /* occlusion: any hit in [tmin, tmax] */
+    KDR_ALL = 2,     /* every hit, capped (kdr_all_batch only) */
+    KDR_COUNT = 3,   /* number of hits (kdr_count_batch only) */
 } kdr_query;
 
 /* Closest hit; returns 1 on hit, 0 on miss (hit filled either way). A ray
@@ -184,6 +186,86 @@ int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
 
 /* 1 if the CPU runs the 8-wide (AVX2) bundle code. */
 int kdr_cpu_has_avx2(void);
+
+/* ---- all hits and hit counts (core/kd_all.c) -------------------------------
+ * A hit is a triangle that the watertight test (core/kd_tri.h) accepts with
+ * tmin <= t <= tmax. Nothing is merged: a ray through an edge shared by two
+ * triangles hits both (two hits at the same t), through a vertex shared by
+ * k triangles up to k; each triangle counts once however many leaves hold
+ * it. The first of the all-hits list is kdr_intersect1's hit. */
+#define KDR_MAX_HITS_LIMIT 1024u
+
+/* The first min(max_hits, all) hits of the ray in increasing t, ties by
+ * smaller prim, into hits[0..*nhits). max_hits in 1..KDR_MAX_HITS_LIMIT,
+ * else KDR_EINVAL. An invalid ray (as for kdr_intersect1) has no hit. */
+int kdr_intersect_all1(const kdr_scene *scene, const kdr_ray *ray, uint32_t max_hits,
+                       kdr_hit *hits, uint32_t *nhits, kdr_trav_stats *stats);
+/* The number of hits, no cap. KDR_ENOMEM when its scratch list (one entry
+ * per triangle test that hits) cannot grow. */
+int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
+               kdr_trav_stats *stats);
+
+/* All hits of rays [first, first+count) of a batch: ray i's hits go to
+ * slots [i*max_hits, i*max_hits + nhits[i]) of t, prim, u, v (each
+ * n*max_hits long; slots past nhits[i] are not written). */
+typedef struct kdr_all_hits {
+    uint32_t *nhits; /* n */
+    float *t, *u, *v;
+    int32_t *prim;
+} kdr_all_hits;
+
+int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                  size_t count, uint32_t max_hits, kdr_all_hits *out,
+                  kdr_trav_stats *stats);
+/* counts[i] = kdr_count1 of ray i. */
+int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                    size_t count, uint32_t *counts, kdr_trav_stats *stats);
+
+/* ---- closest points (core/kd_closest.c) ------------------------------------
+ * The point of the scene nearest to a query point: its triangle (prim),
+ * barycentrics (point = (1-u-v)*p0 + u*p1 + v*p2) and distance, found by a
+ * nearest-triangle search of the kd-tree. Distances are computed in double
+ * precision (kdr_point_triangle); among triangles at exactly the same
+ * distance the smallest prim wins. Zero-area triangles are never found. */
+typedef struct kdr_closest {
+    float point[3];
+    float distance; /* -1: nothing within max_distance */
+    float u, v;
+    int32_t prim;   /* -1: nothing within max_distance */
+} kdr_closest;
+
+/* The closest point within max_distance (>= 0; +inf: no limit; a triangle
+ * at exactly max_distance counts). KDR_EINVAL for a non-finite point or a
+ * negative / NaN max_distance. stats count points as rays. */
+int kdr_closest_point1(const kdr_scene *scene, const float point[3], float max_distance,
+                       kdr_closest *out, kdr_trav_stats *stats);
+/* Points [first, first+count) of points (3 floats each) into out[i]. */
+int kdr_closest_point_batch(const kdr_scene *scene, const float *points, size_t first,
+                            size_t count, float max_distance, kdr_closest *out,
+                            kdr_trav_stats *stats);
+/* The exact closest point q of triangle tri (9 floats) to p, in double:
+ * q = (1-u-v)*p0 + u*p1 + v*p2 and d2 = |p - q|^2. The one distance every
+ * search (and the Embree point-query callback of the benchmark) uses. */
+void kdr_point_triangle(const float p[3], const float *tri, double q[3], double *u,
+                        double *v, double *d2);
+
+/* ---- occupancy (core/kd_occupancy.c) ------------------------------------------
+ * Inside (1) or outside (0) the scene's closed meshes: each of
+ * KDR_OCCUPANCY_RAYS rays from the point in fixed, well-spread directions
+ * counts its hits (kdr_count1) and votes "inside" when the count is odd;
+ * the majority decides. A point inside two overlapping closed meshes is
+ * outside (parity). Meaningless for open meshes. */
+#define KDR_OCCUPANCY_RAYS 9
+
+/* votes (may be NULL): how many rays voted inside. KDR_EINVAL for a
+ * non-finite point; KDR_ENOMEM as kdr_count1. */
+int kdr_occupancy1(const kdr_scene *scene, const float point[3], uint8_t *inside,
+                   uint8_t *votes, kdr_trav_stats *stats);
+/* Points [first, first+count) of points (3 floats each) into inside[i]. */
+int kdr_occupancy_batch(const kdr_scene *scene, const float *points, size_t first,
+                        size_t count, uint8_t *inside, kdr_trav_stats *stats);
+/* Direction r (0..KDR_OCCUPANCY_RAYS-1) of the vote (unit length). */
+void kdr_occupancy_direction(int r, float dir[3]);
 
 /* ---- cone-shadow queries -------------------------------------------------- */
 

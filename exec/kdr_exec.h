@@ -59,6 +59,10 @@ extern "C" {
 #define KDR_EXEC_CHUNK_TILES 16
 #define KDR_EXEC_CHUNK_POINTS 64
 #define KDR_EXEC_CHUNK_SHADOW_RAYS 65536
+/* closest-point: points per chunk (a few microseconds each) */
+#define KDR_EXEC_CHUNK_CLOSEST 2048
+/* occupancy: points per chunk (9 hit counts each) */
+#define KDR_EXEC_CHUNK_OCCUPANCY 512
 /* Bytes charged per body byte for parsing it, up front: what a JSON body of
  * usual decimals takes (1.3 per byte while its float arrays grow; CBOR
  * typed arrays take none). A parse that needs more is charged more as it
@@ -122,6 +126,8 @@ typedef enum kdr_exec_kind {
     KDR_EXEC_CONE_SHADOW,
     KDR_EXEC_FRUSTUM,
     KDR_EXEC_RENDER, /* a picture (render/): q->render, no body; PNG answer */
+    KDR_EXEC_CLOSEST_POINT, /* issue 15: nearest triangle of each point */
+    KDR_EXEC_OCCUPANCY,     /* issue 15: inside/outside by voting */
 } kdr_exec_kind;
 
 typedef enum kdr_exec_mode {
@@ -165,6 +171,10 @@ typedef struct kdr_exec_query {
     kdr_exec_kind kind;
     kdr_exec_mode mode;
     const kdr_scene *scene;
+    /* the scene's glTF (node, mesh, primitive) ranges, for the "mesh"
+     * answer field; NULL / 0: every hit's mesh is -1,-1,-1 */
+    const kdr_proto_mesh_range *meshes;
+    size_t nmeshes;
     const char *body; /* not NUL-terminated; a CBOR body's float arrays
                          are read in place, so it must outlive q (above) */
     size_t len;

@@ -73,7 +73,9 @@ struct kdr_exec_job {
     union {
         struct {
             kdr_bundle_request req;
-            kdr_hits hits;
+            kdr_hits hits;     /* closest, any */
+            kdr_all_hits all;  /* all: max_hits slots per ray; count: nhits */
+            int32_t *offset;   /* all: n + 1, filled when encoding */
         } bundle;
         struct {
             kdr_frustum_request req;
@@ -90,6 +92,14 @@ struct kdr_exec_job {
             kdr_render_image img;
             kdr_render_stats *stats; /* one per band, summed by encode */
         } render;
+        struct {
+            kdr_closest_request req;
+            kdr_closest *out; /* one per point */
+        } closest;
+        struct {
+            kdr_occupancy_request req;
+            uint8_t *inside; /* one per point */
+        } occupancy;
     } k;
 };
 

@@ -8,6 +8,7 @@
  * media type is CBOR. Bodies are parsed by their media type (JSON or CBOR).
  * Fast and reference modes differ only in the core mode a chunk asks for.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -69,6 +70,82 @@ static int encoded(kdr_exec_job *j, int rc, kdr_encoding enc) {
     return rc;
 }
 
+/* ---- per-hit attributes ("normal", "mesh") ------------------------------------------
+ */
+
+/* Bytes of the attribute arrays for entries hits (3 floats + 3 int32). */
+static size_t attrs_bytes(unsigned fields, size_t entries) {
+    return fields & KDR_FIELDS_ATTRS ? entries * 24 : 0;
+}
+
+/* The range holding prim (they tile [0, ntris) in order), or NULL. */
+static const kdr_proto_mesh_range *range_of(const kdr_exec_query *q, int32_t prim) {
+    size_t lo = 0, hi = q->nmeshes;
+    while (lo < hi) {
+        const size_t mid = lo + (hi - lo) / 2;
+        if ((uint64_t)prim < q->meshes[mid].first_prim)
+            hi = mid;
+        else if ((uint64_t)prim >= q->meshes[mid].first_prim + q->meshes[mid].count)
+            lo = mid + 1;
+        else
+            return &q->meshes[mid];
+    }
+    return NULL;
+}
+
+/* Fills normal / mesh (3 per entry) for prims[0..n): the unit normal of
+ * (p1-p0) x (p2-p0) computed in double, and the glTF indices; a miss (prim
+ * < 0) gets 0,0,0 and -1,-1,-1. Allocates both arrays (freed by the
+ * caller); KDR_ENOMEM. */
+static int attrs_fill(const kdr_exec_query *q, const int32_t *prims, size_t n,
+                      float **normal, int32_t **mesh) {
+    *normal = malloc((n ? 3 * n : 1) * sizeof **normal);
+    *mesh = malloc((n ? 3 * n : 1) * sizeof **mesh);
+    if (!*normal || !*mesh) return KDR_ENOMEM;
+    for (size_t i = 0; i < n; i++) {
+        float *nv = *normal + 3 * i;
+        int32_t *mv = *mesh + 3 * i;
+        nv[0] = nv[1] = nv[2] = 0.0f;
+        mv[0] = mv[1] = mv[2] = -1;
+        const float *t =
+            prims[i] >= 0 ? kdr_scene_triangle(q->scene, (size_t)prims[i]) : NULL;
+        if (!t) continue;
+        double e1[3], e2[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = (double)t[3 + k] - t[k];
+            e2[k] = (double)t[6 + k] - t[k];
+        }
+        const double c[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                             e1[0] * e2[1] - e1[1] * e2[0]};
+        const double len = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+        for (int k = 0; k < 3; k++)
+            nv[k] = len > 0 ? (float)(c[k] / len) : 0.0f;
+        const kdr_proto_mesh_range *r = range_of(q, prims[i]);
+        if (r) {
+            mv[0] = (int32_t)r->node;
+            mv[1] = (int32_t)r->mesh;
+            mv[2] = (int32_t)r->primitive;
+        }
+    }
+    return 0;
+}
+
+/* Encodes closest / any hits with the attributes the fields ask for. */
+static int encode_hits(kdr_exec_job *j, const kdr_hits *h, size_t n, kdr_query query,
+                       unsigned fields, kdr_encoding enc) {
+    float *normal = NULL;
+    int32_t *mesh = NULL;
+    int rc = 0;
+    if (fields & KDR_FIELDS_ATTRS) rc = attrs_fill(j->q, h->prim, n, &normal, &mesh);
+    const kdr_hit_attrs attrs = {normal, mesh};
+    if (rc == 0)
+        rc = kdr_proto_encode_hits_attrs(h, &attrs, n, query, fields, enc,
+                                         &j->q->result.body);
+    free(normal);
+    free(mesh);
+    return encoded(j, rc, enc);
+}
+
 /* ---- bundle ------------------------------------------------------------------ */
 
 static int bundle_parse(kdr_exec_job *j) {
@@ -87,8 +164,16 @@ static int bundle_parse(kdr_exec_job *j) {
     j->parsed_bytes = 0;
     for (int i = 0; i < 4; i++)
         if (r->owned[i]) j->parsed_bytes += floats[i] * sizeof(float);
-    j->answer_estimate =
-        hits_estimate(b->n, r->query, r->fields, answer_encoding(j, r->encoding));
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    if (r->query == KDR_ALL) /* slots, offsets, attributes, answer */
+        j->answer_estimate = b->n * (size_t)r->max_hits * 16 + (2 * b->n + 1) * 4 +
+                             attrs_bytes(r->fields, b->n * (size_t)r->max_hits) +
+                             kdr_proto_all_answer_max(b->n, r->max_hits, r->fields, enc);
+    else if (r->query == KDR_COUNT)
+        j->answer_estimate = b->n * 4 + kdr_proto_counts_answer_max(b->n, enc);
+    else
+        j->answer_estimate =
+            hits_estimate(b->n, r->query, r->fields, enc) + attrs_bytes(r->fields, b->n);
     j->nchunks = chunks_of(b->n, KDR_EXEC_CHUNK_RAYS);
     j->work_rays = b->n;
     j->deadline_ms = r->deadline_ms;
@@ -96,30 +181,112 @@ static int bundle_parse(kdr_exec_job *j) {
 }
 
 static int bundle_alloc(kdr_exec_job *j) {
-    return hits_alloc(&j->k.bundle.hits, j->k.bundle.req.batch.n, j->k.bundle.req.query);
+    const kdr_bundle_request *r = &j->k.bundle.req;
+    kdr_all_hits *a = &j->k.bundle.all;
+    memset(a, 0, sizeof *a);
+    j->k.bundle.offset = NULL;
+    memset(&j->k.bundle.hits, 0, sizeof j->k.bundle.hits);
+    const size_t n = r->batch.n ? r->batch.n : 1;
+    if (r->query == KDR_COUNT)
+        return (a->nhits = malloc(n * sizeof *a->nhits)) ? 0 : KDR_ENOMEM;
+    if (r->query != KDR_ALL) return hits_alloc(&j->k.bundle.hits, r->batch.n, r->query);
+    const size_t slots = n * r->max_hits;
+    a->nhits = malloc(n * sizeof *a->nhits);
+    a->t = malloc(slots * sizeof *a->t);
+    a->u = malloc(slots * sizeof *a->u);
+    a->v = malloc(slots * sizeof *a->v);
+    a->prim = malloc(slots * sizeof *a->prim);
+    j->k.bundle.offset = malloc((n + 1) * sizeof *j->k.bundle.offset);
+    return a->nhits && a->t && a->u && a->v && a->prim && j->k.bundle.offset ? 0
+                                                                             : KDR_ENOMEM;
 }
 
 static void bundle_chunk(kdr_exec_job *j, size_t c) {
     const kdr_bundle_request *r = &j->k.bundle.req;
     size_t first, count;
     kdr_exec_chunk_range(r->batch.n, KDR_EXEC_CHUNK_RAYS, c, &first, &count);
+    if (r->query == KDR_ALL) { /* one way to walk: both modes are the same */
+        kdr_exec_note_rc(j, kdr_all_batch(j->q->scene, &r->batch, first, count,
+                                          r->max_hits, &j->k.bundle.all, NULL));
+        return;
+    }
+    if (r->query == KDR_COUNT) {
+        kdr_exec_note_rc(j, kdr_count_batch(j->q->scene, &r->batch, first, count,
+                                            j->k.bundle.all.nhits, NULL));
+        return;
+    }
     kdr_trav_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE;
     kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &r->batch, first, count, r->query,
                                         mode, &j->k.bundle.hits, NULL));
+}
+
+/* The all answer's flat arrays: each ray's hits moved down from its slots
+ * (ray i's slots start at i * max_hits >= its flat offset, so moving in
+ * ray order never overwrites what is still to be moved). */
+static void all_compact(kdr_exec_job *j) {
+    const kdr_bundle_request *r = &j->k.bundle.req;
+    kdr_all_hits *a = &j->k.bundle.all;
+    int32_t *off = j->k.bundle.offset;
+    size_t at = 0;
+    for (size_t i = 0; i < r->batch.n; i++) {
+        off[i] = (int32_t)at;
+        const size_t from = i * (size_t)r->max_hits, m = a->nhits[i];
+        if (from != at) {
+            memmove(a->t + at, a->t + from, m * sizeof *a->t);
+            memmove(a->u + at, a->u + from, m * sizeof *a->u);
+            memmove(a->v + at, a->v + from, m * sizeof *a->v);
+            memmove(a->prim + at, a->prim + from, m * sizeof *a->prim);
+        }
+        at += m;
+    }
+    off[r->batch.n] = (int32_t)at;
 }
 
 static int bundle_encode(kdr_exec_job *j) {
     const kdr_bundle_request *r = &j->k.bundle.req;
     const kdr_encoding enc = answer_encoding(j, r->encoding);
     j->q->result.rays = r->batch.n;
-    return encoded(j,
-                   kdr_proto_encode_hits_fields(&j->k.bundle.hits, r->batch.n, r->query,
-                                                r->fields, enc, &j->q->result.body),
-                   enc);
+    if (r->query == KDR_COUNT)
+        return encoded(j,
+                       kdr_proto_encode_counts(j->k.bundle.all.nhits, r->batch.n, enc,
+                                               &j->q->result.body),
+                       enc);
+    if (r->query == KDR_ALL) {
+        all_compact(j);
+        const kdr_all_hits *a = &j->k.bundle.all;
+        float *normal = NULL;
+        int32_t *mesh = NULL;
+        int rc = 0;
+        if (r->fields & KDR_FIELDS_ATTRS)
+            rc = attrs_fill(j->q, a->prim, (size_t)j->k.bundle.offset[r->batch.n],
+                            &normal, &mesh);
+        const kdr_all_answer ans = {r->batch.n,
+                                    (const int32_t *)(const void *)a->nhits,
+                                    j->k.bundle.offset,
+                                    a->t,
+                                    a->u,
+                                    a->v,
+                                    a->prim,
+                                    {normal, mesh}};
+        if (rc == 0) rc = kdr_proto_encode_all(&ans, r->fields, enc, &j->q->result.body);
+        free(normal);
+        free(mesh);
+        return encoded(j, rc, enc);
+    }
+    return encode_hits(j, &j->k.bundle.hits, r->batch.n, r->query, r->fields, enc);
 }
 
 static void bundle_release(kdr_exec_job *j) {
     hits_free(&j->k.bundle.hits);
+    kdr_all_hits *a = &j->k.bundle.all;
+    free(a->nhits);
+    free(a->t);
+    free(a->u);
+    free(a->v);
+    free(a->prim);
+    memset(a, 0, sizeof *a);
+    free(j->k.bundle.offset);
+    j->k.bundle.offset = NULL;
     kdr_bundle_request_free(&j->k.bundle.req);
 }
 
@@ -135,7 +302,8 @@ static int frustum_parse(kdr_exec_job *j) {
     }
     j->parsed_bytes = 0; /* a camera: nothing beyond the job itself */
     j->answer_estimate =
-        hits_estimate(r->rays, r->query, r->fields, answer_encoding(j, r->encoding));
+        hits_estimate(r->rays, r->query, r->fields, answer_encoding(j, r->encoding)) +
+        attrs_bytes(r->fields, r->rays);
     j->nchunks =
         chunks_of(kdr_frustum_tile_count(&r->camera, r->tile), KDR_EXEC_CHUNK_TILES);
     j->work_rays = r->rays;
@@ -162,10 +330,7 @@ static int frustum_encode(kdr_exec_job *j) {
     const kdr_frustum_request *r = &j->k.frustum.req;
     const kdr_encoding enc = answer_encoding(j, r->encoding);
     j->q->result.rays = r->rays;
-    return encoded(j,
-                   kdr_proto_encode_hits_fields(&j->k.frustum.hits, r->rays, r->query,
-                                                r->fields, enc, &j->q->result.body),
-                   enc);
+    return encode_hits(j, &j->k.frustum.hits, r->rays, r->query, r->fields, enc);
 }
 
 static void frustum_release(kdr_exec_job *j) { hits_free(&j->k.frustum.hits); }
@@ -268,6 +433,120 @@ static int shadow_core_error(kdr_exec_job *j, int rc) {
     return j->q->result.status == 400;
 }
 
+/* ---- closest-point ------------------------------------------------------------------
+ */
+
+static int closest_parse(kdr_exec_job *j) {
+    kdr_proto_error err = {0};
+    kdr_closest_request *r = &j->k.closest.req;
+    if (kdr_proto_parse_closest_as(j->q->media, j->q->body, j->q->len, j->q->max_rays, r,
+                                   &err) != 0) {
+        kdr_exec_fail_proto(j, &err);
+        return -1;
+    }
+    j->parsed_bytes = r->owned_points ? 3 * r->n * sizeof(float) : 0;
+    /* results, the encoder's per-member copy, the answer */
+    j->answer_estimate =
+        r->n * sizeof(kdr_closest) + 3 * r->n * sizeof(float) +
+        kdr_proto_closest_answer_max(r->n, answer_encoding(j, r->encoding));
+    j->nchunks = chunks_of(r->n, KDR_EXEC_CHUNK_CLOSEST);
+    j->work_rays = r->n * (r->is_signed ? 1 + (uint64_t)KDR_OCCUPANCY_RAYS : 1);
+    j->deadline_ms = r->deadline_ms;
+    return 0;
+}
+
+static int closest_alloc(kdr_exec_job *j) {
+    const size_t n = j->k.closest.req.n;
+    j->k.closest.out = malloc((n ? n : 1) * sizeof *j->k.closest.out);
+    return j->k.closest.out ? 0 : KDR_ENOMEM;
+}
+
+/* One way to search: fast and reference modes are the same. */
+static void closest_chunk(kdr_exec_job *j, size_t c) {
+    const kdr_closest_request *r = &j->k.closest.req;
+    size_t first, count;
+    kdr_exec_chunk_range(r->n, KDR_EXEC_CHUNK_CLOSEST, c, &first, &count);
+    kdr_exec_note_rc(j, kdr_closest_point_batch(j->q->scene, r->points, first, count,
+                                                r->max_distance, j->k.closest.out, NULL));
+    if (!r->is_signed) return;
+    /* signed: negative inside the closed meshes (the occupancy vote) */
+    for (size_t i = first; i < first + count; i++) {
+        uint8_t inside = 0;
+        const int rc =
+            kdr_occupancy1(j->q->scene, r->points + 3 * i, &inside, NULL, NULL);
+        if (rc != KDR_OK) {
+            kdr_exec_note_rc(j, rc);
+            return;
+        }
+        if (inside) j->k.closest.out[i].distance = -j->k.closest.out[i].distance;
+    }
+}
+
+static int closest_encode(kdr_exec_job *j) {
+    const kdr_closest_request *r = &j->k.closest.req;
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    j->q->result.rays = r->n;
+    return encoded(
+        j, kdr_proto_encode_closest(j->k.closest.out, r->n, enc, &j->q->result.body),
+        enc);
+}
+
+static void closest_release(kdr_exec_job *j) {
+    free(j->k.closest.out);
+    j->k.closest.out = NULL;
+    kdr_closest_request_free(&j->k.closest.req);
+}
+
+/* ---- occupancy ------------------------------------------------------------------------
+ */
+
+static int occupancy_parse(kdr_exec_job *j) {
+    kdr_proto_error err = {0};
+    kdr_occupancy_request *r = &j->k.occupancy.req;
+    if (kdr_proto_parse_occupancy_as(j->q->media, j->q->body, j->q->len, j->q->max_rays,
+                                     r, &err) != 0) {
+        kdr_exec_fail_proto(j, &err);
+        return -1;
+    }
+    j->parsed_bytes = r->owned_points ? 3 * r->n * sizeof(float) : 0;
+    j->answer_estimate =
+        r->n + kdr_proto_occupancy_answer_max(r->n, answer_encoding(j, r->encoding));
+    j->nchunks = chunks_of(r->n, KDR_EXEC_CHUNK_OCCUPANCY);
+    j->work_rays = r->n * (uint64_t)KDR_OCCUPANCY_RAYS;
+    j->deadline_ms = r->deadline_ms;
+    return 0;
+}
+
+static int occupancy_alloc(kdr_exec_job *j) {
+    const size_t n = j->k.occupancy.req.n;
+    j->k.occupancy.inside = malloc(n ? n : 1);
+    return j->k.occupancy.inside ? 0 : KDR_ENOMEM;
+}
+
+static void occupancy_chunk(kdr_exec_job *j, size_t c) {
+    const kdr_occupancy_request *r = &j->k.occupancy.req;
+    size_t first, count;
+    kdr_exec_chunk_range(r->n, KDR_EXEC_CHUNK_OCCUPANCY, c, &first, &count);
+    kdr_exec_note_rc(j, kdr_occupancy_batch(j->q->scene, r->points, first, count,
+                                            j->k.occupancy.inside, NULL));
+}
+
+static int occupancy_encode(kdr_exec_job *j) {
+    const kdr_occupancy_request *r = &j->k.occupancy.req;
+    const kdr_encoding enc = answer_encoding(j, r->encoding);
+    j->q->result.rays = r->n * (uint64_t)KDR_OCCUPANCY_RAYS;
+    return encoded(
+        j,
+        kdr_proto_encode_occupancy(j->k.occupancy.inside, r->n, enc, &j->q->result.body),
+        enc);
+}
+
+static void occupancy_release(kdr_exec_job *j) {
+    free(j->k.occupancy.inside);
+    j->k.occupancy.inside = NULL;
+    kdr_occupancy_request_free(&j->k.occupancy.req);
+}
+
 /* ---- the table -------------------------------------------------------------------- */
 
 static const kdr_exec_kind_ops BUNDLE = {bundle_parse,  bundle_alloc,   bundle_chunk,
@@ -277,6 +556,13 @@ static const kdr_exec_kind_ops FRUSTUM = {frustum_parse,  frustum_alloc,   frust
 static const kdr_exec_kind_ops SHADOW = {shadow_parse,   shadow_alloc,
                                          shadow_chunk,   shadow_encode,
                                          shadow_release, shadow_core_error};
+
+static const kdr_exec_kind_ops CLOSEST = {closest_parse,  closest_alloc,   closest_chunk,
+                                          closest_encode, closest_release, NULL};
+
+static const kdr_exec_kind_ops OCCUPANCY = {occupancy_parse,   occupancy_alloc,
+                                            occupancy_chunk,   occupancy_encode,
+                                            occupancy_release, NULL};
 
 const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
     switch (kind) {
@@ -288,6 +574,10 @@ const kdr_exec_kind_ops *kdr_exec_ops_for(kdr_exec_kind kind) {
         return &SHADOW;
     case KDR_EXEC_RENDER:
         return kdr_exec_render_ops();
+    case KDR_EXEC_CLOSEST_POINT:
+        return &CLOSEST;
+    case KDR_EXEC_OCCUPANCY:
+        return &OCCUPANCY;
     }
     return NULL;
 }

@@ -149,6 +149,8 @@ int kdr_pf_float(const cJSON *item, const char *name, float *out,
 int kdr_pf_int(const cJSON *item, const char *name, double lo, double hi,
                const char *range_text, uint64_t *out, kdr_proto_error *err);
 int kdr_pf_query(const cJSON *root, kdr_query *out, kdr_proto_error *err);
+/* The bundle's "query": closest, any, all or count. */
+int kdr_pf_bundle_query(const cJSON *root, kdr_query *out, kdr_proto_error *err);
 int kdr_pf_encoding(const cJSON *root, kdr_encoding *out, kdr_proto_error *err);
 /* "fields" for a bundle / frustum query: KDR_FIELD_* bits, the query's
  * defaults when absent. */
@@ -160,8 +162,9 @@ typedef struct kdr_field_info {
     const char *name;
     unsigned bit;
     int closest_only;
+    unsigned width; /* values per ray / hit */
 } kdr_field_info;
-#define KDR_FIELD_COUNT 5
+#define KDR_FIELD_COUNT 7
 extern const kdr_field_info kdr_field_table[KDR_FIELD_COUNT];
 /* "deadline_ms": absent gives 0, else a number in (0, KDR_PROTO_MAX_DEADLINE_MS]. */
 int kdr_pf_deadline(const cJSON *root, double *out, kdr_proto_error *err);

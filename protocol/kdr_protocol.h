@@ -60,6 +60,8 @@ extern "C" {
 #define KDR_PROTO_DEFAULT_SAMPLES 64
 #define KDR_PROTO_MAX_SAMPLES 4096
 #define KDR_PROTO_DEFAULT_SEED 1
+/* bundle "query": "all": "max_hits" default and limit (the core's) */
+#define KDR_PROTO_DEFAULT_MAX_HITS 16u
 #define KDR_PROTO_DEFAULT_TILE 8
 #define KDR_PROTO_MIN_TILE 4
 #define KDR_PROTO_MAX_TILE 64
@@ -159,7 +161,8 @@ const char *kdr_proto_encoding_media(kdr_encoding enc);
 /* ---- answer fields ("fields": [...]) ----------------------------------------- */
 
 /* What a bundle or frustum answer holds, as a bit set. Defaults: closest ->
- * t, prim, u, v; any -> hit. "hit" (0/1) may also be asked of a closest
+ * t, prim, u, v; any -> hit; all (bundle) -> t, prim, u, v of every hit
+ * ("hit" not allowed); count (bundle) -> no fields (0: "fields" refused). "hit" (0/1) may also be asked of a closest
  * query (1 where prim >= 0); t, prim, u, v only of closest queries. New
  * per-ray attributes get the next bits and a row in kdr_fields.c. */
 #define KDR_FIELD_T (1u << 0)
@@ -167,13 +170,22 @@ const char *kdr_proto_encoding_media(kdr_encoding enc);
 #define KDR_FIELD_U (1u << 2)
 #define KDR_FIELD_V (1u << 3)
 #define KDR_FIELD_HIT (1u << 4)
+/* per hit, three values each (issue 15): the triangle's unit geometric
+ * normal (p1-p0) x (p2-p0), and the glTF node, mesh and primitive it came
+ * from; closest and all queries only, never defaults. A miss: 0,0,0 and
+ * -1,-1,-1. Encoded only with kdr_hit_attrs (kdr_proto_encode_hits_attrs,
+ * kdr_all_answer). */
+#define KDR_FIELD_NORMAL (1u << 5)
+#define KDR_FIELD_MESH (1u << 6)
+#define KDR_FIELDS_ATTRS (KDR_FIELD_NORMAL | KDR_FIELD_MESH)
 #define KDR_FIELDS_CLOSEST (KDR_FIELD_T | KDR_FIELD_PRIM | KDR_FIELD_U | KDR_FIELD_V)
 #define KDR_FIELDS_ANY KDR_FIELD_HIT
 
 /* POST /v1/scenes/{name}/bundle */
 typedef struct kdr_bundle_request {
-    kdr_ray_batch batch; /* ready for kdr_trace_batch */
-    kdr_query query;
+    kdr_ray_batch batch; /* ready for kdr_trace_batch / kdr_all_batch */
+    kdr_query query;     /* closest, any, all or count */
+    uint32_t max_hits;   /* all: 1..KDR_MAX_HITS_LIMIT (default 16); else 0 */
     kdr_encoding encoding;
     unsigned fields;     /* KDR_FIELD_* bits, never 0 */
     double deadline_ms;  /* "deadline_ms": 0 when absent */
@@ -230,6 +242,42 @@ int kdr_proto_parse_frustum_as(kdr_media media, const char *body, size_t len,
                                size_t max_rays, kdr_frustum_request *out,
                                kdr_proto_error *err);
 
+/* POST /v1/scenes/{name}/closest-point (protocol/kdr_points.c): N points
+ * (counted as N rays against the limit), "max_distance" >= 0 (default and
+ * huge values: +inf), "signed" (boolean; not together with max_distance):
+ * distances negative inside (kdr_occupancy1). */
+typedef struct kdr_closest_request {
+    const float *points; /* 3*n, ready for kdr_closest_point_batch */
+    size_t n;
+    float max_distance;
+    int is_signed;
+    kdr_encoding encoding;
+    double deadline_ms;  /* "deadline_ms": 0 when absent */
+    float *owned_points; /* internal */
+} kdr_closest_request;
+
+int kdr_proto_parse_closest(const char *body, size_t len, size_t max_rays,
+                            kdr_closest_request *out, kdr_proto_error *err);
+int kdr_proto_parse_closest_as(kdr_media media, const char *body, size_t len,
+                               size_t max_rays, kdr_closest_request *out,
+                               kdr_proto_error *err);
+void kdr_closest_request_free(kdr_closest_request *req);
+
+/* POST /v1/scenes/{name}/occupancy: N points (N rays against the limit;
+ * each costs KDR_OCCUPANCY_RAYS hit counts). */
+typedef struct kdr_occupancy_request {
+    const float *points; /* 3*n */
+    size_t n;
+    kdr_encoding encoding;
+    double deadline_ms;
+    float *owned_points; /* internal */
+} kdr_occupancy_request;
+
+int kdr_proto_parse_occupancy_as(kdr_media media, const char *body, size_t len,
+                                 size_t max_rays, kdr_occupancy_request *out,
+                                 kdr_proto_error *err);
+void kdr_occupancy_request_free(kdr_occupancy_request *req);
+
 /* ---- responses ------------------------------------------------------------------ */
 
 /* Bundle / frustum results for rays [0, n): closest ->
@@ -245,6 +293,51 @@ int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
  * be valid for the query (the parsers ensure it): else KDR_EINVAL. */
 int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query,
                                  unsigned fields, kdr_encoding enc, kdr_buf *out);
+/* The per-hit attributes of KDR_FIELDS_ATTRS: 3 values per ray (or per
+ * hit of an all answer), the executor fills them from the scene. */
+typedef struct kdr_hit_attrs {
+    const float *normal;  /* 3 per entry */
+    const int32_t *mesh;  /* 3 per entry: node, mesh, primitive */
+} kdr_hit_attrs;
+/* kdr_proto_encode_hits_fields with normal / mesh available (attrs may be
+ * NULL when fields asks for neither). */
+int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                                kdr_query query, unsigned fields, kdr_encoding enc,
+                                kdr_buf *out);
+
+/* Bundle "query": "all": {"count":N,"nhits":[N],"offset":[N+1], then the
+ * chosen fields of t, prim, u, v, each offset[N] long}: ray i's hits are
+ * entries offset[i] .. offset[i+1]-1, in increasing t (ties by prim).
+ * nhits and offset are int32 ({"i32": ...} in base64, tag 78 in CBOR). */
+typedef struct kdr_all_answer {
+    size_t n;               /* rays */
+    const int32_t *nhits;   /* n */
+    const int32_t *offset;  /* n + 1 */
+    const float *t, *u, *v; /* offset[n] each (only the chosen fields read) */
+    const int32_t *prim;
+    kdr_hit_attrs attrs;    /* 3 * offset[n] each, when fields asks */
+} kdr_all_answer;
+int kdr_proto_encode_all(const kdr_all_answer *a, unsigned fields, kdr_encoding enc,
+                         kdr_buf *out);
+/* Bound for n rays of at most max_hits hits each (see the hits bound). */
+size_t kdr_proto_all_answer_max(size_t n, size_t max_hits, unsigned fields,
+                                kdr_encoding enc);
+/* Bundle "query": "count": {"count":N,"nhits":[N int32]}. */
+int kdr_proto_encode_counts(const uint32_t *counts, size_t n, kdr_encoding enc,
+                            kdr_buf *out);
+size_t kdr_proto_counts_answer_max(size_t n, kdr_encoding enc);
+
+/* closest-point: {"count":N,"prim":[N int32],"distance":[N],"point":[3N],
+ * "u":[N],"v":[N]}; a point with nothing within max_distance has prim -1,
+ * distance -1, point 0,0,0, u = v = 0 (as the core leaves it). */
+int kdr_proto_encode_closest(const kdr_closest *c, size_t n, kdr_encoding enc,
+                             kdr_buf *out);
+size_t kdr_proto_closest_answer_max(size_t n, kdr_encoding enc);
+/* occupancy: {"count":N,"inside":[N 0|1]} (uint8, tag 64 in CBOR; base64
+ * as {"i32": ...} like "hit"). */
+int kdr_proto_encode_occupancy(const uint8_t *inside, size_t n, kdr_encoding enc,
+                               kdr_buf *out);
+size_t kdr_proto_occupancy_answer_max(size_t n, kdr_encoding enc);
 
 /* {"count":N,"visibility":[N*nlights floats]} plus "stats" when stats is
  * not NULL. */

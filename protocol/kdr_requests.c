@@ -127,6 +127,28 @@ static int bundle_arrays(const kdr_pf_doc *doc, const bundle_shape *sh,
     return zero_direction(b->dir, sh->n, err);
 }
 
+/* "max_hits": only with "query": "all" (1..KDR_MAX_HITS_LIMIT, default
+ * KDR_PROTO_DEFAULT_MAX_HITS). An all answer may hold n * max_hits hits,
+ * so that product, not n, is held to the ray limit. */
+static int bundle_max_hits(const cJSON *root, kdr_query q, size_t n, size_t max,
+                           uint32_t *out, kdr_proto_error *err) {
+    const cJSON *it = cJSON_GetObjectItemCaseSensitive(root, "max_hits");
+    *out = 0;
+    if (q != KDR_ALL) {
+        if (it)
+            return kdr_proto_error_set(err, 400,
+                                       "max_hits: only with \"query\": \"all\"");
+        return 0;
+    }
+    uint64_t v = KDR_PROTO_DEFAULT_MAX_HITS;
+    if (it && kdr_pf_int(it, "max_hits", 1, KDR_MAX_HITS_LIMIT, "1..1024", &v, err))
+        return err->status;
+    *out = (uint32_t)v;
+    if ((uint64_t)n * v > max)
+        return kdr_pf_too_many(err, (uint64_t)n * v, max, "hit slots (rays * max_hits)");
+    return 0;
+}
+
 int kdr_proto_parse_bundle(const char *body, size_t len, size_t max_rays,
                            kdr_bundle_request *out, kdr_proto_error *err) {
     return kdr_proto_parse_bundle_as(KDR_MEDIA_JSON, body, len, max_rays, out, err);
@@ -144,7 +166,10 @@ int kdr_proto_parse_bundle_as(kdr_media media, const char *body, size_t len,
         return err->status;
     int st = bundle_shapes(&doc, limit_of(max_rays), &sh, err);
     if (!st)
-        st = kdr_pf_query(doc.root, &out->query, err);
+        st = kdr_pf_bundle_query(doc.root, &out->query, err);
+    if (!st)
+        st = bundle_max_hits(doc.root, out->query, sh.n, limit_of(max_rays), &out->max_hits,
+                             err);
     if (!st)
         st = kdr_pf_fields(doc.root, out->query, &out->fields, err);
     if (!st)

@@ -38,10 +38,8 @@ static float src_float(const array_src *s, size_t k) {
 }
 
 static int32_t src_int(const array_src *s, size_t k) {
-    if (s->u8)
-        return s->u8[k] ? 1 : 0;
-    if (s->hit_of)
-        return s->hit_of[k] >= 0;
+    if (s->u8) return s->u8[k] ? 1 : 0;
+    if (s->hit_of) return s->hit_of[k] >= 0;
     return s->i[k] < 0 ? -1 : s->i[k];
 }
 
@@ -49,8 +47,7 @@ static size_t put_int(char *p, int64_t v) {
     char tmp[24];
     size_t n = 0, len = 0;
     uint64_t u = v < 0 ? (uint64_t)0 - (uint64_t)v : (uint64_t)v;
-    if (v < 0)
-        p[len++] = '-';
+    if (v < 0) p[len++] = '-';
     do {
         tmp[n++] = (char)('0' + u % 10);
         u /= 10;
@@ -67,17 +64,14 @@ static size_t json_value_max(const array_src *s) {
 
 static int json_array(kdr_buf *b, const array_src *s, size_t n) {
     const size_t per = json_value_max(s);
-    if (kdr_buf_append(b, "[", 1))
-        return KDR_ENOMEM;
+    if (kdr_buf_append(b, "[", 1)) return KDR_ENOMEM;
     for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
         const size_t k1 = n - k0 < KDR_CHUNK ? n : k0 + KDR_CHUNK;
         /* kdr_format_float copies KDR_FLOAT_CHARS bytes whatever the length */
-        if (kdr_buf_reserve(b, (k1 - k0) * per + KDR_FLOAT_CHARS))
-            return KDR_ENOMEM;
+        if (kdr_buf_reserve(b, (k1 - k0) * per + KDR_FLOAT_CHARS)) return KDR_ENOMEM;
         char *p = b->data + b->len;
         for (size_t k = k0; k < k1; k++) {
-            if (k)
-                *p++ = ',';
+            if (k) *p++ = ',';
             p += s->f ? kdr_format_float(src_float(s, k), p) : put_int(p, src_int(s, k));
         }
         b->len = (size_t)(p - b->data);
@@ -134,8 +128,7 @@ static int base64_array(kdr_buf *b, const array_src *s, size_t n) {
  * float32 (85) little-endian otherwise. */
 static int cbor_array(kdr_buf *b, const array_src *s, size_t n) {
     if (src_is_bytes(s)) {
-        if (kdr_cbor_typed_head(b, KDR_CBOR_TAG_U8, n))
-            return KDR_ENOMEM;
+        if (kdr_cbor_typed_head(b, KDR_CBOR_TAG_U8, n)) return KDR_ENOMEM;
         unsigned char *p = (unsigned char *)b->data + b->len;
         if (s->hit_of) /* hoisted as in stage_words */
             for (size_t k = 0; k < n; k++)
@@ -183,7 +176,7 @@ static array_src field_kind(unsigned bit) {
     static const int32_t i;
     static const uint8_t u8;
     array_src s = {0};
-    if (bit == KDR_FIELD_PRIM)
+    if (bit == KDR_FIELD_PRIM || bit == KDR_FIELD_MESH)
         s.i = &i;
     else if (bit == KDR_FIELD_HIT)
         s.u8 = &u8;
@@ -199,7 +192,7 @@ size_t kdr_proto_hits_answer_max(size_t n, kdr_query query, unsigned fields,
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
         if (fields & kdr_field_table[k].bit) {
             const array_src s = field_kind(kdr_field_table[k].bit);
-            total += array_max(&s, n, enc);
+            total += array_max(&s, n * kdr_field_table[k].width, enc);
         }
     return total;
 }
@@ -220,8 +213,7 @@ static int presize(kdr_buf *out, size_t bound) {
 /* One "name": array member (JSON: preceded by a comma). */
 static int named_array(kdr_buf *b, const char *name, const array_src *s, size_t n,
                        kdr_encoding enc) {
-    if (enc == KDR_ENCODING_CBOR)
-        return kdr_cbor_text(b, name) || cbor_array(b, s, n);
+    if (enc == KDR_ENCODING_CBOR) return kdr_cbor_text(b, name) || cbor_array(b, s, n);
     if (kdr_buf_append(b, ",", 1) || kdr_buf_json_string(b, name) ||
         kdr_buf_append(b, ":", 1))
         return KDR_ENOMEM;
@@ -243,13 +235,28 @@ static int close_answer(kdr_buf *b, kdr_encoding enc) {
 }
 
 /* The source of answer field bit for a query. */
-static array_src field_src(const kdr_hits *h, kdr_query query, unsigned bit) {
+static array_src field_src(const kdr_hits *h, const kdr_hit_attrs *a, kdr_query query,
+                           unsigned bit) {
     array_src s = {0};
     switch (bit) {
-    case KDR_FIELD_T: s = (array_src){.f = h->t, .prim = h->prim, .miss_f = -1.0f}; break;
-    case KDR_FIELD_PRIM: s = (array_src){.i = h->prim}; break;
-    case KDR_FIELD_U: s = (array_src){.f = h->u, .prim = h->prim, .miss_f = 0.0f}; break;
-    case KDR_FIELD_V: s = (array_src){.f = h->v, .prim = h->prim, .miss_f = 0.0f}; break;
+    case KDR_FIELD_NORMAL:
+        s = (array_src){.f = a->normal};
+        break;
+    case KDR_FIELD_MESH:
+        s = (array_src){.i = a->mesh};
+        break;
+    case KDR_FIELD_T:
+        s = (array_src){.f = h->t, .prim = h->prim, .miss_f = -1.0f};
+        break;
+    case KDR_FIELD_PRIM:
+        s = (array_src){.i = h->prim};
+        break;
+    case KDR_FIELD_U:
+        s = (array_src){.f = h->u, .prim = h->prim, .miss_f = 0.0f};
+        break;
+    case KDR_FIELD_V:
+        s = (array_src){.f = h->v, .prim = h->prim, .miss_f = 0.0f};
+        break;
     default: /* KDR_FIELD_HIT */
         if (query == KDR_ANY)
             s.u8 = h->hit;
@@ -262,27 +269,33 @@ static array_src field_src(const kdr_hits *h, kdr_query query, unsigned bit) {
 
 int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query,
                                  unsigned fields, kdr_encoding enc, kdr_buf *out) {
+    return kdr_proto_encode_hits_attrs(hits, NULL, n, query, fields, enc, out);
+}
+
+int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs,
+                                size_t n, kdr_query query, unsigned fields,
+                                kdr_encoding enc, kdr_buf *out) {
     size_t members = 0;
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
-        if (!(fields & fi->bit))
-            continue;
-        if (fi->closest_only && query == KDR_ANY)
-            return KDR_EINVAL;
+        if (!(fields & fi->bit)) continue;
+        if (fi->closest_only && query == KDR_ANY) return KDR_EINVAL;
         members++;
     }
-    if (members == 0 || (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY)))
+    if (members == 0 ||
+        (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY | KDR_FIELDS_ATTRS)))
+        return KDR_EINVAL;
+    if ((fields & KDR_FIELD_NORMAL && (!attrs || !attrs->normal)) ||
+        (fields & KDR_FIELD_MESH && (!attrs || !attrs->mesh)))
         return KDR_EINVAL;
     if (presize(out, kdr_proto_hits_answer_max(n, query, fields, enc)) ||
         count_head(out, n, members, enc))
         return KDR_ENOMEM;
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
-        if (!(fields & fi->bit))
-            continue;
-        const array_src s = field_src(hits, query, fi->bit);
-        if (named_array(out, fi->name, &s, n, enc))
-            return KDR_ENOMEM;
+        if (!(fields & fi->bit)) continue;
+        const array_src s = field_src(hits, attrs, query, fi->bit);
+        if (named_array(out, fi->name, &s, n * fi->width, enc)) return KDR_ENOMEM;
     }
     return close_answer(out, enc);
 }
@@ -293,12 +306,154 @@ int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,
         hits, n, query, query == KDR_ANY ? KDR_FIELDS_ANY : KDR_FIELDS_CLOSEST, enc, out);
 }
 
+/* ---- all hits and counts ------------------------------------------------------- */
+
+size_t kdr_proto_all_answer_max(size_t n, size_t max_hits, unsigned fields,
+                                kdr_encoding enc) {
+    const array_src ints = field_kind(KDR_FIELD_PRIM);
+    size_t total =
+        KDR_ANSWER_FIXED + array_max(&ints, n, enc) + array_max(&ints, n + 1, enc);
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
+        if (fields & kdr_field_table[k].bit) {
+            const array_src s = field_kind(kdr_field_table[k].bit);
+            total += array_max(&s, n * max_hits * kdr_field_table[k].width, enc);
+        }
+    return total;
+}
+
+int kdr_proto_encode_all(const kdr_all_answer *a, unsigned fields, kdr_encoding enc,
+                         kdr_buf *out) {
+    if (!a || !a->nhits || !a->offset || fields == 0 ||
+        (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ATTRS)) ||
+        (fields & KDR_FIELD_NORMAL && !a->attrs.normal) ||
+        (fields & KDR_FIELD_MESH && !a->attrs.mesh))
+        return KDR_EINVAL;
+    size_t members = 2, max_hits = 0;
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++)
+        members += (fields & kdr_field_table[k].bit) != 0;
+    for (size_t i = 0; i < a->n; i++)
+        max_hits = (size_t)a->nhits[i] > max_hits ? (size_t)a->nhits[i] : max_hits;
+    const size_t total = (size_t)a->offset[a->n];
+    const array_src nh = {.i = a->nhits}, off = {.i = a->offset};
+    if (presize(out, kdr_proto_all_answer_max(a->n, max_hits, fields, enc)) ||
+        count_head(out, a->n, members, enc) ||
+        named_array(out, "nhits", &nh, a->n, enc) ||
+        named_array(out, "offset", &off, a->n + 1, enc))
+        return KDR_ENOMEM;
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
+        const unsigned bit = kdr_field_table[k].bit;
+        if (!(fields & bit)) continue;
+        const array_src s = bit == KDR_FIELD_T        ? (array_src){.f = a->t}
+                            : bit == KDR_FIELD_PRIM   ? (array_src){.i = a->prim}
+                            : bit == KDR_FIELD_U      ? (array_src){.f = a->u}
+                            : bit == KDR_FIELD_V      ? (array_src){.f = a->v}
+                            : bit == KDR_FIELD_NORMAL ? (array_src){.f = a->attrs.normal}
+                                                      : (array_src){.i = a->attrs.mesh};
+        if (named_array(out, kdr_field_table[k].name, &s,
+                        total * kdr_field_table[k].width, enc))
+            return KDR_ENOMEM;
+    }
+    return close_answer(out, enc);
+}
+
+size_t kdr_proto_counts_answer_max(size_t n, kdr_encoding enc) {
+    const array_src ints = field_kind(KDR_FIELD_PRIM);
+    return KDR_ANSWER_FIXED + array_max(&ints, n, enc);
+}
+
+int kdr_proto_encode_counts(const uint32_t *counts, size_t n, kdr_encoding enc,
+                            kdr_buf *out) {
+    if (!counts) return KDR_EINVAL;
+    /* counts are at most the triangle count (< 2^30): int32 on the wire */
+    const array_src s = {.i = (const int32_t *)(const void *)counts};
+    if (presize(out, kdr_proto_counts_answer_max(n, enc)) || count_head(out, n, 1, enc) ||
+        named_array(out, "nhits", &s, n, enc))
+        return KDR_ENOMEM;
+    return close_answer(out, enc);
+}
+
+/* ---- closest points ------------------------------------------------------------ */
+
+size_t kdr_proto_closest_answer_max(size_t n, kdr_encoding enc) {
+    const array_src ints = field_kind(KDR_FIELD_PRIM), f = field_kind(KDR_FIELD_T);
+    return KDR_ANSWER_FIXED + array_max(&ints, n, enc) + 3 * array_max(&f, n, enc) +
+           array_max(&f, 3 * n, enc);
+}
+
+/* The core's answers are an array of structs: each member (what: 0 prim,
+ * 1 distance, 2 point, three per entry, 3 u, 4 v) is copied into a plain
+ * array (at most 12 bytes per point, freed before the next member) and
+ * written as one. */
+static int closest_member(kdr_buf *b, const char *name, const kdr_closest *c, size_t n,
+                          int what, kdr_encoding enc) {
+    const size_t per = what == 2 ? 3 : 1, total = per * n;
+    int32_t *ibuf = NULL;
+    float *fbuf = NULL;
+    if (what == 0)
+        ibuf = malloc((total ? total : 1) * sizeof *ibuf);
+    else
+        fbuf = malloc((total ? total : 1) * sizeof *fbuf);
+    if (!ibuf && !fbuf) return KDR_ENOMEM;
+    for (size_t i = 0; i < n; i++) {
+        switch (what) {
+        case 0:
+            ibuf[i] = c[i].prim;
+            break;
+        case 1:
+            fbuf[i] = c[i].distance;
+            break;
+        case 2:
+            for (int k = 0; k < 3; k++)
+                fbuf[3 * i + k] = c[i].point[k];
+            break;
+        case 3:
+            fbuf[i] = c[i].u;
+            break;
+        default:
+            fbuf[i] = c[i].v;
+            break;
+        }
+    }
+    const array_src s = what == 0 ? (array_src){.i = ibuf} : (array_src){.f = fbuf};
+    const int rc = named_array(b, name, &s, total, enc);
+    free(ibuf);
+    free(fbuf);
+    return rc;
+}
+
+int kdr_proto_encode_closest(const kdr_closest *c, size_t n, kdr_encoding enc,
+                             kdr_buf *out) {
+    if (!c) return KDR_EINVAL;
+    static const char *const names[5] = {"prim", "distance", "point", "u", "v"};
+    if (presize(out, kdr_proto_closest_answer_max(n, enc)) || count_head(out, n, 5, enc))
+        return KDR_ENOMEM;
+    for (int w = 0; w < 5; w++)
+        if (closest_member(out, names[w], c, n, w, enc)) return KDR_ENOMEM;
+    return close_answer(out, enc);
+}
+
+size_t kdr_proto_occupancy_answer_max(size_t n, kdr_encoding enc) {
+    const array_src s = field_kind(KDR_FIELD_HIT);
+    return KDR_ANSWER_FIXED + array_max(&s, n, enc);
+}
+
+int kdr_proto_encode_occupancy(const uint8_t *inside, size_t n, kdr_encoding enc,
+                               kdr_buf *out) {
+    if (!inside) return KDR_EINVAL;
+    const array_src s = {.u8 = inside};
+    if (presize(out, kdr_proto_occupancy_answer_max(n, enc)) ||
+        count_head(out, n, 1, enc) || named_array(out, "inside", &s, n, enc))
+        return KDR_ENOMEM;
+    return close_answer(out, enc);
+}
+
 static int shadow_stats(kdr_buf *out, const kdr_shadow_stats *stats, kdr_encoding enc) {
     if (enc == KDR_ENCODING_CBOR)
         return kdr_cbor_text(out, "stats") || kdr_cbor_map(out, 3) ||
                kdr_cbor_text(out, "cones_decided") ||
                kdr_cbor_uint(out, stats->cones_decided) ||
-               kdr_cbor_text(out, "rays_traced") || kdr_cbor_uint(out, stats->rays_traced) ||
+               kdr_cbor_text(out, "rays_traced") ||
+               kdr_cbor_uint(out, stats->rays_traced) ||
                kdr_cbor_text(out, "nodes_visited") ||
                kdr_cbor_uint(out, stats->nodes_visited);
     char tail[160];
@@ -328,11 +483,9 @@ int kdr_proto_encode_shadow(const float *visibility, size_t n, size_t nlights,
 /* Shortest of %.15g / %.17g that reads back exactly; null if not finite. */
 static int put_double(kdr_buf *b, double d) {
     char tmp[40];
-    if (!isfinite(d))
-        return KDR_BUF_LIT(b, "null");
+    if (!isfinite(d)) return KDR_BUF_LIT(b, "null");
     int len = snprintf(tmp, sizeof tmp, "%.15g", d);
-    if (strtod(tmp, NULL) != d)
-        len = snprintf(tmp, sizeof tmp, "%.17g", d);
+    if (strtod(tmp, NULL) != d) len = snprintf(tmp, sizeof tmp, "%.17g", d);
     return kdr_buf_append(b, tmp, (size_t)len);
 }
 
@@ -349,12 +502,13 @@ static int put_u64(kdr_buf *b, const char *key, uint64_t v) {
 
 static int put_kdtree(kdr_buf *b, const kdr_tree_stats *t) {
     return KDR_BUF_LIT(b, ",\"kdtree\":{") || put_u64(b, "nodes", t->nodes) ||
-           KDR_BUF_LIT(b, ",") || put_u64(b, "leaves", t->leaves) || KDR_BUF_LIT(b, ",") ||
-           put_u64(b, "empty_leaves", t->empty_leaves) || KDR_BUF_LIT(b, ",") ||
-           put_u64(b, "max_depth", t->max_depth) || KDR_BUF_LIT(b, ",\"refs_per_leaf\":") ||
-           put_double(b, t->refs_per_leaf) || KDR_BUF_LIT(b, ",\"sah_cost\":") ||
-           put_double(b, t->sah_cost) || KDR_BUF_LIT(b, ",\"build_ms\":") ||
-           put_double(b, t->build_ms) || KDR_BUF_LIT(b, "}");
+           KDR_BUF_LIT(b, ",") || put_u64(b, "leaves", t->leaves) ||
+           KDR_BUF_LIT(b, ",") || put_u64(b, "empty_leaves", t->empty_leaves) ||
+           KDR_BUF_LIT(b, ",") || put_u64(b, "max_depth", t->max_depth) ||
+           KDR_BUF_LIT(b, ",\"refs_per_leaf\":") || put_double(b, t->refs_per_leaf) ||
+           KDR_BUF_LIT(b, ",\"sah_cost\":") || put_double(b, t->sah_cost) ||
+           KDR_BUF_LIT(b, ",\"build_ms\":") || put_double(b, t->build_ms) ||
+           KDR_BUF_LIT(b, "}");
 }
 
 static int put_mesh(kdr_buf *b, const kdr_proto_mesh_range *m) {
@@ -382,10 +536,8 @@ int kdr_proto_encode_scene(const kdr_proto_scene_info *s, kdr_buf *out) {
     return KDR_BUF_LIT(out, "]}");
 }
 
-int kdr_proto_encode_scenes(const kdr_proto_scene_info *scenes, size_t n,
-                            kdr_buf *out) {
-    if (KDR_BUF_LIT(out, "{\"scenes\":["))
-        return KDR_ENOMEM;
+int kdr_proto_encode_scenes(const kdr_proto_scene_info *scenes, size_t n, kdr_buf *out) {
+    if (KDR_BUF_LIT(out, "{\"scenes\":[")) return KDR_ENOMEM;
     for (size_t i = 0; i < n; i++)
         if ((i && KDR_BUF_LIT(out, ",")) || kdr_proto_encode_scene(&scenes[i], out))
             return KDR_ENOMEM;
@@ -395,7 +547,8 @@ int kdr_proto_encode_scenes(const kdr_proto_scene_info *scenes, size_t n,
 int kdr_proto_encode_health(const char *status, size_t nscenes, kdr_buf *out) {
     char tail[48];
     int len = snprintf(tail, sizeof tail, ",\"scenes\":%zu}", nscenes);
-    if (KDR_BUF_LIT(out, "{\"status\":") || kdr_buf_json_string(out, status ? status : "") ||
+    if (KDR_BUF_LIT(out, "{\"status\":") ||
+        kdr_buf_json_string(out, status ? status : "") ||
         kdr_buf_append(out, tail, (size_t)len))
         return KDR_ENOMEM;
     return 0;

@@ -18,12 +18,11 @@ static const double BUCKETS[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05
                                  0.1,    0.25,  0.5,    1.0,   2.5,  5.0,   10.0};
 #define NBUCKET (sizeof BUCKETS / sizeof BUCKETS[0])
 
-static const char *const EP_NAMES[KDR_EP_COUNT] = {"health",      "ready",   "metrics",
-                                                   "scenes",      "scene",   "bundle",
-                                                   "cone-shadow", "frustum", "render",
-                                                   "page",        "other"};
-static const char *const RAY_NAMES[KDR_RAYS_COUNT] = {"bundle", "cone-shadow", "frustum",
-                                                      "render"};
+static const char *const EP_NAMES[KDR_EP_COUNT] = {
+    "health",  "ready",  "metrics", "scenes",        "scene",     "bundle", "cone-shadow",
+    "frustum", "render", "page",    "closest-point", "occupancy", "other"};
+static const char *const RAY_NAMES[KDR_RAYS_COUNT] = {
+    "bundle", "cone-shadow", "frustum", "render", "closest-point", "occupancy"};
 
 static atomic_uint_fast64_t requests[KDR_EP_COUNT][NSTATUS + 1];
 static atomic_uint_fast64_t latency_buckets[KDR_EP_COUNT][NBUCKET + 1];
@@ -144,7 +143,8 @@ static void render_latency(kdr_tb *tb) {
 
 static void render_rays(kdr_tb *tb) {
     kdr_tb_printf(tb, "# HELP kdray_rays_traced_total Rays answered, by query kind "
-                      "(cone-shadow: shadow rays actually traced).\n"
+                      "(cone-shadow: shadow rays actually traced; closest-point: points; "
+                      "occupancy: points x 9 vote rays).\n"
                       "# TYPE kdray_rays_traced_total counter\n");
     for (size_t k = 0; k < KDR_RAYS_COUNT; k++)
         kdr_tb_printf(tb, "kdray_rays_traced_total{kind=\"%s\"} %llu\n", RAY_NAMES[k],

@@ -25,6 +25,8 @@ typedef enum kdr_endpoint {
     KDR_EP_FRUSTUM,
     KDR_EP_RENDER, /* GET .../render.png */
     KDR_EP_PAGE,   /* GET /: the page (page.c) */
+    KDR_EP_CLOSEST_POINT,
+    KDR_EP_OCCUPANCY,
     KDR_EP_OTHER, /* unknown paths */
     KDR_EP_COUNT
 } kdr_endpoint;
@@ -34,6 +36,8 @@ typedef enum kdr_ray_kind {
     KDR_RAYS_SHADOW,
     KDR_RAYS_FRUSTUM,
     KDR_RAYS_RENDER, /* a picture's primary, shadow and ao rays */
+    KDR_RAYS_POINTS,    /* closest-point: points searched */
+    KDR_RAYS_OCCUPANCY, /* occupancy: points x vote rays */
     KDR_RAYS_COUNT
 } kdr_ray_kind;
 

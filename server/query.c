@@ -28,10 +28,12 @@ static const size_t INLINE_RAYS_MAX = 4096; /* one bundle chunk */
 static const unsigned COST_SHIFT = 3;
 
 static kdr_exec_kind kind_of(kdr_endpoint ep) {
-    return ep == KDR_EP_FRUSTUM       ? KDR_EXEC_FRUSTUM
-           : ep == KDR_EP_CONE_SHADOW ? KDR_EXEC_CONE_SHADOW
-           : ep == KDR_EP_RENDER      ? KDR_EXEC_RENDER
-                                      : KDR_EXEC_BUNDLE;
+    return ep == KDR_EP_FRUSTUM         ? KDR_EXEC_FRUSTUM
+           : ep == KDR_EP_CONE_SHADOW   ? KDR_EXEC_CONE_SHADOW
+           : ep == KDR_EP_RENDER        ? KDR_EXEC_RENDER
+           : ep == KDR_EP_CLOSEST_POINT ? KDR_EXEC_CLOSEST_POINT
+           : ep == KDR_EP_OCCUPANCY     ? KDR_EXEC_OCCUPANCY
+                                        : KDR_EXEC_BUNDLE;
 }
 
 static size_t inline_rays(const kdr_scene_version *v, kdr_endpoint ep) {
@@ -61,10 +63,12 @@ static void learn_cost(kdr_scene_version *v, kdr_endpoint ep, const kdr_exec_res
 }
 
 static kdr_ray_kind ray_kind_of(kdr_endpoint ep) {
-    return ep == KDR_EP_FRUSTUM       ? KDR_RAYS_FRUSTUM
-           : ep == KDR_EP_CONE_SHADOW ? KDR_RAYS_SHADOW
-           : ep == KDR_EP_RENDER      ? KDR_RAYS_RENDER
-                                      : KDR_RAYS_BUNDLE;
+    return ep == KDR_EP_FRUSTUM         ? KDR_RAYS_FRUSTUM
+           : ep == KDR_EP_CONE_SHADOW   ? KDR_RAYS_SHADOW
+           : ep == KDR_EP_RENDER        ? KDR_RAYS_RENDER
+           : ep == KDR_EP_CLOSEST_POINT ? KDR_RAYS_POINTS
+           : ep == KDR_EP_OCCUPANCY     ? KDR_RAYS_OCCUPANCY
+                                        : KDR_RAYS_BUNDLE;
 }
 
 /* A picture's stage times (Server-Timing, milliseconds: primary, shadow,
@@ -115,6 +119,8 @@ static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoi
     call->q = (kdr_exec_query){.kind = kind_of(ep),
                                .mode = KDR_EXEC_FAST,
                                .scene = call->scene->scene,
+                               .meshes = call->scene->proto_ranges,
+                               .nmeshes = call->scene->nranges,
                                .body = req->body,
                                .len = req->len,
                                .media = media,

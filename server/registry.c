@@ -66,6 +66,7 @@ static void version_free(kdr_scene_version *v) {
     kdr_scene_free(v->scene); /* before the mapping it may read from */
     kdr_tree_cache_unmap(v->map, v->map_len);
     free(v->ranges);
+    free(v->proto_ranges);
     free(v);
 }
 
@@ -237,6 +238,18 @@ static void to_cache(kdr_registry *r, entry *e, const kdr_build_opts *opts,
 
 /* Loads and builds e's file as a new version (one reference, the caller's),
  * or maps it from the tree cache; NULL with the reason in why. */
+/* The mesh table in the protocol's form (the answers' "mesh" field), for
+ * a version built or mapped from the cache alike. -1 out of memory. */
+static int set_proto_ranges(kdr_scene_version *v) {
+    v->proto_ranges = calloc(v->nranges ? v->nranges : 1, sizeof *v->proto_ranges);
+    if (!v->proto_ranges) return -1;
+    for (size_t i = 0; i < v->nranges; i++)
+        v->proto_ranges[i] = (kdr_proto_mesh_range){
+            v->ranges[i].node, v->ranges[i].mesh, v->ranges[i].primitive,
+            v->ranges[i].first_prim, v->ranges[i].count};
+    return 0;
+}
+
 static kdr_scene_version *load_version(kdr_registry *r, entry *e, unsigned generation,
                                        int threads, char *why, size_t why_len) {
     kdr_build_opts opts;
@@ -252,6 +265,11 @@ static kdr_scene_version *load_version(kdr_registry *r, entry *e, unsigned gener
             return NULL;
         }
         kdr_scene_version *v = from_cache(r, e, &opts, &key, generation);
+        if (v && set_proto_ranges(v) != 0) {
+            version_free(v);
+            snprintf(why, why_len, "out of memory");
+            return NULL;
+        }
         if (v) return v;
     }
     kdr_gltf_scene g;
@@ -275,6 +293,7 @@ static kdr_scene_version *load_version(kdr_registry *r, entry *e, unsigned gener
     g.ranges = NULL;
     g.nranges = 0;
     kdr_gltf_free(&g);
+    if (rc == KDR_OK && set_proto_ranges(v) != 0) rc = KDR_ENOMEM;
     if (rc != KDR_OK) {
         snprintf(why, why_len, "kd-tree build failed: %s", kdr_strerror(rc));
         version_free(v);

@@ -22,6 +22,7 @@
 #include <stddef.h>
 
 #include "kdr_gltf.h"
+#include "kdr_protocol.h"
 #include "kdray.h"
 #include "textbuf.h"
 
@@ -29,6 +30,7 @@
 typedef struct kdr_scene_version {
     kdr_scene *scene;
     kdr_mesh_range *ranges;
+    kdr_proto_mesh_range *proto_ranges; /* the same, for the "mesh" field */
     size_t nranges;
     double load_ms, build_ms;
     unsigned generation; /* 1 for the start-up build, +1 per reload */
@@ -40,7 +42,7 @@ typedef struct kdr_scene_version {
      * kind (bundle, cone-shadow, frustum; 0 = not measured yet): how much a
      * query of N rays would hold an HTTP thread if answered inline; render
      * is measured too, per pixel x (1 + samples), though never inlined). */
-    atomic_uint ns_per_ray[4];
+    atomic_uint ns_per_ray[6]; /* by kdr_exec_kind */
 } kdr_scene_version;
 
 typedef struct kdr_registry kdr_registry;

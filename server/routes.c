@@ -28,7 +28,8 @@ typedef struct route {
 } route;
 
 static int is_post_endpoint(kdr_endpoint ep) {
-    return ep == KDR_EP_BUNDLE || ep == KDR_EP_CONE_SHADOW || ep == KDR_EP_FRUSTUM;
+    return ep == KDR_EP_BUNDLE || ep == KDR_EP_CONE_SHADOW || ep == KDR_EP_FRUSTUM ||
+           ep == KDR_EP_CLOSEST_POINT || ep == KDR_EP_OCCUPANCY;
 }
 
 /* A render is a GET, but a query all the same: admitted, run and charged
@@ -49,6 +50,8 @@ static kdr_endpoint query_endpoint(const char *op) {
     if (!strcmp(op, "cone-shadow")) return KDR_EP_CONE_SHADOW;
     if (!strcmp(op, "frustum")) return KDR_EP_FRUSTUM;
     if (!strcmp(op, "render.png")) return KDR_EP_RENDER;
+    if (!strcmp(op, "closest-point")) return KDR_EP_CLOSEST_POINT;
+    if (!strcmp(op, "occupancy")) return KDR_EP_OCCUPANCY;
     return KDR_EP_OTHER;
 }
 
@@ -144,10 +147,12 @@ int kdr_route_precheck(kdr_server *srv, const kdr_request *req, long long conten
         problemf(out, 404, "scene %s: no such scene", r.scene, r.scene_len);
         return 1;
     }
-    if (is_post_endpoint(r.ep) && kdr_proto_media_of(req->content_type) == KDR_MEDIA_OTHER) {
+    if (is_post_endpoint(r.ep) &&
+        kdr_proto_media_of(req->content_type) == KDR_MEDIA_OTHER) {
         const char *ct = req->content_type ? req->content_type : "(none)";
-        problemf(out, 415, "Content-Type %s: expected application/json or application/cbor",
-                 ct, strlen(ct));
+        problemf(out, 415,
+                 "Content-Type %s: expected application/json or application/cbor", ct,
+                 strlen(ct));
         return 1;
     }
     if (content_length >= 0 && (unsigned long long)content_length > srv->max_body) {

@@ -5,7 +5,7 @@
  * integration tests compare the daemon's answers with these byte for byte;
  * the service benchmark uses --repeat to time the tracing in-process.
  *
- *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum
+ *   kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum|closest-point|occupancy
  *               [--mode reference|fast] [--threads T] [--repeat R]
  *               [--content-type TYPE] [--accept TYPE] REQUEST.json|REQUEST.cbor
  *   kdray-trace [--scene PATH] KIND:MODE:REQUEST.json...   (-> REQUEST.json.out)
@@ -65,6 +65,10 @@ static int kind_of(const char *name, kdr_exec_kind *out) {
         *out = KDR_EXEC_FRUSTUM;
     else if (!strcmp(name, "cone-shadow"))
         *out = KDR_EXEC_CONE_SHADOW;
+    else if (!strcmp(name, "closest-point"))
+        *out = KDR_EXEC_CLOSEST_POINT;
+    else if (!strcmp(name, "occupancy"))
+        *out = KDR_EXEC_OCCUPANCY;
     else
         return -1;
     return 0;
@@ -83,6 +87,14 @@ static size_t rays_of(kdr_exec_kind kind, kdr_media media, const char *body, siz
     } else if (kind == KDR_EXEC_FRUSTUM) {
         kdr_frustum_request r;
         if (!kdr_proto_parse_frustum_as(media, body, len, max, &r, &err)) n = r.rays;
+    } else if (kind == KDR_EXEC_OCCUPANCY) {
+        kdr_occupancy_request r;
+        if (!kdr_proto_parse_occupancy_as(media, body, len, max, &r, &err)) n = r.n;
+        kdr_occupancy_request_free(&r);
+    } else if (kind == KDR_EXEC_CLOSEST_POINT) {
+        kdr_closest_request r;
+        if (!kdr_proto_parse_closest_as(media, body, len, max, &r, &err)) n = r.n;
+        kdr_closest_request_free(&r);
     } else {
         kdr_shadow_request r;
         if (!kdr_proto_parse_shadow_as(media, body, len, max, &r, &err))
@@ -131,7 +143,8 @@ static void run(kdr_exec *ex, kdr_exec_query *q, unsigned repeat) {
 static int usage(void) {
     fprintf(
         stderr,
-        "usage: kdray-trace [--scene PATH] --kind bundle|cone-shadow|frustum "
+        "usage: kdray-trace [--scene PATH] --kind "
+        "bundle|cone-shadow|frustum|closest-point|occupancy "
         "[--mode reference|fast] [--threads T] [--repeat R]\n"
         "                   [--content-type TYPE] [--accept TYPE] REQUEST.json|.cbor\n"
         "       kdray-trace [--scene PATH] [--threads T] KIND:MODE:REQUEST.json...\n"
@@ -171,21 +184,35 @@ static int parse_cli(cli *c, int argc, char **argv) {
     return 0;
 }
 
-static kdr_scene *load_scene(const char *path, unsigned threads) {
+/* The scene and its glTF ranges (for the "mesh" field), as kdrayd has them. */
+typedef struct trace_scene {
+    kdr_scene *scene;
+    kdr_proto_mesh_range *meshes;
+    size_t nmeshes;
+} trace_scene;
+
+static int load_scene(const char *path, unsigned threads, trace_scene *out) {
     kdr_gltf_scene g;
     char err[512];
+    memset(out, 0, sizeof *out);
     if (kdr_gltf_load(path, &g, err, sizeof err)) {
         fprintf(stderr, "kdray-trace: %s\n", err);
-        return NULL;
+        return -1;
     }
-    kdr_scene *s = NULL;
     kdr_build_opts opts;
     kdr_build_opts_default(&opts);
-    opts.threads = (int)threads;
-    int rc = kdr_scene_build(g.tris, g.ntris, &opts, NULL, NULL, &s);
+    opts.threads = (int)threads; /* the same tree on any count */
+    int rc = kdr_scene_build(g.tris, g.ntris, &opts, NULL, NULL, &out->scene);
+    out->meshes = calloc(g.nranges ? g.nranges : 1, sizeof *out->meshes);
+    if (!rc && !out->meshes) rc = KDR_ENOMEM;
+    for (size_t i = 0; !rc && i < g.nranges; i++)
+        out->meshes[i] = (kdr_proto_mesh_range){
+            g.ranges[i].node, g.ranges[i].mesh, g.ranges[i].primitive,
+            g.ranges[i].first_prim, g.ranges[i].count};
+    out->nmeshes = g.nranges;
     kdr_gltf_free(&g);
     if (rc) fprintf(stderr, "kdray-trace: build: %s\n", kdr_strerror(rc));
-    return rc ? NULL : s;
+    return rc ? -1 : 0;
 }
 
 /* Writes the answer to stdout (path NULL) or to path + ".out". */
@@ -207,7 +234,7 @@ static int write_out(const char *path, const kdr_buf *out) {
 /* Answers one request: a plain PATH goes to stdout with --kind/--mode; a
  * KIND:MODE:PATH spec (several per run share one scene build) goes to
  * PATH.out. Returns 0 or 1. */
-static int answer_one(kdr_exec *ex, const kdr_scene *scene, cli c, char *spec) {
+static int answer_one(kdr_exec *ex, const trace_scene *ts, cli c, char *spec) {
     char *path = spec, *k = NULL, *m = NULL;
     if (strchr(spec, ':') && strchr(strchr(spec, ':') + 1, ':')) {
         k = spec;
@@ -236,7 +263,9 @@ static int answer_one(kdr_exec *ex, const kdr_scene *scene, cli c, char *spec) {
     }
     kdr_exec_query q = {.kind = kind,
                         .mode = c.fast ? KDR_EXEC_FAST : KDR_EXEC_REFERENCE,
-                        .scene = scene,
+                        .scene = ts->scene,
+                        .meshes = ts->meshes,
+                        .nmeshes = ts->nmeshes,
                         .body = body,
                         .len = len,
                         .media = media,
@@ -259,13 +288,15 @@ int main(int argc, char **argv) {
     if (parse_cli(&c, argc, argv)) return usage();
     if (!c.scene_path)
         c.scene_path = kdr_default_scene_path(default_path, sizeof default_path);
-    kdr_scene *scene = load_scene(c.scene_path, c.threads);
+    trace_scene ts;
+    const int loaded = load_scene(c.scene_path, c.threads, &ts) == 0;
     kdr_exec_config cfg = {c.threads, (size_t)c.nrequests, 0, NULL, NULL};
-    kdr_exec *ex = scene ? kdr_exec_create(&cfg) : NULL;
-    int rc = !scene || !ex;
+    kdr_exec *ex = loaded ? kdr_exec_create(&cfg) : NULL;
+    int rc = !loaded || !ex;
     for (int i = 0; i < c.nrequests && !rc; i++)
-        rc = answer_one(ex, scene, c, c.requests[i]);
+        rc = answer_one(ex, &ts, c, c.requests[i]);
     kdr_exec_destroy(ex);
-    kdr_scene_free(scene);
+    kdr_scene_free(ts.scene);
+    free(ts.meshes);
     return rc;
 }

@@ -80,3 +80,18 @@ add_test(NAME page
                  $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients
                  ${CMAKE_CURRENT_BINARY_DIR}/page-screenshots)
 set_tests_properties(page PROPERTIES TIMEOUT 600)
+
+# Bundle "query": "all" / "count" (issue 15) over HTTP, JSON, base64 and
+# CBOR (Debian's python3 for python3-cbor2, as server_codecs).
+add_test(NAME server_queries
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_server_queries.py
+                 $<TARGET_FILE:kdrayd> $<TARGET_FILE:kdray_trace>
+                 ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(server_queries PROPERTIES TIMEOUT 600)
+
+# clients/kdray_raycast.py (issue 15): installed offline the documented way
+# into a throwaway venv, then every Open3D-named method against kdrayd.
+add_test(NAME client_raycast
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_client_raycast.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(client_raycast PROPERTIES TIMEOUT 600)

@@ -277,7 +277,7 @@ static const struct err_case {
     {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0,0,1,0],\"tmax\":[1,\"a\"]}", 0, 400,
      "tmax[1]: not a number"},
     {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"query\":\"nearest\"}", 0, 400,
-     "query: must be \"closest\" or \"any\""},
+     "query: must be \"closest\", \"any\", \"all\" or \"count\""},
     {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0],\"encoding\":5}", 0, 400,
      "encoding: must be \"json\" or \"base64\""},
     {BUNDLE, "{\"origins\":[0,0,0],\"directions\":[1,0,0,0,1,0,0,0,1]}", 2, 413,

@@ -41,6 +41,11 @@ QUERIES = [
                      "lights": [{"center": [0, 9, 0], "radius": 2.0}], "samples": 64}),
     ("frustum", {"camera": {"eye": [3, 4, 9], "target": [0, 1, 0], "fov_y_deg": 50,
                             "width": 40, "height": 30}, "encoding": "base64"}),
+    # the glTF mesh table travels beside the tree (a mapped tree must name
+    # each hit's node, mesh and primitive as a built one does)
+    ("bundle", {"origins": [0.1, 4.0, 6.0], "directions":
+                [x for i in range(16) for x in ((i % 4 - 1.5) * 0.2, -0.4, -1.0)],
+                "fields": ["t", "prim", "normal", "mesh"]}),
 ]
 
 

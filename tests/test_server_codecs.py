@@ -187,7 +187,7 @@ def test_bad_bodies(t, c, b):
         ({"origins": [0, 3, 5], "directions": b"\0" * 12},
          "directions: a byte string needs a typed-array tag"),
         ({"origins": [0, 3, 5], "directions": [0, 0, -1], "query": 7},
-         'query: must be "closest" or "any"'),
+         'query: must be "closest", "any", "all" or "count"'),
         ({"origins": [0, 3, 5], "directions": [0, 0, float("nan")]},
          "directions[2]: not a number"),
         ({"origins": [0, 3, 5], "directions": [0, 0, -1], "tmax": float("nan")},

@@ -13,8 +13,8 @@
  * the limit, and freeing the request must count back every byte.
  */
 #include <math.h>
-#include <stdio.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -24,14 +24,12 @@
 #define FUZZ_MAX_RAYS 100000
 
 static void check(int ok) {
-    if (!ok)
-        abort();
+    if (!ok) abort();
 }
 
 static int finite_n(const float *v, size_t n) {
     for (size_t i = 0; i < n; i++)
-        if (!isfinite(v[i]))
-            return 0;
+        if (!isfinite(v[i])) return 0;
     return 1;
 }
 
@@ -45,15 +43,12 @@ static void put_float(kdr_buf *b, float f) {
 
 static void put_floats(kdr_buf *b, const char *key, const float *v, size_t n, int list) {
     kdr_buf_append(b, key, strlen(key));
-    if (list)
-        kdr_buf_append(b, "[", 1);
+    if (list) kdr_buf_append(b, "[", 1);
     for (size_t i = 0; i < n; i++) {
-        if (i)
-            kdr_buf_append(b, ",", 1);
+        if (i) kdr_buf_append(b, ",", 1);
         put_float(b, v[i]);
     }
-    if (list)
-        kdr_buf_append(b, "]", 1);
+    if (list) kdr_buf_append(b, "]", 1);
 }
 
 /* An accepted CBOR bundle as JSON parses to the same batch. */
@@ -65,13 +60,20 @@ static void json_twin(const kdr_bundle_request *r) {
     put_floats(&j, ",\"directions\":", x->dir, 3 * x->n, 1);
     put_floats(&j, ",\"tmin\":", x->tmin, x->tmin_stride ? x->n : 1, x->tmin_stride);
     put_floats(&j, ",\"tmax\":", x->tmax, x->tmax_stride ? x->n : 1, x->tmax_stride);
-    kdr_buf_append(&j, r->query == KDR_ANY ? ",\"query\":\"any\"}" : "}",
-                   r->query == KDR_ANY ? 15 : 1);
+    static const char *const q[] = {"closest", "any", "all", "count"};
+    char tail[64];
+    const int tl =
+        r->query == KDR_ALL
+            ? snprintf(tail, sizeof tail, ",\"query\":\"all\",\"max_hits\":%u}",
+                       (unsigned)r->max_hits)
+            : snprintf(tail, sizeof tail, ",\"query\":\"%s\"}", q[r->query]);
+    kdr_buf_append(&j, tail, (size_t)tl);
     kdr_bundle_request t;
     kdr_proto_error err;
     check(kdr_proto_parse_bundle(j.data, j.len, FUZZ_MAX_RAYS, &t, &err) == 0);
     const kdr_ray_batch *y = &t.batch;
-    check(x->n == y->n && x->org_stride == y->org_stride && t.query == r->query);
+    check(x->n == y->n && x->org_stride == y->org_stride && t.query == r->query &&
+          t.max_hits == r->max_hits);
     check(!memcmp(x->dir, y->dir, 12 * x->n));
     check(!memcmp(x->org, y->org, x->org_stride ? 12 * x->n : 12));
     check(!memcmp(x->tmin, y->tmin, x->tmin_stride ? 4 * x->n : 4));
@@ -88,29 +90,45 @@ static void fuzz_bundle(kdr_media media, const char *body, size_t len) {
     if (st == 0) {
         const kdr_ray_batch *b = &r.batch;
         check(b->n >= 1 && b->n <= FUZZ_MAX_RAYS);
-        check(finite_n(b->org, b->org_stride ? 3 * b->n : 3) && finite_n(b->dir, 3 * b->n));
+        check(finite_n(b->org, b->org_stride ? 3 * b->n : 3) &&
+              finite_n(b->dir, 3 * b->n));
         for (size_t i = 0; i < b->n; i++)
             check(b->dir[3 * i] != 0 || b->dir[3 * i + 1] != 0 || b->dir[3 * i + 2] != 0);
         for (size_t i = 0; i < (b->tmax_stride ? b->n : 1); i++)
             check(!isnan(b->tmax[i]));
-        check(r.fields != 0);
-        if (media == KDR_MEDIA_CBOR)
-            json_twin(&r);
+        check(r.fields != 0 || r.query == KDR_COUNT);
+        check(r.query == KDR_ALL ? r.max_hits >= 1 && r.max_hits <= KDR_MAX_HITS_LIMIT &&
+                                       (uint64_t)b->n * r.max_hits <= FUZZ_MAX_RAYS
+                                 : r.max_hits == 0);
+        if (media == KDR_MEDIA_CBOR) json_twin(&r);
         /* encode a fake result of the right size every way */
         float *t = calloc(b->n, 4);
         int32_t *prim = calloc(b->n, 4);
         uint8_t *hit = calloc(b->n, 1);
         kdr_hits h = {.t = t, .prim = prim, .u = t, .v = t, .hit = hit};
         check(t && prim && hit);
+        int32_t *off = calloc(b->n + 1, 4);
+        check(off != NULL);
+        float *n3 = calloc(3 * b->n, 4);
+        int32_t *m3 = calloc(3 * b->n, 4);
+        check(n3 && m3);
+        const kdr_all_answer all = {b->n, prim, off, t, t, t, prim, {n3, m3}};
+        const kdr_hit_attrs attrs = {n3, m3};
         for (int enc = 0; enc < 3; enc++) {
             kdr_buf out;
             kdr_buf_init(&out);
-            check(kdr_proto_encode_hits_fields(&h, b->n, r.query, r.fields,
-                                               enc ? (kdr_encoding)enc : r.encoding,
-                                               &out) == 0);
+            const kdr_encoding e = enc ? (kdr_encoding)enc : r.encoding;
+            if (r.query == KDR_ALL)
+                check(kdr_proto_encode_all(&all, r.fields, e, &out) == 0);
+            else if (r.query == KDR_COUNT)
+                check(kdr_proto_encode_counts((const uint32_t *)prim, b->n, e, &out) ==
+                      0);
+            else
+                check(kdr_proto_encode_hits_attrs(&h, &attrs, b->n, r.query, r.fields, e,
+                                                  &out) == 0);
             kdr_buf_free(&out);
         }
-        free(t), free(prim), free(hit);
+        free(t), free(prim), free(hit), free(off), free(n3), free(m3);
     } else {
         check(st == 400 || st == 413);
         check(memchr(err.detail, '\0', sizeof err.detail) != NULL && err.detail[0]);
@@ -150,6 +168,28 @@ static void fuzz_frustum(kdr_media media, const char *body, size_t len) {
     }
 }
 
+/* closest-point and occupancy (issue 15): points finite, N within the
+ * limit, max_distance >= 0 (not with signed). */
+static void fuzz_points(kdr_media media, const char *body, size_t len) {
+    kdr_closest_request c;
+    kdr_proto_error err;
+    int st = kdr_proto_parse_closest_as(media, body, len, FUZZ_MAX_RAYS, &c, &err);
+    if (st == 0) {
+        check(c.n >= 1 && c.n <= FUZZ_MAX_RAYS && finite_n(c.points, 3 * c.n));
+        check(c.max_distance >= 0 && (!c.is_signed || isinf(c.max_distance)));
+    } else {
+        check(st == 400 || st == 413);
+    }
+    kdr_closest_request_free(&c);
+    kdr_occupancy_request o;
+    st = kdr_proto_parse_occupancy_as(media, body, len, FUZZ_MAX_RAYS, &o, &err);
+    if (st == 0)
+        check(o.n >= 1 && o.n <= FUZZ_MAX_RAYS && finite_n(o.points, 3 * o.n));
+    else
+        check(st == 400 || st == 413);
+    kdr_occupancy_request_free(&o);
+}
+
 static void fuzz_base64(const char *s, size_t len) {
     unsigned char *dst = malloc(kdr_base64_decoded_max(len) + 1);
     size_t got = 0, bad = 0;
@@ -171,15 +211,13 @@ static void fuzz_base64(const char *s, size_t len) {
  * and every float. */
 static void fuzz_paths_agree(const char *body, size_t len) {
     static const char extra[] = "{\"\\u0078\":0,";
-    if (len < 2 || body[0] != '{')
-        return;
+    if (len < 2 || body[0] != '{') return;
     size_t k = 1;
     while (k < len && (unsigned char)body[k] <= ' ') /* cJSON's whitespace */
         k++;
     const int empty = k < len && body[k] == '}';
     char *other = malloc(len + sizeof extra);
-    if (!other)
-        return;
+    if (!other) return;
     size_t n = sizeof extra - 1 - (size_t)empty;
     memcpy(other, extra, n);
     memcpy(other + n, body + 1, len - 1);
@@ -188,8 +226,7 @@ static void fuzz_paths_agree(const char *body, size_t len) {
     int sa = kdr_proto_parse_bundle(body, len, FUZZ_MAX_RAYS, &a, &ea);
     int sb = kdr_proto_parse_bundle(other, n + len - 1, FUZZ_MAX_RAYS, &b, &eb);
     check(sa == sb);
-    if (sa && strncmp(ea.detail, "body:", 5))
-        check(!strcmp(ea.detail, eb.detail));
+    if (sa && strncmp(ea.detail, "body:", 5)) check(!strcmp(ea.detail, eb.detail));
     if (!sa) {
         const kdr_ray_batch *x = &a.batch, *y = &b.batch;
         check(x->n == y->n && x->org_stride == y->org_stride);
@@ -203,11 +240,11 @@ static void fuzz_paths_agree(const char *body, size_t len) {
     free(other);
 }
 
-/* The three parsers under a meter of limit bytes, in both media types. */
+/* The parsers under a meter of limit bytes, in both media types. */
 static void fuzz_metered(const char *body, size_t len, size_t limit) {
     for (int m = 0; m < 2; m++) {
         const kdr_media media = m ? KDR_MEDIA_CBOR : KDR_MEDIA_JSON;
-        for (int kind = 0; kind < 3; kind++) {
+        for (int kind = 0; kind < 5; kind++) {
             kdr_proto_meter meter = {.limit = limit};
             kdr_proto_meter *outer = kdr_proto_meter_set(&meter);
             kdr_proto_error err;
@@ -220,9 +257,20 @@ static void fuzz_metered(const char *body, size_t len, size_t limit) {
                 kdr_shadow_request r;
                 st = kdr_proto_parse_shadow_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
                 kdr_shadow_request_free(&r);
-            } else {
+            } else if (kind == 2) {
                 kdr_frustum_request r;
-                st = kdr_proto_parse_frustum_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
+                st =
+                    kdr_proto_parse_frustum_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
+            } else if (kind == 3) {
+                kdr_closest_request r;
+                st =
+                    kdr_proto_parse_closest_as(media, body, len, FUZZ_MAX_RAYS, &r, &err);
+                kdr_closest_request_free(&r);
+            } else {
+                kdr_occupancy_request r;
+                st = kdr_proto_parse_occupancy_as(media, body, len, FUZZ_MAX_RAYS, &r,
+                                                  &err);
+                kdr_occupancy_request_free(&r);
             }
             kdr_proto_meter_set(outer);
             check(meter.used == 0); /* every block counted back */
@@ -235,19 +283,18 @@ static void fuzz_metered(const char *body, size_t len, size_t limit) {
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     /* an exact-size copy, so ASan catches any read past the body */
     char *body = malloc(size ? size : 1);
-    if (!body)
-        return 0;
+    if (!body) return 0;
     memcpy(body, data, size);
     for (int m = 0; m < 2; m++) {
         const kdr_media media = m ? KDR_MEDIA_CBOR : KDR_MEDIA_JSON;
         fuzz_bundle(media, body, size);
         fuzz_shadow(media, body, size);
         fuzz_frustum(media, body, size);
+        fuzz_points(media, body, size);
     }
     fuzz_base64(body, size);
     fuzz_paths_agree(body, size);
-    if (size)
-        fuzz_metered(body, size, (size_t)data[size - 1] * 48);
+    if (size) fuzz_metered(body, size, (size_t)data[size - 1] * 48);
     free(body);
     return 0;
 }

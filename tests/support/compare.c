@@ -239,6 +239,11 @@ static cmp_class reason_at(const kdr_ray *r, const float *tri, double t) {
                : CMP_NCLASSES;
 }
 
+cmp_class cmp_hit_reason(const kdr_ray *ray, const float *tri, double t) {
+    const cmp_class c = reason_at(ray, tri, t);
+    return c == CMP_NCLASSES ? CMP_AGREE : c;
+}
+
 /* Embree hits tri, kd (and, to be sure, brute force) does not: the reason
  * class, or CMP_NCLASSES when unexplained. */
 static cmp_class explain_embree_only(const float *tris, size_t ntris,

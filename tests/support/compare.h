@@ -77,6 +77,14 @@ cmp_class cmp_occluded(const float *tris, size_t ntris, const kdr_ray *ray,
                        int kd_hit, int em_hit, const kdr_hit *kd_closest,
                        const kdr_hit *em_closest);
 
+/* Why a hit (or a miss) of triangle tri at distance t is decided by float
+ * rounding: the ray lies in its plane or it has zero area (CMP_PARALLEL),
+ * grazes an edge or vertex (CMP_BOUNDARY), or t is within rounding of an end
+ * of [tmin, tmax] (CMP_INTERVAL_END); CMP_AGREE when none of these holds
+ * (then two correct tests must agree on this triangle). Judges all-hits
+ * lists prim by prim. */
+cmp_class cmp_hit_reason(const kdr_ray *ray, const float *tri, double t);
+
 typedef struct cmp_tally {
     uint64_t rays;
     uint64_t n[CMP_NCLASSES];

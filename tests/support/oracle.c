@@ -7,6 +7,7 @@
  */
 #define _POSIX_C_SOURCE 200809L
 #include "oracle.h"
+#include "kd_traverse.h"
 
 #include <math.h>
 #include <stdatomic.h>
@@ -26,6 +27,7 @@ void oracle_opts_default(oracle_opts *opts) {
     opts->robust = 1;
     opts->quality = RTC_BUILD_QUALITY_HIGH;
     opts->device_config = NULL;
+    opts->context_filter = 0;
 }
 
 void oracle_opts_judge(oracle_opts *opts) {
@@ -98,8 +100,10 @@ oracle *oracle_create(const float *tris, size_t ntris, const oracle_opts *opts) 
     rtcSetDeviceErrorFunction(o->device, on_error, NULL);
     rtcSetDeviceMemoryMonitorFunction(o->device, on_memory, o);
     o->scene = rtcNewScene(o->device);
-    rtcSetSceneFlags(o->scene, opts->robust ? RTC_SCENE_FLAG_ROBUST
-                                            : RTC_SCENE_FLAG_NONE);
+    rtcSetSceneFlags(o->scene,
+                     (opts->robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE) |
+                         (opts->context_filter ? RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION
+                                               : RTC_SCENE_FLAG_NONE));
     rtcSetSceneBuildQuality(o->scene, opts->quality);
     if (ntris > 0 && attach_triangles(o, tris, ntris, opts->quality) != 0) {
         oracle_free(o);
@@ -193,4 +197,124 @@ int oracle_occluded1(const oracle *o, const kdr_ray *ray) {
     rtcOccluded1(o->scene, &ctx, &r);
     /* Embree marks an occluded ray by setting tfar to -inf */
     return r.tfar == -INFINITY;
+}
+
+/* ---- every hit along a ray ------------------------------------------------ */
+
+typedef struct all_ctx {
+    struct RTCIntersectContext ctx; /* first: Embree hands this pointer back */
+    kdr_hit *hits;
+    size_t n, cap;
+    int oom;
+} all_ctx;
+
+/* rtcIntersect1 calls filters with N == 1: ray and hit are then an RTCRay
+ * and an RTCHit (the RTCRayN/RTCHitN accessors are C++ only). */
+static void record_hit(const struct RTCFilterFunctionNArguments *args) {
+    all_ctx *c = (all_ctx *)args->context;
+    if (args->N != 1 || !args->valid[0])
+        return;
+    args->valid[0] = 0; /* reject: traversal goes on */
+    const struct RTCHit *hit = (const struct RTCHit *)args->hit;
+    const struct RTCRay *ray = (const struct RTCRay *)args->ray;
+    for (size_t i = 0; i < c->n; i++)
+        if (c->hits[i].prim == (int32_t)hit->primID)
+            return;
+    if (c->n == c->cap) {
+        const size_t cap = c->cap ? 2 * c->cap : 64;
+        kdr_hit *h = realloc(c->hits, cap * sizeof *h);
+        if (!h) {
+            c->oom = 1;
+            return;
+        }
+        c->hits = h;
+        c->cap = cap;
+    }
+    c->hits[c->n++] = (kdr_hit){ray->tfar, hit->u, hit->v, (int32_t)hit->primID};
+}
+
+static int hit_order(const void *a, const void *b) {
+    const kdr_hit *x = a, *y = b;
+    if (x->t != y->t)
+        return x->t < y->t ? -1 : 1;
+    return (x->prim > y->prim) - (x->prim < y->prim);
+}
+
+size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap) {
+    if (!ray_is_valid(ray))
+        return 0;
+    all_ctx c = {.hits = NULL};
+    rtcInitIntersectContext(&c.ctx);
+    c.ctx.filter = record_hit;
+    struct RTCRayHit rh;
+    to_rtc_ray(ray, &rh.ray);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(o->scene, &c.ctx, &rh);
+    if (c.n > 1)
+        qsort(c.hits, c.n, sizeof *c.hits, hit_order);
+    for (size_t i = 0; i < c.n && i < cap; i++)
+        out[i] = c.hits[i];
+    free(c.hits);
+    return c.oom ? 0 : c.n;
+}
+
+size_t oracle_all_requery(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap) {
+    size_t n = 0;
+    kdr_ray r = *ray;
+    while (n < cap && oracle_intersect1(o, &r, &out[n])) {
+        r.tmin = nextafterf(out[n].t, INFINITY);
+        n++;
+        if (!(r.tmin <= r.tmax))
+            break;
+    }
+    return n;
+}
+
+/* ---- closest point: rtcPointQuery with a closest-triangle callback ------- */
+
+typedef struct cp_user {
+    const float *tris;
+    const float *p;
+    double d2;
+    kdr_closest best;
+} cp_user;
+
+static bool closest_triangle(struct RTCPointQueryFunctionArguments *args) {
+    cp_user *u = args->userPtr;
+    const unsigned prim = args->primID;
+    const float *tri = u->tris + 9 * (size_t)prim;
+    if (kd_tri_degenerate(tri))
+        return false;
+    double q[3], bu, bv, d2;
+    kdr_point_triangle(u->p, tri, q, &bu, &bv, &d2);
+    if (!(d2 < u->d2 || (d2 == u->d2 && (int32_t)prim < u->best.prim)))
+        return false;
+    u->d2 = d2;
+    u->best.prim = (int32_t)prim;
+    u->best.u = (float)bu;
+    u->best.v = (float)bv;
+    for (int k = 0; k < 3; k++)
+        u->best.point[k] = (float)q[k];
+    const float r = (float)sqrt(d2);
+    /* the query sphere shrinks to the best distance (rounded up: a tie at
+     * exactly that distance must still be reported) */
+    args->query->radius = nextafterf(r, INFINITY);
+    return true;
+}
+
+int oracle_closest_point(const oracle *o, const float *tris, const float p[3],
+                         float max_distance, kdr_closest *out) {
+    cp_user u = {tris, p, (double)max_distance * max_distance, {{0, 0, 0}, -1, 0, 0, -1}};
+    if (u.d2 > 0 && isinf(max_distance))
+        u.d2 = INFINITY;
+    struct RTCPointQuery q = {p[0], p[1], p[2], 0.0f, max_distance};
+    struct RTCPointQueryContext ctx;
+    rtcInitPointQueryContext(&ctx);
+    rtcPointQuery(o->scene, &q, &ctx, closest_triangle, &u);
+    *out = u.best;
+    if (u.best.prim >= 0)
+        out->distance = (float)sqrt(u.d2);
+    return u.best.prim >= 0;
 }

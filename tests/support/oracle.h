@@ -25,9 +25,12 @@ typedef struct oracle_opts {
     int robust;               /* RTC_SCENE_FLAG_ROBUST */
     enum RTCBuildQuality quality;
     const char *device_config; /* rtcNewDevice config, e.g. "threads=1" */
+    int context_filter;       /* RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION: needed
+                                 by oracle_all_filter (oracle_all.c) */
 } oracle_opts;
 
-/* robust = 1, quality = HIGH, device_config = NULL (Embree's default). */
+/* robust = 1, quality = HIGH, device_config = NULL (Embree's default),
+ * context_filter = 0. */
 void oracle_opts_default(oracle_opts *opts);
 
 /* What the accuracy gates judge with: the defaults plus device_config
@@ -63,5 +66,29 @@ RTCScene oracle_rtc_scene(const oracle *o);
 int oracle_intersect1(const oracle *o, const kdr_ray *ray, kdr_hit *hit);
 /* Any hit in [tmin, tmax]. */
 int oracle_occluded1(const oracle *o, const kdr_ray *ray);
+
+/* ---- every hit along a ray, the two ways Embree users collect them
+ * (oracle_all.c) ---- */
+
+/* A context filter function that records each (t, primID, u, v) Embree
+ * reports and rejects it, so the traversal goes on to the end; hits of the
+ * same prim reported twice (a triangle in several BVH leaves, spatial
+ * splits) are kept once. Needs an oracle made with context_filter = 1.
+ * Writes the hits sorted by (t, prim) into out[0..cap) and returns how many
+ * there are in all (may exceed cap: only the first cap are written). */
+size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap);
+/* The re-query loop: closest hit, then again from just past it (tnear =
+ * the next float after t) until a miss or cap hits. Hits sharing a t with
+ * an earlier one (shared edges) are lost, as they are for users of this
+ * way. Returns the number written (<= cap). Any oracle. */
+size_t oracle_all_requery(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap);
+
+/* The closest point of the scene to p within max_distance, the way an
+ * Embree user gets it: rtcPointQuery with a callback that computes each
+ * candidate's distance (kdr_point_triangle, the core's double-precision
+ * distance, so answers compare bit for bit) and shrinks the query radius.
+ * tris: the triangles the oracle was built from. Returns 1 if found. */
+int oracle_closest_point(const oracle *o, const float *tris, const float p[3],
+                         float max_distance, kdr_closest *out);
 
 #endif /* KDRAY_TEST_ORACLE_H */

@@ -1,0 +1,345 @@
+/*
+ * bench_queries.c — the "queries" section (issue 15): every hit along a ray
+ * and hit counts, kdray against the two ways Embree users collect hits, in
+ * the same process and run, one thread, CPU time (bench.h's rules):
+ *  - capped lists (16 hits per ray): kdr_intersect_all1 against the
+ *    re-query loop on the rival's fast scene (closest hit, then again from
+ *    the next float past it; oracle_all_requery, which loses hits that
+ *    share a t, so it does less work than kdray's exact list);
+ *  - every hit (uncapped) and counts: kdr_intersect_all1 with cap 1024 and
+ *    kdr_count1 against a context filter that records every hit and
+ *    rejects it (oracle_all_filter) on the same fast HIGH-quality BVH with
+ *    the context-filter flag it needs.
+ *  - closest points: kdr_closest_point1 against rtcPointQuery with a
+ *    closest-triangle callback (oracle_closest_point: the core's double
+ *    distance, the query radius shrunk to each better distance) on the
+ *    rival's fast scene; points half on/near the surfaces (offset up to
+ *    1e-3 of the diagonal), half uniform in the box. Check: the same
+ *    distance for every point, bit for bit.
+ *  - occupancy: kdr_occupancy1 against the same 9-ray vote with the
+ *    collecting filter (points uniform in the box; answers compared and
+ *    the number differing printed: the two triangle tests may disagree on
+ *    rays through shared edges, which the vote is there to outvote).
+ *    Correctness against the winding number is tests/test_occupancy.c's.
+ * Workloads: "camera" (primary rays from outside through the scene: many
+ * surfaces per ray) and "random" (origins in the box). Checks: kdray's hit
+ * total equals the filter's within 0.1% (they differ only on rounding
+ * cases), and the re-query loop's is no larger than kdray's capped one.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bench.h"
+#include "oracle.h"
+#include "rival.h"
+
+#define CAPPED 16u
+
+typedef struct q_ctx {
+    const bench_scene *s;
+    const bench_workload *w;
+    const oracle *fast, *filter;
+    kdr_hit *buf;
+    uint64_t hits; /* the last pass's total */
+} q_ctx;
+
+static void kd_capped(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++) {
+        uint32_t n = 0;
+        kdr_intersect_all1(c->s->kd, &c->w->rays[i], CAPPED, c->buf, &n, NULL);
+        h += n;
+    }
+    c->hits = h;
+}
+
+static void kd_every(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++) {
+        uint32_t n = 0;
+        kdr_intersect_all1(c->s->kd, &c->w->rays[i], KDR_MAX_HITS_LIMIT, c->buf, &n,
+                           NULL);
+        h += n;
+    }
+    c->hits = h;
+}
+
+static void kd_count(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++) {
+        uint32_t n = 0;
+        kdr_count1(c->s->kd, &c->w->rays[i], &n, NULL);
+        h += n;
+    }
+    c->hits = h;
+}
+
+static void emb_requery(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++)
+        h += oracle_all_requery(c->fast, &c->w->rays[i], c->buf, CAPPED);
+    c->hits = h;
+}
+
+static void emb_filter(void *p) {
+    q_ctx *c = p;
+    uint64_t h = 0;
+    for (size_t i = 0; i < c->w->n; i++)
+        h += oracle_all_filter(c->filter, &c->w->rays[i], c->buf, KDR_MAX_HITS_LIMIT);
+    c->hits = h;
+}
+
+typedef struct cp_ctx {
+    const bench_scene *s;
+    const oracle *fast;
+    const float *pts;
+    size_t n;
+    float *dist; /* per point, the last pass */
+} cp_ctx;
+
+static void kd_closest(void *p) {
+    cp_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++) {
+        kdr_closest r;
+        kdr_closest_point1(c->s->kd, c->pts + 3 * i, INFINITY, &r, NULL);
+        c->dist[i] = r.distance;
+    }
+}
+
+static void emb_closest(void *p) {
+    cp_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++) {
+        kdr_closest r;
+        oracle_closest_point(c->fast, c->s->tris, c->pts + 3 * i, INFINITY, &r);
+        c->dist[i] = r.distance;
+    }
+}
+
+static int closest_run(const bench_scene *s, const bench_opts *o) {
+    const size_t n = o->rays / 4 ? o->rays / 4 : 1;
+    float *pts = malloc(3 * n * sizeof *pts), *d0 = malloc(n * sizeof *d0),
+          *d1 = malloc(n * sizeof *d1);
+    if (!pts || !d0 || !d1) {
+        free(pts), free(d0), free(d1);
+        return -1;
+    }
+    kdr_bounds bb;
+    kdr_scene_bounds(s->kd, &bb);
+    const float diag = kdr_scene_diagonal(s->kd);
+    uint64_t x = 0x9e3779b97f4a7c15ull;
+    for (size_t i = 0; i < n; i++) {
+        float r[6];
+        for (int k = 0; k < 6; k++) {
+            x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+            r[k] = (float)(x >> 40) / 16777216.0f;
+        }
+        float *p = pts + 3 * i;
+        if (i % 2) {
+            for (int k = 0; k < 3; k++)
+                p[k] = bb.min[k] + (bb.max[k] - bb.min[k]) * r[k];
+            continue;
+        }
+        const float *t = s->tris + 9 * (size_t)(x % s->ntris);
+        float a = r[0], b = r[1];
+        if (a + b > 1) a = 1 - a, b = 1 - b;
+        for (int k = 0; k < 3; k++)
+            p[k] = (1 - a - b) * t[k] + a * t[3 + k] + b * t[6 + k] +
+                   1e-3f * diag * (r[3 + k] - 0.5f);
+    }
+    cp_ctx c0 = {s, rival_oracle(s->emb), pts, n, d0}, c1 = c0;
+    c1.dist = d1;
+    bench_method m[2] = {{"kd_closest", 0, NULL, kd_closest, &c0, 0},
+                         {"embree_point_query", BENCH_RIVAL, NULL, emb_closest, &c1, 0}};
+    bench_measure(m, 2, o->repeat, 200.0);
+    bench_summary_add(s, "closest_point", m[0].name, n, m[0].best_ms, -1.0);
+    bench_summary_add(s, "closest_point", m[1].name, n, m[1].best_ms, -1.0);
+    size_t differ = 0;
+    for (size_t i = 0; i < n; i++)
+        differ += d0[i] != d1[i];
+    printf("closest  %zu points: kd %.1f ms, rtcPointQuery %.1f ms (kd %.2fx), distances "
+           "differing: %zu\n",
+           n, m[0].best_ms, m[1].best_ms, m[1].best_ms / m[0].best_ms, differ);
+    if (differ)
+        bench_fail("%s: %zu closest-point distances differ from rtcPointQuery's", s->name,
+                   differ);
+    free(pts), free(d0), free(d1);
+    return 0;
+}
+
+/* ---- occupancy: kdr_occupancy1 against the same vote with Embree's
+ * collecting filter (9 rays, parity of each ray's hit count, majority) ---- */
+
+typedef struct occ_ctx {
+    const bench_scene *s;
+    const oracle *filter;
+    const float *pts;
+    size_t n;
+    uint8_t *inside;
+    kdr_hit *buf;
+} occ_ctx;
+
+static void kd_occ(void *p) {
+    occ_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++)
+        kdr_occupancy1(c->s->kd, c->pts + 3 * i, &c->inside[i], NULL, NULL);
+}
+
+static void emb_occ(void *p) {
+    occ_ctx *c = p;
+    for (size_t i = 0; i < c->n; i++) {
+        int odd = 0;
+        for (int r = 0; r < KDR_OCCUPANCY_RAYS; r++) {
+            kdr_ray ray = {{c->pts[3 * i], c->pts[3 * i + 1], c->pts[3 * i + 2]},
+                           {0, 0, 0},
+                           0.0f,
+                           INFINITY};
+            kdr_occupancy_direction(r, ray.dir);
+            odd +=
+                (int)(oracle_all_filter(c->filter, &ray, c->buf, KDR_MAX_HITS_LIMIT) & 1);
+        }
+        c->inside[i] = 2 * odd > KDR_OCCUPANCY_RAYS;
+    }
+}
+
+static int occupancy_run(const bench_scene *s, const bench_opts *o, const oracle *filter,
+                         kdr_hit *buf) {
+    const size_t n = o->rays / 16 ? o->rays / 16 : 1;
+    float *pts = malloc(3 * n * sizeof *pts);
+    uint8_t *a = malloc(n), *b = malloc(n);
+    if (!pts || !a || !b) {
+        free(pts), free(a), free(b);
+        return -1;
+    }
+    kdr_bounds bb;
+    kdr_scene_bounds(s->kd, &bb);
+    uint64_t x = 0x2545f4914f6cdd1dull;
+    for (size_t i = 0; i < 3 * n; i++) {
+        x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+        const int k = (int)(i % 3);
+        pts[i] = bb.min[k] + (bb.max[k] - bb.min[k]) * ((float)(x >> 40) / 16777216.0f);
+    }
+    occ_ctx c0 = {s, filter, pts, n, a, buf}, c1 = c0;
+    c1.inside = b;
+    bench_method m[2] = {{"kd_occupancy", 0, NULL, kd_occ, &c0, 0},
+                         {"embree_filter_occupancy", BENCH_RIVAL, NULL, emb_occ, &c1, 0}};
+    bench_measure(m, 2, o->repeat, 200.0);
+    bench_summary_add(s, "occupancy", m[0].name, n, m[0].best_ms, -1.0);
+    bench_summary_add(s, "occupancy", m[1].name, n, m[1].best_ms, -1.0);
+    size_t differ = 0, inside = 0;
+    for (size_t i = 0; i < n; i++) {
+        differ += a[i] != b[i];
+        inside += a[i];
+    }
+    printf(
+        "occupancy %zu points (%zu inside): kd %.1f ms, Embree filter vote %.1f ms (kd "
+        "%.2fx), answers differing: %zu\n",
+        n, inside, m[0].best_ms, m[1].best_ms, m[1].best_ms / m[0].best_ms, differ);
+    free(pts), free(a), free(b);
+    return 0;
+}
+
+static const char *const q_workloads[] = {"camera", "random"};
+#define NWORK (sizeof q_workloads / sizeof *q_workloads)
+#define MAX_SCENES 32
+static char g_scene[MAX_SCENES][64];
+static int g_nscenes;
+
+static int queries_run(const bench_scene *s, const bench_opts *o) {
+    rival *filt = rival_create_filter(s->tris, s->ntris, RIVAL_QUALITY);
+    kdr_hit *buf = malloc(KDR_MAX_HITS_LIMIT * sizeof *buf);
+    if (!filt || !buf) {
+        rival_free(filt);
+        free(buf);
+        return -1;
+    }
+    if (g_nscenes < MAX_SCENES)
+        snprintf(g_scene[g_nscenes++], sizeof g_scene[0], "%s", s->name);
+    printf("\n== %s: %zu triangles, all hits and counts (CPU ms, best of %d)\n", s->name,
+           s->ntris, o->repeat);
+    int rc = 0;
+    for (size_t k = 0; k < NWORK && rc == 0; k++) {
+        bench_workload w;
+        if (bench_workload_make(&w, s->kd, q_workloads[k], o->rays) != 0) {
+            rc = -1;
+            break;
+        }
+        q_ctx ctx[5];
+        for (int m = 0; m < 5; m++)
+            ctx[m] = (q_ctx){s, &w, rival_oracle(s->emb), rival_oracle(filt), buf, 0};
+        bench_method m[5] = {
+            {"kd_all16", 0, NULL, kd_capped, &ctx[0], 0},
+            {"embree_requery16", BENCH_RIVAL, NULL, emb_requery, &ctx[1], 0},
+            {"kd_all", 0, NULL, kd_every, &ctx[2], 0},
+            {"kd_count", 0, NULL, kd_count, &ctx[3], 0},
+            {"embree_filter_all", BENCH_RIVAL, NULL, emb_filter, &ctx[4], 0},
+        };
+        bench_measure(m, 5, o->repeat, 200.0);
+        char wk[64];
+        for (int i = 0; i < 5; i++) {
+            const int capped = i < 2;
+            snprintf(wk, sizeof wk, "%s_%s", capped ? "all16" : "all", q_workloads[k]);
+            bench_summary_add(s, wk, m[i].name, w.n, m[i].best_ms, -1.0);
+        }
+        printf("%-8s hits: kd_all16 %llu, requery16 %llu, kd_all %llu, kd_count %llu, "
+               "filter %llu\n",
+               q_workloads[k], (unsigned long long)ctx[0].hits,
+               (unsigned long long)ctx[1].hits, (unsigned long long)ctx[2].hits,
+               (unsigned long long)ctx[3].hits, (unsigned long long)ctx[4].hits);
+        printf("%-8s ms:   kd_all16 %.1f, requery16 %.1f (kd %.2fx) | kd_all %.1f, "
+               "kd_count %.1f, filter %.1f (kd_all %.2fx, kd_count %.2fx)\n",
+               q_workloads[k], m[0].best_ms, m[1].best_ms, m[1].best_ms / m[0].best_ms,
+               m[2].best_ms, m[3].best_ms, m[4].best_ms, m[4].best_ms / m[2].best_ms,
+               m[4].best_ms / m[3].best_ms);
+        const double d = fabs((double)ctx[2].hits - (double)ctx[4].hits);
+        if (ctx[2].hits != ctx[3].hits || d > 0.001 * (double)ctx[4].hits + 2)
+            bench_fail("%s %s: kd_all %llu / kd_count %llu hits vs the filter's %llu",
+                       s->name, q_workloads[k], (unsigned long long)ctx[2].hits,
+                       (unsigned long long)ctx[3].hits, (unsigned long long)ctx[4].hits);
+        if (ctx[1].hits > ctx[0].hits)
+            bench_fail(
+                "%s %s: the re-query loop found more hits (%llu) than kd_all16 (%llu)",
+                s->name, q_workloads[k], (unsigned long long)ctx[1].hits,
+                (unsigned long long)ctx[0].hits);
+        bench_workload_free(&w);
+    }
+    if (rc == 0) rc = occupancy_run(s, o, rival_oracle(filt), buf);
+    rival_free(filt);
+    free(buf);
+    if (rc == 0) rc = closest_run(s, o);
+    return rc;
+}
+
+static void queries_finish(const bench_opts *o) {
+    (void)o;
+    printf("\n== all hits: Embree ms / kdray ms (> 1: kdray faster)\n");
+    printf("%-10s | %-22s | %-22s | %-22s | %-22s | %-22s | %-22s\n", "scene",
+           "all16 camera (requery)", "all16 random (requery)", "all camera (filter)",
+           "all random (filter)", "closest (point query)", "occupancy (filter)");
+    for (int i = 0; i < g_nscenes; i++) {
+        printf("%-10s", g_scene[i]);
+        static const char *const rows[6][3] = {
+            {"all16_camera", "kd_all16", "embree_requery16"},
+            {"all16_random", "kd_all16", "embree_requery16"},
+            {"all_camera", "kd_all", "embree_filter_all"},
+            {"all_random", "kd_all", "embree_filter_all"},
+            {"closest_point", "kd_closest", "embree_point_query"},
+            {"occupancy", "kd_occupancy", "embree_filter_occupancy"}};
+        for (int r = 0; r < 6; r++) {
+            const double kd = bench_summary_ms(g_scene[i], rows[r][0], rows[r][1]);
+            const double em = bench_summary_ms(g_scene[i], rows[r][0], rows[r][2]);
+            if (kd > 0 && em > 0)
+                printf(" | %22.2f", em / kd);
+            else
+                printf(" | %22s", "-");
+        }
+        printf("\n");
+    }
+}
+
+const bench_section bench_queries_section = {"queries", queries_run, queries_finish};

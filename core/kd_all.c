@@ -1,0 +1,348 @@
+/*
+ * kd_all.c — every hit along a ray ("all", capped at max_hits, in (t, prim)
+ * order) and the number of hits ("count", no cap), one ray at a time.
+ *
+ * What a hit is: triangle prim is hit by the ray when kd_tri_intersect
+ * (core/kd_tri.h, the test every other traversal uses) accepts it with
+ * tmin <= t <= tmax. Nothing else is merged or filtered: a ray through an
+ * edge shared by two triangles is accepted by the watertight test for both
+ * (edges count as inside), so it gives two hits at the same t; a ray through
+ * a vertex shared by k triangles gives up to k hits; coincident triangles
+ * each give a hit. Each triangle counts once, however many leaves reference
+ * it: its test result depends only on the ray and the triangle, so the
+ * copies found in other leaves are identical and are dropped.
+ *
+ * The walk is the single-ray walk's (kd_traverse_single.c) front-to-back
+ * descent with the split convention and slack of kd_traverse.h, written
+ * with the scalar forms of the ray set-up (kd_clip_root_slack), which that
+ * file documents as the definition. Leaves test every reference over
+ * [tmin, bound]: bound is tmax until max_hits hits are held, then the
+ * max_hits-th t (a hit at that t with a smaller prim can still replace the
+ * last one). A pending subtree is skipped once it starts past
+ * kd_term_bound(bound), as for closest hits, so a capped walk stops early
+ * and its answer is the first max_hits hits of the uncapped one.
+ *
+ * "count" keeps every accepted prim (duplicates included) in a buffer that
+ * starts on the stack and moves to the heap past KD_COUNT_STACK entries,
+ * then sorts and counts distinct prims.
+ */
+#include <stdlib.h>
+#include <string.h>
+
+#include "kd_internal.h"
+#include "kd_traverse.h"
+#include "kd_tri.h"
+#include "kd_tri_ntri.h"
+
+#define KD_COUNT_STACK 256
+
+typedef struct all_todo {
+    const kd_node *node;
+    float tn, tf;
+} all_todo;
+
+/* Where accepted hits go: a sorted, prim-unique list of at most cap hits
+ * (all), or a growing list of prims (count). */
+typedef struct all_sink {
+    kdr_hit *hits; /* all: sorted by (t, prim) */
+    uint32_t cap, n;
+    uint32_t *prims; /* count */
+    size_t np, pcap;
+    int heap, oom;
+    float bound; /* triangle tests use [tmin, bound] */
+    uint64_t nodes, tests;
+} all_sink;
+
+/* all: inserts (t, prim) unless it is already held or cannot be among the
+ * first cap hits. */
+static void keep_all(all_sink *s, float t, int32_t prim, float u, float v) {
+    if (s->n == s->cap &&
+        !kd_hit_better(t, prim, s->hits[s->n - 1].t, s->hits[s->n - 1].prim))
+        return;
+    /* first position whose (t, prim) is not better than the new one */
+    uint32_t lo = 0, hi = s->n;
+    while (lo < hi) {
+        const uint32_t mid = lo + (hi - lo) / 2;
+        if (kd_hit_better(s->hits[mid].t, s->hits[mid].prim, t, prim))
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (lo < s->n && s->hits[lo].prim == prim)
+        return; /* the same triangle, found again in another leaf */
+    const uint32_t keep = s->n < s->cap ? s->n : s->cap - 1;
+    memmove(s->hits + lo + 1, s->hits + lo, (keep - lo) * sizeof *s->hits);
+    s->hits[lo] = (kdr_hit){t, u, v, prim};
+    s->n = keep + 1;
+    if (s->n == s->cap) s->bound = s->hits[s->n - 1].t;
+}
+
+/* count: appends prim, growing the buffer (first move: off the stack). */
+static void keep_prim(all_sink *s, int32_t prim) {
+    if (s->np == s->pcap) {
+        const size_t cap = 2 * s->pcap;
+        uint32_t *p =
+            s->heap ? realloc(s->prims, cap * sizeof *p) : malloc(cap * sizeof *p);
+        if (!p) {
+            s->oom = 1;
+            return;
+        }
+        if (!s->heap) memcpy(p, s->prims, s->np * sizeof *p);
+        s->prims = p;
+        s->pcap = cap;
+        s->heap = 1;
+    }
+    s->prims[s->np++] = (uint32_t)prim;
+}
+
+/* One accepted hit into the sink. */
+static inline void keep(all_sink *s, float t, int32_t prim, float u, float v) {
+    if (s->hits)
+        keep_all(s, t, prim, u, v);
+    else
+        keep_prim(s, prim);
+}
+
+/* Four references at once (the last group repeats its final reference: a
+ * hit found twice is kept once); the same float operations as
+ * kd_tri_intersect, so t, u, v are bit for bit the scalar ones. */
+static void test_group4(const kdr_scene *sc, const uint32_t *ref, uint32_t left,
+                        const kd_ntri_pre4 *pre4, float tmin, all_sink *s) {
+    const float *rows[4];
+    int32_t prims[4];
+    for (uint32_t j = 0; j < 4; j++) {
+        prims[j] = (int32_t)ref[j < left ? j : left - 1];
+        rows[j] = sc->tris + 9 * (size_t)prims[j];
+    }
+    f4 t, V, W, det;
+    const int hits =
+        kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(s->bound), &t, &V, &W, &det);
+    if (!hits) return;
+    _Alignas(16) float tv[4], vv[4], wv[4], dv[4];
+    f4_store(tv, t);
+    f4_store(vv, V);
+    f4_store(wv, W);
+    f4_store(dv, det);
+    for (int j = 0; j < 4; j++)
+        if ((hits >> j) & 1 && tv[j] <= s->bound)
+            keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+}
+
+/* Eight at a time (AVX2); the last group is the last eight references. Not
+ * inlined: the caller is not compiled for AVX2. */
+KD_AVX2 __attribute__((noinline)) static void
+test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
+           const kd_ray_pre *pre, float tmin, all_sink *s) {
+    kd_ntri_pre8 pre8;
+    kd_ntri_pre_init8(pre, &pre8);
+    const f8 tmin8 = f8_set1(tmin);
+    for (uint32_t i = 0; i < count && !s->oom; i += 8) {
+        const uint32_t base = i + 8 <= count ? i : count - 8;
+        const float *rows[8];
+        for (int j = 0; j < 8; j++)
+            rows[j] = sc->tris + 9 * (size_t)ref[base + j];
+        f8 t, V, W, det;
+        const int hits =
+            kd_ntri_test8(&pre8, rows, tmin8, f8_set1(s->bound), &t, &V, &W, &det);
+        if (!hits) continue;
+        _Alignas(32) float tv[8], vv[8], wv[8], dv[8];
+        f8_store(tv, t);
+        f8_store(vv, V);
+        f8_store(wv, W);
+        f8_store(dv, det);
+        for (int j = 0; j < 8; j++)
+            if ((hits >> j) & 1 && tv[j] <= s->bound)
+                keep(s, tv[j], (int32_t)ref[base + j], vv[j] / dv[j], wv[j] / dv[j]);
+    }
+}
+
+/* Every reference of leaf n over [tmin, bound]; leaves of at least
+ * KD_LEAF_AVX2_MIN / KD_LEAF_SIMD_MIN references eight / four at a time,
+ * as the single-ray walk does. */
+static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *pre,
+                      const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s) {
+    const uint32_t *ref = sc->refs + n->u.first;
+    const uint32_t count = kd_count(n);
+    s->tests += count;
+    if (sc->prefetch_leaves) kd_prefetch_tris(sc, ref, count);
+    if (avx2 && count >= KD_LEAF_AVX2_MIN) {
+        test_leaf8(sc, ref, count, pre, tmin, s);
+        return;
+    }
+    if (count >= KD_LEAF_SIMD_MIN) {
+        for (uint32_t i = 0; i < count && !s->oom; i += 4)
+            test_group4(sc, ref + i, count - i, pre4, tmin, s);
+        return;
+    }
+    for (uint32_t i = 0; i < count && !s->oom; i++) {
+        float t, u, v;
+        const int32_t prim = (int32_t)ref[i];
+        if (kd_tri_intersect(pre, sc->tris + 9 * (size_t)prim, tmin, s->bound, &t, &u,
+                             &v))
+            keep(s, t, prim, u, v);
+    }
+}
+
+/* The front-to-back walk over every leaf the ray passes (within the slack)
+ * that can still hold a hit at or before the bound. */
+static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
+    if (!sc || !sc->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax)) return;
+    float inv[3], ss[3], tn, tf;
+    for (int k = 0; k < 3; k++)
+        inv[k] = 1.0f / r->dir[k];
+    const float slack = kd_ray_slack(sc, r->org);
+    kd_signed_slack(slack, inv, ss);
+    if (!kd_clip_root_slack(sc, r->org, r->dir, inv, slack, r->tmin, r->tmax, &tn, &tf))
+        return;
+    kd_ray_pre pre;
+    kd_ray_precompute(r->org, r->dir, &pre);
+    kd_ntri_pre4 pre4;
+    kd_ntri_pre_init4(&pre, &pre4);
+    const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
+    all_todo stack[KD_MAX_DEPTH];
+    int sp = 0;
+    const kd_node *nodes = sc->nodes, *n = nodes;
+    for (;;) {
+        while (n && !kd_is_leaf(n)) {
+            s->nodes++;
+            const int axis = kd_axis(n);
+            const float a = n->u.split - r->org[axis];
+            const float t_lo = (a - ss[axis]) * inv[axis];
+            const float t_hi = (a + ss[axis]) * inv[axis];
+            const int neg = signbit(inv[axis]) ? 1 : 0;
+            const kd_node *below = n + 1, *above = nodes + kd_above(n);
+            const kd_node *nearc = neg ? above : below, *farc = neg ? below : above;
+            const int near_empty = neg ? kd_above_empty(n) : kd_below_empty(n);
+            const int far_empty = neg ? kd_below_empty(n) : kd_above_empty(n);
+            if (t_lo > tf) {
+                n = near_empty ? NULL : nearc;
+            } else if (t_hi < tn) {
+                n = far_empty ? NULL : farc;
+            } else if (far_empty) { /* both sides, or a NaN: the near one */
+                n = nearc;
+                tf = t_hi < tf ? t_hi : tf;
+            } else if (near_empty) {
+                n = farc;
+                tn = t_lo > tn ? t_lo : tn;
+            } else {
+                stack[sp].node = farc;
+                stack[sp].tn = t_lo > tn ? t_lo : tn;
+                stack[sp].tf = tf;
+                ++sp;
+                n = nearc;
+                tf = t_hi < tf ? t_hi : tf;
+            }
+        }
+        if (n) {
+            s->nodes++;
+            test_leaf(sc, n, &pre, &pre4, avx2, r->tmin, s);
+            if (s->oom) return;
+        }
+        const float bound = kd_term_bound(s->bound);
+        do {
+            if (sp == 0) return;
+            --sp;
+        } while (!(stack[sp].tn <= bound));
+        n = stack[sp].node;
+        tn = stack[sp].tn;
+        tf = stack[sp].tf;
+    }
+}
+
+static void add_stats(kdr_trav_stats *st, const all_sink *s) {
+    if (!st) return;
+    st->rays++;
+    st->nodes_visited += s->nodes;
+    st->tri_tests += s->tests;
+}
+
+int kdr_intersect_all1(const kdr_scene *scene, const kdr_ray *ray, uint32_t max_hits,
+                       kdr_hit *hits, uint32_t *nhits, kdr_trav_stats *stats) {
+    if (nhits) *nhits = 0;
+    if (!scene || !ray || !hits || !nhits || max_hits == 0 ||
+        max_hits > KDR_MAX_HITS_LIMIT)
+        return KDR_EINVAL;
+    all_sink s = {.hits = hits, .cap = max_hits, .bound = ray->tmax};
+    walk(scene, ray, &s);
+    add_stats(stats, &s);
+    *nhits = s.n;
+    return KDR_OK;
+}
+
+static int cmp_u32(const void *a, const void *b) {
+    const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return (x > y) - (x < y);
+}
+
+int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
+               kdr_trav_stats *stats) {
+    if (count) *count = 0;
+    if (!scene || !ray || !count) return KDR_EINVAL;
+    uint32_t local[KD_COUNT_STACK];
+    all_sink s = {.prims = local, .pcap = KD_COUNT_STACK, .bound = ray->tmax};
+    walk(scene, ray, &s);
+    add_stats(stats, &s);
+    if (!s.oom && s.np > 1) qsort(s.prims, s.np, sizeof *s.prims, cmp_u32);
+    uint32_t distinct = 0;
+    for (size_t i = 0; i < s.np; i++)
+        distinct += i == 0 || s.prims[i] != s.prims[i - 1];
+    if (s.heap) free(s.prims);
+    if (s.oom) return KDR_ENOMEM;
+    *count = distinct;
+    return KDR_OK;
+}
+
+/* The ray i of a batch (kd_batch.c reads batches the same way). */
+static void batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
+    const float *o = b->org + (b->org_stride ? 3 * i : 0);
+    for (int k = 0; k < 3; k++) {
+        r->org[k] = o[k];
+        r->dir[k] = b->dir[3 * i + k];
+    }
+    r->tmin = b->tmin ? b->tmin[b->tmin_stride ? i : 0] : 0.0f;
+    r->tmax = b->tmax ? b->tmax[b->tmax_stride ? i : 0] : INFINITY;
+}
+
+static int batch_ok(const kdr_ray_batch *b, size_t first, size_t count) {
+    if (!b || !b->org || !b->dir) return 0;
+    if (b->org_stride != 0 && b->org_stride != 3) return 0;
+    if ((b->tmin && b->tmin_stride > 1) || (b->tmax && b->tmax_stride > 1)) return 0;
+    return first <= b->n && count <= b->n - first;
+}
+
+int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                  size_t count, uint32_t max_hits, kdr_all_hits *out,
+                  kdr_trav_stats *stats) {
+    if (!scene || !batch_ok(batch, first, count) || !out || !out->nhits || !out->t ||
+        !out->prim || !out->u || !out->v || max_hits == 0 ||
+        max_hits > KDR_MAX_HITS_LIMIT)
+        return KDR_EINVAL;
+    kdr_hit buf[KDR_MAX_HITS_LIMIT];
+    for (size_t i = first; i < first + count; i++) {
+        kdr_ray r;
+        uint32_t nh = 0;
+        batch_ray(batch, i, &r);
+        kdr_intersect_all1(scene, &r, max_hits, buf, &nh, stats);
+        out->nhits[i] = nh;
+        const size_t base = i * (size_t)max_hits;
+        for (uint32_t k = 0; k < nh; k++) {
+            out->t[base + k] = buf[k].t;
+            out->prim[base + k] = buf[k].prim;
+            out->u[base + k] = buf[k].u;
+            out->v[base + k] = buf[k].v;
+        }
+    }
+    return KDR_OK;
+}
+
+int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                    size_t count, uint32_t *counts, kdr_trav_stats *stats) {
+    if (!scene || !batch_ok(batch, first, count) || !counts) return KDR_EINVAL;
+    for (size_t i = first; i < first + count; i++) {
+        kdr_ray r;
+        batch_ray(batch, i, &r);
+        const int rc = kdr_count1(scene, &r, &counts[i], stats);
+        if (rc != KDR_OK) return rc;
+    }
+    return KDR_OK;
+}

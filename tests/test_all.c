@@ -1,0 +1,329 @@
+/*
+ * test_all.c — all hits (kdr_intersect_all1, kdr_all_batch) and hit counts
+ * (kdr_count1, kdr_count_batch) against brute force and against Embree, on
+ * the stress corpus (tests/support/stress.h: mixed adversarial rays plus
+ * rays from inside the closed meshes) and on the bundled default scene.
+ *
+ * Per ray:
+ *  - brute force: every non-degenerate triangle through kd_tri_intersect
+ *    over [tmin, tmax], sorted by (t, prim). The kd list (cap 1024) must be
+ *    sorted, prim-unique, and every entry must equal brute force's entry of
+ *    that prim bit for bit; a brute-force hit the kd walk does not find is
+ *    allowed only where cmp_hit_reason proves it a rounding case (the single
+ *    walk's known cases, docs/ACCURACY.md), and is counted;
+ *  - capped lists (1, 2, 3, 16) are the uncapped list's prefix, bit for bit;
+ *    cap 1 is kdr_intersect1's hit; kdr_count1 is the uncapped length;
+ *  - Embree (robust, a context filter that collects every hit): every prim
+ *    on one list and not the other must be a proven rounding case.
+ * Exit 1 on any unexplained difference.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "compare.h"
+#include "kd_traverse.h"
+#include "kd_tri.h"
+#include "kdray.h"
+#include "oracle.h"
+#include "stress.h"
+#ifdef KDRAY_HAVE_GLTF
+#include "kdr_gltf.h"
+#endif
+
+#define SEED 20261201u
+#define CAP KDR_MAX_HITS_LIMIT
+
+typedef struct tally {
+    unsigned long rays, hits, brute_only_explained, embree_explained, bad;
+} tally;
+
+static int g_printed;
+
+static void bad(tally *t, const char *what, const kdr_ray *r) {
+    t->bad++;
+    if (g_printed++ < 10)
+        fprintf(stderr, "  UNEXPLAINED %s: org %a %a %a dir %a %a %a [%a, %a]\n", what,
+                r->org[0], r->org[1], r->org[2], r->dir[0], r->dir[1], r->dir[2], r->tmin,
+                r->tmax);
+}
+
+static int by_t_prim(const void *a, const void *b) {
+    const kdr_hit *x = a, *y = b;
+    if (x->t != y->t) return x->t < y->t ? -1 : 1;
+    return (x->prim > y->prim) - (x->prim < y->prim);
+}
+
+/* Every hit by brute force, sorted; returns the count (<= cap written). */
+static size_t brute_all(const float *tris, size_t ntris, const kdr_ray *r, kdr_hit *out,
+                        size_t cap) {
+    if (!kd_ray_valid(r->org, r->dir, r->tmin, r->tmax)) return 0;
+    kd_ray_pre pre;
+    kd_ray_precompute(r->org, r->dir, &pre);
+    size_t n = 0;
+    for (size_t p = 0; p < ntris; p++) {
+        const float *tri = tris + 9 * p;
+        float t, u, v;
+        if (kd_tri_degenerate(tri) ||
+            !kd_tri_intersect(&pre, tri, r->tmin, r->tmax, &t, &u, &v))
+            continue;
+        if (n < cap) out[n] = (kdr_hit){t, u, v, (int32_t)p};
+        n++;
+    }
+    qsort(out, n < cap ? n : cap, sizeof *out, by_t_prim);
+    return n;
+}
+
+static int same_hit(const kdr_hit *a, const kdr_hit *b) {
+    return memcmp(a, b, sizeof *a) == 0;
+}
+
+static const kdr_hit *find_prim(const kdr_hit *h, size_t n, int32_t prim) {
+    for (size_t i = 0; i < n; i++)
+        if (h[i].prim == prim) return &h[i];
+    return NULL;
+}
+
+static void check_ray(const kdr_scene *sc, const oracle *o, const float *tris,
+                      size_t ntris, const kdr_ray *r, tally *t) {
+    static kdr_hit kd[CAP], br[CAP], em[CAP], capped[16];
+    t->rays++;
+    uint32_t nk = 0;
+    if (kdr_intersect_all1(sc, r, CAP, kd, &nk, NULL) != KDR_OK) {
+        bad(t, "kdr_intersect_all1 failed", r);
+        return;
+    }
+    t->hits += nk;
+    for (uint32_t i = 1; i < nk; i++)
+        if (!(kd[i - 1].t < kd[i].t ||
+              (kd[i - 1].t == kd[i].t && kd[i - 1].prim < kd[i].prim)))
+            bad(t, "list not in (t, prim) order or a prim twice", r);
+    const size_t nb = brute_all(tris, ntris, r, br, CAP);
+    if (nb > CAP || nk == CAP) {
+        fprintf(stderr, "  a ray with >= %u hits: raise CAP\n", CAP);
+        t->bad++;
+        return;
+    }
+    for (uint32_t i = 0; i < nk; i++) {
+        const kdr_hit *b = find_prim(br, nb, kd[i].prim);
+        if (!b || !same_hit(b, &kd[i]))
+            bad(t, "kd hit that brute force does not give bit for bit", r);
+    }
+    for (size_t i = 0; i < nb; i++)
+        if (!find_prim(kd, nk, br[i].prim)) {
+            if (cmp_hit_reason(r, tris + 9 * (size_t)br[i].prim, br[i].t) == CMP_AGREE)
+                bad(t, "brute-force hit the kd walk misses", r);
+            else
+                t->brute_only_explained++;
+        }
+    /* capped lists: the prefix, bit for bit */
+    static const uint32_t caps[] = {1, 2, 3, 16};
+    for (size_t c = 0; c < sizeof caps / sizeof caps[0]; c++) {
+        uint32_t nc = 0;
+        kdr_intersect_all1(sc, r, caps[c], capped, &nc, NULL);
+        if (nc != (nk < caps[c] ? nk : caps[c]) ||
+            memcmp(capped, kd, nc * sizeof *kd) != 0)
+            bad(t, "capped list is not the prefix", r);
+    }
+    kdr_hit first;
+    kdr_intersect1(sc, r, &first, NULL);
+    if (nk ? !same_hit(&first, &kd[0]) : first.prim >= 0)
+        bad(t, "first of all hits is not kdr_intersect1's hit", r);
+    uint32_t cnt = 0;
+    if (kdr_count1(sc, r, &cnt, NULL) != KDR_OK || cnt != nk)
+        bad(t, "kdr_count1 differs from the list's length", r);
+    /* Embree: the prims on one list only must be rounding cases */
+    const size_t ne = oracle_all_filter(o, r, em, CAP);
+    for (size_t i = 0; i < ne && i < CAP; i++)
+        if (!find_prim(kd, nk, em[i].prim)) {
+            if (cmp_hit_reason(r, tris + 9 * (size_t)em[i].prim, em[i].t) == CMP_AGREE)
+                bad(t, "Embree hit that kd does not report", r);
+            else
+                t->embree_explained++;
+        }
+    for (uint32_t i = 0; i < nk; i++)
+        if (!find_prim(em, ne < CAP ? ne : CAP, kd[i].prim)) {
+            if (cmp_hit_reason(r, tris + 9 * (size_t)kd[i].prim, kd[i].t) == CMP_AGREE)
+                bad(t, "kd hit that Embree does not report", r);
+            else
+                t->embree_explained++;
+        }
+}
+
+/* The batch entry points equal the single-ray ones ray by ray, with the
+ * origin shared (stride 0) and per ray. */
+static void check_batch(const kdr_scene *sc, const kdr_ray *rays, size_t n, tally *t) {
+    const uint32_t K = 4;
+    float *org = malloc(3 * n * sizeof *org), *dir = malloc(3 * n * sizeof *dir);
+    float *tmin = malloc(n * sizeof *tmin), *tmax = malloc(n * sizeof *tmax);
+    uint32_t *nh = malloc(n * sizeof *nh), *cnt = malloc(n * sizeof *cnt);
+    float *ht = malloc(n * K * sizeof *ht), *hu = malloc(n * K * sizeof *hu),
+          *hv = malloc(n * K * sizeof *hv);
+    int32_t *hp = malloc(n * K * sizeof *hp);
+    for (size_t i = 0; i < n; i++) {
+        memcpy(org + 3 * i, rays[i].org, sizeof rays[i].org);
+        memcpy(dir + 3 * i, rays[i].dir, sizeof rays[i].dir);
+        tmin[i] = rays[i].tmin;
+        tmax[i] = rays[i].tmax;
+    }
+    for (int shared = 0; shared < 2; shared++) {
+        kdr_ray_batch b = {n, org, shared ? 0 : 3, dir, tmin, 1, tmax, 1};
+        kdr_all_hits out = {nh, ht, hu, hv, hp};
+        if (kdr_all_batch(sc, &b, 0, n, K, &out, NULL) != KDR_OK ||
+            kdr_count_batch(sc, &b, 0, n, cnt, NULL) != KDR_OK) {
+            bad(t, "batch call failed", &rays[0]);
+            break;
+        }
+        for (size_t i = 0; i < n; i++) {
+            kdr_ray r = rays[i];
+            if (shared) memcpy(r.org, org, sizeof r.org);
+            kdr_hit h[4];
+            uint32_t m = 0, c = 0;
+            kdr_intersect_all1(sc, &r, K, h, &m, NULL);
+            kdr_count1(sc, &r, &c, NULL);
+            int ok = nh[i] == m && cnt[i] == c;
+            for (uint32_t k = 0; ok && k < m; k++)
+                ok = ht[i * K + k] == h[k].t && hp[i * K + k] == h[k].prim &&
+                     hu[i * K + k] == h[k].u && hv[i * K + k] == h[k].v;
+            if (!ok) bad(t, "batch answer differs from the single-ray one", &r);
+        }
+    }
+    free(org), free(dir), free(tmin), free(tmax), free(nh), free(cnt);
+    free(ht), free(hu), free(hv), free(hp);
+}
+
+static void print_tally(const char *label, const tally *t) {
+    printf("%-16s rays %6lu hits %7lu brute-only(rounding) %lu embree-diff(rounding) "
+           "%lu unexplained %lu\n",
+           label, t->rays, t->hits, t->brute_only_explained, t->embree_explained, t->bad);
+}
+
+static int run_scene(const char *label, const float *tris, size_t ntris,
+                     const kdr_ray *rays, size_t n, tally *total) {
+    kdr_scene *sc = NULL;
+    if (kdr_scene_build(tris, ntris, NULL, NULL, NULL, &sc) != KDR_OK) {
+        fprintf(stderr, "%s: build failed\n", label);
+        return 1;
+    }
+    oracle_opts oo;
+    oracle_opts_judge(&oo);
+    oo.context_filter = 1;
+    oracle *o = oracle_create(tris, ntris, &oo);
+    if (!o) {
+        kdr_scene_free(sc);
+        return 1;
+    }
+    tally t = {0};
+    for (size_t i = 0; i < n; i++)
+        check_ray(sc, o, tris, ntris, &rays[i], &t);
+    check_batch(sc, rays, n < 500 ? n : 500, &t);
+    print_tally(label, &t);
+    total->rays += t.rays;
+    total->hits += t.hits;
+    total->brute_only_explained += t.brute_only_explained;
+    total->embree_explained += t.embree_explained;
+    total->bad += t.bad;
+    oracle_free(o);
+    kdr_scene_free(sc);
+    return 0;
+}
+
+static int api_errors(void) {
+    const float tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    kdr_scene *sc = NULL;
+    if (kdr_scene_build(tri, 1, NULL, NULL, NULL, &sc) != KDR_OK) return 1;
+    kdr_ray r = {{0.25f, 0.25f, 1}, {0, 0, -1}, 0, INFINITY};
+    kdr_hit h[2];
+    uint32_t n = 7, c = 0;
+    int fails = 0;
+    fails += kdr_intersect_all1(sc, &r, 0, h, &n, NULL) != KDR_EINVAL || n != 0;
+    fails +=
+        kdr_intersect_all1(sc, &r, KDR_MAX_HITS_LIMIT + 1, h, &n, NULL) != KDR_EINVAL;
+    fails += kdr_intersect_all1(NULL, &r, 1, h, &n, NULL) != KDR_EINVAL;
+    fails += kdr_count1(sc, NULL, &c, NULL) != KDR_EINVAL;
+    fails += kdr_intersect_all1(sc, &r, 2, h, &n, NULL) != KDR_OK || n != 1 ||
+             h[0].prim != 0 || h[0].t != 1.0f;
+    fails += kdr_count1(sc, &r, &c, NULL) != KDR_OK || c != 1;
+    /* a ray outside its interval, and an invalid one: no hits */
+    r.tmax = 0.5f;
+    fails += kdr_count1(sc, &r, &c, NULL) != KDR_OK || c != 0;
+    r.tmax = INFINITY;
+    r.dir[2] = 0.0f;
+    fails += kdr_intersect_all1(sc, &r, 2, h, &n, NULL) != KDR_OK || n != 0;
+    kdr_scene_free(sc);
+    if (fails) fprintf(stderr, "api_errors: %d checks failed\n", fails);
+    return fails;
+}
+
+/* Two triangles sharing an edge, a ray through that edge: two hits at the
+ * same t (the documented definition), ordered by prim. */
+static int shared_edge(void) {
+    const float tris[18] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+    kdr_scene *sc = NULL;
+    if (kdr_scene_build(tris, 2, NULL, NULL, NULL, &sc) != KDR_OK) return 1;
+    kdr_ray r = {{0.5f, 0.5f, 1}, {0, 0, -1}, 0, INFINITY};
+    kdr_hit h[4];
+    uint32_t n = 0, c = 0;
+    kdr_intersect_all1(sc, &r, 4, h, &n, NULL);
+    kdr_count1(sc, &r, &c, NULL);
+    kdr_scene_free(sc);
+    const int ok = n == 2 && c == 2 && h[0].prim == 0 && h[1].prim == 1 &&
+                   h[0].t == 1.0f && h[1].t == 1.0f;
+    if (!ok) fprintf(stderr, "shared_edge: n %u count %u\n", n, c);
+    return !ok;
+}
+
+int main(int argc, char **argv) {
+    const size_t nrays = argc > 1 ? (size_t)atol(argv[1]) : 1500;
+    int fails = api_errors() + shared_edge();
+    tally total = {0};
+    kdr_ray *rays = malloc((nrays + 400) * sizeof *rays);
+    for (int k = 0; k < STRESS_NSCENES; k++) {
+        stress_scene s;
+        if (stress_scene_make((stress_scene_kind)k, SEED, &s) != 0) return 1;
+        stress_rays(&s, STRESS_RAYS_MIXED, SEED + (uint64_t)k, nrays, rays);
+        const size_t ni = stress_inside_rays(&s, SEED, 400, rays + nrays);
+        fails += run_scene(stress_scene_name((stress_scene_kind)k), s.tris, s.ntris, rays,
+                           nrays + ni, &total);
+        stress_scene_free(&s);
+    }
+#ifdef KDRAY_HAVE_GLTF
+    if (argc > 2) { /* a real scene: random rays through its box */
+        kdr_gltf_scene gs, *g = &gs;
+        char err[256];
+        if (kdr_gltf_load(argv[2], g, err, sizeof err) != 0) {
+            fprintf(stderr, "%s\n", err);
+            return 1;
+        }
+        stress_rng rng;
+        stress_rng_seed(&rng, SEED);
+        kdr_bounds bb = {{INFINITY, INFINITY, INFINITY},
+                         {-INFINITY, -INFINITY, -INFINITY}};
+        for (size_t i = 0; i < 3 * g->ntris; i++)
+            for (int k = 0; k < 3; k++) {
+                const float x = g->tris[3 * i + k];
+                bb.min[k] = x < bb.min[k] ? x : bb.min[k];
+                bb.max[k] = x > bb.max[k] ? x : bb.max[k];
+            }
+        for (size_t i = 0; i < nrays; i++) {
+            for (int k = 0; k < 3; k++)
+                rays[i].org[k] =
+                    bb.min[k] + (bb.max[k] - bb.min[k]) * stress_rng_float(&rng);
+            stress_rng_dir(&rng, rays[i].dir);
+            rays[i].tmin = 0.0f;
+            rays[i].tmax = INFINITY;
+        }
+        fails += run_scene("gltf", g->tris, g->ntris, rays, nrays, &total);
+        kdr_gltf_free(g);
+    }
+#endif
+    free(rays);
+    print_tally("total", &total);
+    if (total.bad || fails) {
+        printf("FAIL: %lu unexplained, %d other failures\n", total.bad, fails);
+        return 1;
+    }
+    printf("ok\n");
+    return 0;
+}
