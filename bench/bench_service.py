@@ -238,10 +238,12 @@ def core_rate(trace, scene, body_path, threads, n):
             "--repeat", str(repeat), body_path]
     if scene:
         args[1:1] = ["--scene", scene]
-    out = subprocess.run(args, capture_output=True, text=True, timeout=300)
-    m = re.search(r"mean [\d.]+ ms, ([\d.]+) Mrays/s", out.stderr)
+    # the answer on stdout is binary for CBOR requests: only stderr is text
+    out = subprocess.run(args, capture_output=True, timeout=300)
+    err = out.stderr.decode("utf-8", "replace")
+    m = re.search(r"mean [\d.]+ ms, ([\d.]+) Mrays/s", err)
     if not m:
-        raise SystemExit("kdray-trace: " + out.stderr)
+        raise SystemExit("kdray-trace: " + err)
     return float(m.group(1)) * 1e6
 
 

@@ -90,7 +90,7 @@ def bytes_per_tri(out):
     if not os.path.exists(path):
         return got
     for line in open(path):
-        if line.startswith("== kd build and single rays"):
+        if line.startswith("== kd build, single rays") or line.startswith("== kd build and single rays"):
             on = True
         elif on and "|" in line and not line.startswith("scene"):
             cells = [c.split() for c in line.split("|")]
