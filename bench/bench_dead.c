@@ -59,8 +59,12 @@ static void rnd_dir(float d[3]) {
 }
 
 static rays make_rays(int set, size_t n) {
-    rays r = {n, malloc(3 * n * sizeof(float)), malloc(3 * n * sizeof(float)),
-              malloc(n * sizeof(float)), malloc(n * sizeof(float)), {0}};
+    rays r = {n,
+              malloc(3 * n * sizeof(float)),
+              malloc(3 * n * sizeof(float)),
+              malloc(n * sizeof(float)),
+              malloc(n * sizeof(float)),
+              {0}};
     size_t org_stride = 3, t_stride = 1;
     for (size_t i = 0; i < n; i++) {
         float *o = r.org + 3 * i, *d = r.dir + 3 * i;
@@ -98,11 +102,10 @@ static rays make_rays(int set, size_t n) {
             break;
         }
     }
-    if (set == 0 || set == 4)
-        org_stride = 0;
-    if (set == 0)
-        t_stride = 0;
-    r.b = (kdr_ray_batch){n, r.org, org_stride, r.dir, r.tmin, t_stride, r.tmax, t_stride};
+    if (set == 0 || set == 4) org_stride = 0;
+    if (set == 0) t_stride = 0;
+    r.b =
+        (kdr_ray_batch){n, r.org, org_stride, r.dir, r.tmin, t_stride, r.tmax, t_stride};
     return r;
 }
 
@@ -120,14 +123,15 @@ int main(int argc, char **argv) {
             only = 0;
             while ((size_t)only < NSETS && strcmp(set_names[only], argv[i + 1]) != 0)
                 only++;
-            if ((size_t)only == NSETS)
-                only = -2;
+            if ((size_t)only == NSETS) only = -2;
         } else
             only = -2;
     }
     if (argc % 2 == 0 || only == -2 || nrays < 256 || ntris == 0 || repeat < 1) {
-        fprintf(stderr, "usage: %s [--set interval|perray|away|nan|camera|random] "
-                        "[--rays N] [--tris N] [--repeat R]\n", argv[0]);
+        fprintf(stderr,
+                "usage: %s [--set interval|perray|away|nan|camera|random] "
+                "[--rays N] [--tris N] [--repeat R]\n",
+                argv[0]);
         return 2;
     }
     float *tris = malloc(ntris * 9 * sizeof(float));
@@ -150,8 +154,7 @@ int main(int argc, char **argv) {
     printf("%zu triangles, %zu rays per call, best of %d\n", ntris, nrays, repeat);
     int fail = 0;
     for (size_t set = 0; set < NSETS; set++) {
-        if (only >= 0 && (size_t)only != set)
-            continue;
+        if (only >= 0 && (size_t)only != set) continue;
         rays r = make_rays((int)set, nrays);
         double best = INFINITY;
         for (int k = 0; k < repeat; k++) {

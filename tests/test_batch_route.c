@@ -78,19 +78,19 @@ static void make_chunk(chunk *c, int run) {
 
 /* Checks one chunk's route: want_walk 1 = the interleaved walk, 0 =
  * bundles. Stride 3 unless shared (stride 0, only for run = KB_CHUNK). */
-static void check_route(const char *scene, const kdr_scene *s, const char *what,
-                        int run, int shared, int want_walk) {
+static void check_route(const char *scene, const kdr_scene *s, const char *what, int run,
+                        int shared, int want_walk) {
     chunk *c = malloc(sizeof *c);
     make_chunk(c, run);
-    if (shared)
-        c->b.org_stride = 0;
+    if (shared) c->b.org_stride = 0;
     const int scattered = kd_batch_scattered(s, &c->b, 0, KB_CHUNK);
     float t[KB_CHUNK], u[KB_CHUNK], v[KB_CHUNK];
     int32_t prim[KB_CHUNK];
     uint8_t hit[KB_CHUNK];
     kdr_hits h = {t, prim, u, v, hit};
     kdr_trav_stats st = {0};
-    const int rc = kdr_trace_batch(s, &c->b, 0, KB_CHUNK, KDR_CLOSEST, KDR_TRAV_AUTO, &h, &st);
+    const int rc =
+        kdr_trace_batch(s, &c->b, 0, KB_CHUNK, KDR_CLOSEST, KDR_TRAV_AUTO, &h, &st);
     /* the walk's groups are the bundle width's (8 with AVX2, else 4) */
     const uint64_t width = kdr_cpu_has_avx2() ? 8 : 4;
     /* the walk route traces every group there; bundles trace KB_PROBE
@@ -105,9 +105,9 @@ static void check_route(const char *scene, const kdr_scene *s, const char *what,
            scene, what, scattered, (unsigned long long)st.fallbacks,
            (unsigned long long)all, hits, ok ? "ok" : "FAIL");
     if (!ok) {
-        fprintf(stderr, "FAIL %s/%s: route %s, want %s (rc %d, rays %llu)\n", scene,
-                what, scattered ? "walk" : "bundles", want_walk ? "walk" : "bundles",
-                rc, (unsigned long long)st.rays);
+        fprintf(stderr, "FAIL %s/%s: route %s, want %s (rc %d, rays %llu)\n", scene, what,
+                scattered ? "walk" : "bundles", want_walk ? "walk" : "bundles", rc,
+                (unsigned long long)st.rays);
         g_failures++;
     }
     free(c);
@@ -127,8 +127,7 @@ static kdr_scene *build(size_t ntris) {
 int main(void) {
     /* the large scene must reach the threshold, the small one stay below */
     kdr_scene *big = build(200000), *small = build(20000);
-    if (!big || !small)
-        return 1;
+    if (!big || !small) return 1;
     printf("scenes: big %llu bytes, small %llu bytes, threshold %zu\n",
            (unsigned long long)big->stats.bytes, (unsigned long long)small->stats.bytes,
            KD_STREAM_RUNS_MIN_BYTES);
