@@ -339,15 +339,18 @@ static rayset rays_aimed(const scene_src *src, const kdr_bounds *b, int shared) 
     return r;
 }
 
-/* Odd intervals and inputs the bundles must hand to single rays. */
-static rayset rays_intervals(const kdr_bounds *b) {
-    rayset r = rays_alloc("intervals", 0);
+/* Odd intervals and inputs the bundles must hand to single rays. Shared:
+ * one origin for all (the chunks stay with bundles, so kd_batch_live's
+ * four-at-a-time test meets them), an inf direction component instead of
+ * an inf origin, and some zero directions. */
+static rayset rays_intervals(const kdr_bounds *b, int shared) {
+    rayset r = rays_alloc(shared ? "intervals-shared" : "intervals", shared);
     float diag = 0.0f;
     for (int k = 0; k < 3; k++)
         diag += (b->max[k] - b->min[k]) * (b->max[k] - b->min[k]);
     diag = sqrtf(diag);
     for (size_t i = 0; i < r.n; i++) {
-        rnd_point(b, 0.05f, r.org + 3 * i);
+        rnd_point(b, 0.05f, r.org + 3 * (shared ? 0 : i));
         rnd_dir(r.dir + 3 * i);
         float a = rnd_in(0.0f, diag), c = rnd_in(0.0f, diag);
         switch (rnd_u32() % 8) {
@@ -357,8 +360,11 @@ static rayset rays_intervals(const kdr_bounds *b) {
         case 3: r.tmin[i] = a < c ? a : c, r.tmax[i] = a < c ? c : a; break;
         case 4: r.tmax[i] = a; break;
         case 5: r.dir[3 * i + rnd_u32() % 3] = NAN; break;
-        case 6: r.org[3 * i + rnd_u32() % 3] = INFINITY; break;
-        default: break;
+        case 6: (shared ? r.dir : r.org)[3 * i + rnd_u32() % 3] = INFINITY; break;
+        default:
+            if (shared && (rnd_u32() & 1))
+                r.dir[3 * i] = r.dir[3 * i + 1] = r.dir[3 * i + 2] = 0.0f;
+            break;
         }
     }
     return r;
@@ -565,7 +571,8 @@ static void check_scene(const scene_src *src, int integer) {
     rayset sets[] = {rays_camera(&bb),         rays_omni(&bb),
                      rays_distinct(&bb),       rays_nearby(&bb),
                      rays_zeros(&bb, integer), rays_on_splits(s, &bb, 0),
-                     rays_on_splits(s, &bb, 1), rays_intervals(&bb),
+                     rays_on_splits(s, &bb, 1), rays_intervals(&bb, 0),
+                     rays_intervals(&bb, 1),
                      rays_aimed(src, &bb, 0),  rays_aimed(src, &bb, 1),
                      rays_slack_planes(s, &bb)};
     for (size_t k = 0; k < sizeof sets / sizeof sets[0]; k++) {
