@@ -1,6 +1,6 @@
 /*
  * bench_dead.c — kdray-bench-dead: what rays that cannot hit cost in
- * kdr_trace_batch (docs/TRAVERSAL.md, "Rays that cannot hit"). Not a test.
+ * kdr_trace_batch (docs/TRAVERSAL.md, "Rays that cannot be traced"). Not a test.
  *
  *   kdray-bench-dead [--set NAME] [--rays N] [--tris N] [--repeat R]
  *
