@@ -48,6 +48,15 @@ add_executable(kdray_bench_render ${CMAKE_CURRENT_SOURCE_DIR}/bench_render.c)
 set_target_properties(kdray_bench_render PROPERTIES OUTPUT_NAME kdray-bench-render)
 target_link_libraries(kdray_bench_render PRIVATE kdray_render kdray_scenes kdray_core)
 
+# What rays that cannot hit cost in kdr_trace_batch (a generated scene, no
+# Embree: nothing to compare against). Prints only; the smoke test runs it
+# small and fails if a ray that cannot hit is answered with a hit.
+add_executable(kdray_bench_dead ${CMAKE_CURRENT_SOURCE_DIR}/bench_dead.c)
+set_target_properties(kdray_bench_dead PROPERTIES OUTPUT_NAME kdray-bench-dead)
+target_link_libraries(kdray_bench_dead PRIVATE kdray_core m)
+add_test(NAME bench_dead_smoke
+  COMMAND kdray_bench_dead --rays 4096 --tris 2000 --repeat 1)
+
 # The end-to-end benchmark (issue 16): kdrayd over loopback with CBOR
 # against Embree with the same thread count in this process. Not a test:
 # `cmake --build build --target bench_e2e` (haus and 2CylinderEngine, 1M

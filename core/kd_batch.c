@@ -3,7 +3,9 @@
  * the bundle width (8 lanes with AVX2, else 4, or one ray at a time) and
  * owns the per-ray helpers the bundle drivers share: reading ray i of an
  * AoS batch with stride-0 sharing, tracing one ray alone (rays a bundle
- * cannot take), ordering a chunk for bundles, and telling scattered chunks
+ * cannot take), answering a chunk's rays that cannot be traced before it
+ * is ordered (kd_batch_live), ordering a chunk for bundles, and telling
+ * scattered chunks
  * (incoherent rays with their own origins), which go to the interleaved
  * walk of kd_stream.h instead.
  */
@@ -15,6 +17,7 @@
 #include "kd_stream.h"
 #include "kd_traverse.h"
 #include "kd_traverse_bundle.h"
+#include "simd.h"
 
 /* libgcc's constructor has run the CPU detection before main; calling
  * __builtin_cpu_init here again would race between threads. */
@@ -47,6 +50,165 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
     out->v[i] = h.v;
 }
 
+/* 0 when ray i fails the first test of kd_walk_setup (kd_walk.h), with the
+ * same float operations: an inf or NaN in the origin or direction (x - x
+ * is not 0), a zero direction, or !(tmin <= tmax), NaN included. */
+static inline int ray_traceable(const kdr_ray_batch *b, size_t i) {
+    const float *o = b->org + b->org_stride * i, *d = b->dir + 3 * i;
+    const float tmin = b->tmin ? b->tmin[b->tmin_stride * i] : 0.0f;
+    const float tmax = b->tmax ? b->tmax[b->tmax_stride * i] : INFINITY;
+    int ok = tmin <= tmax;
+    ok &= (d[0] != 0.0f) | (d[1] != 0.0f) | (d[2] != 0.0f);
+    for (int k = 0; k < 3; k++)
+        ok &= (o[k] - o[k] == 0.0f) & (d[k] - d[k] == 0.0f);
+    return ok;
+}
+
+/* Three floats per ray (rays i..i+3 from p): 1 when all twelve are finite
+ * (x - x == 0, as ray_traceable) and, with dir != 0, no ray's three are
+ * all zero. */
+static inline int four_ok(const float *p, int dir) {
+    const f4 z = f4_set1(0.0f);
+    const f4 a = f4_loadu(p), b = f4_loadu(p + 4), c = f4_loadu(p + 8);
+    const f4 fin = f4_and(f4_and(f4_eq(f4_sub(a, a), z), f4_eq(f4_sub(b, b), z)),
+                          f4_eq(f4_sub(c, c), z));
+    if (f4_bits(fin) != 15)
+        return 0;
+    if (!dir)
+        return 1;
+    /* bit 3r + k: component k of ray r is 0; a ray is flat when its
+     * three bits are set */
+    const int zm = f4_bits(f4_eq(a, z)) | f4_bits(f4_eq(b, z)) << 4 |
+                   f4_bits(f4_eq(c, z)) << 8;
+    return (zm & zm >> 1 & zm >> 2 & 0x249) == 0;
+}
+
+/* 1 when the n floats from p are all finite (x - x == 0). */
+static int floats_finite(const float *p, size_t n) {
+    const f4 z = f4_set1(0.0f);
+    f4 fin = f4_eq(z, z);
+    size_t j = 0;
+    for (; j + 4 <= n; j += 4) {
+        const f4 v = f4_loadu(p + j);
+        fin = f4_and(fin, f4_eq(f4_sub(v, v), z));
+    }
+    int fine = f4_bits(fin) == 15;
+    for (; j < n; j++)
+        fine &= p[j] - p[j] == 0.0f;
+    return fine;
+}
+
+/* 1 when the count directions from d (3 floats each) are all finite and
+ * none is 0 in all three components: four rays (three vectors) at a time,
+ * bit 3r + k of zm telling that component k of ray r is 0. */
+static int dirs_fine(const float *d, size_t count) {
+    const f4 z = f4_set1(0.0f);
+    f4 fin = f4_eq(z, z);
+    int flat = 0;
+    size_t i = 0;
+    for (; i + 4 <= count; i += 4) {
+        const float *p = d + 3 * i;
+        const f4 a = f4_loadu(p), b = f4_loadu(p + 4), c = f4_loadu(p + 8);
+        fin = f4_and(fin, f4_and(f4_and(f4_eq(f4_sub(a, a), z), f4_eq(f4_sub(b, b), z)),
+                                 f4_eq(f4_sub(c, c), z)));
+        const int zm = f4_bits(f4_eq(a, z)) | f4_bits(f4_eq(b, z)) << 4 |
+                       f4_bits(f4_eq(c, z)) << 8;
+        flat |= zm & zm >> 1 & zm >> 2 & 0x249;
+    }
+    int fine = f4_bits(fin) == 15 && !flat;
+    for (; i < count; i++) {
+        const float *p = d + 3 * i;
+        fine &= (p[0] - p[0] == 0.0f) & (p[1] - p[1] == 0.0f) & (p[2] - p[2] == 0.0f);
+        fine &= (p[0] != 0.0f) | (p[1] != 0.0f) | (p[2] != 0.0f);
+    }
+    return fine;
+}
+
+/* 1 when every ray of [first, first+count) passes ray_traceable (the usual
+ * chunk: tested a vector at a time, a few instructions per ray); 0 means
+ * some ray may fail. */
+static int chunk_traceable(const kdr_ray_batch *b, size_t first, size_t count) {
+    if (!dirs_fine(b->dir + 3 * first, count))
+        return 0;
+    const size_t no = b->org_stride ? 3 * count : 3;
+    if (!floats_finite(b->org + b->org_stride * first, no))
+        return 0;
+    const int vmin = b->tmin && b->tmin_stride, vmax = b->tmax && b->tmax_stride;
+    const float lo0 = b->tmin ? b->tmin[vmin ? first : 0] : 0.0f;
+    const float hi0 = b->tmax ? b->tmax[vmax ? first : 0] : INFINITY;
+    if (!vmin && !vmax)
+        return lo0 <= hi0;
+    f4 ok = f4_eq(f4_set1(0.0f), f4_set1(0.0f));
+    size_t i = first;
+    for (; i + 4 <= first + count; i += 4) {
+        const f4 lo = vmin ? f4_loadu(b->tmin + i) : f4_set1(lo0);
+        const f4 hi = vmax ? f4_loadu(b->tmax + i) : f4_set1(hi0);
+        ok = f4_and(ok, f4_le(lo, hi));
+    }
+    int fine = f4_bits(ok) == 15;
+    for (; i < first + count; i++)
+        fine &= (vmin ? b->tmin[i] : lo0) <= (vmax ? b->tmax[i] : hi0);
+    return fine;
+}
+
+size_t kd_batch_live(const kdr_ray_batch *b, size_t first, size_t count, kdr_query q,
+                     kdr_hits *out, kdr_trav_stats *stats, size_t *ids) {
+    if (chunk_traceable(b, first, count)) {
+        for (size_t i = 0; i < count; i++)
+            ids[i] = first + i;
+        return count;
+    }
+    /* groups of four rays are tested at once (the usual case: all fine);
+     * a group with a doubtful ray, and the last few rays, ray by ray */
+    int org_ok = 1; /* a shared origin: tested once */
+    if (b->org_stride == 0)
+        for (int k = 0; k < 3; k++)
+            org_ok &= b->org[k] - b->org[k] == 0.0f;
+    const float t_lo = b->tmin ? b->tmin[0] : 0.0f;
+    const float t_hi = b->tmax ? b->tmax[0] : INFINITY;
+    const int tmin_v = b->tmin && b->tmin_stride, tmax_v = b->tmax && b->tmax_stride;
+    size_t m = 0, i = first;
+    for (; i + 4 <= first + count; i += 4) {
+        int ok = four_ok(b->dir + 3 * i, 1);
+        ok &= b->org_stride == 0 ? org_ok : four_ok(b->org + 3 * i, 0);
+        const f4 lo = tmin_v ? f4_loadu(b->tmin + i) : f4_set1(t_lo);
+        const f4 hi = tmax_v ? f4_loadu(b->tmax + i) : f4_set1(t_hi);
+        ok &= f4_bits(f4_le(lo, hi)) == 15;
+        if (ok) {
+            for (size_t k = 0; k < 4; k++)
+                ids[m + k] = i + k;
+            m += 4;
+            continue;
+        }
+        for (size_t k = i; k < i + 4; k++) {
+            ids[m] = k;
+            m += (size_t)ray_traceable(b, k);
+        }
+    }
+    for (; i < first + count; i++) {
+        ids[m] = i;
+        m += (size_t)ray_traceable(b, i);
+    }
+    if (m == count)
+        return m;
+    for (size_t k = first, j = 0; k < first + count; k++) {
+        if (j < m && ids[j] == k) {
+            j++;
+            continue;
+        }
+        if (q == KDR_ANY) {
+            out->hit[k] = 0;
+        } else {
+            out->t[k] = -1.0f;
+            out->prim[k] = -1;
+            out->u[k] = out->v[k] = 0.0f;
+        }
+    }
+    if (stats)
+        stats->rays += count - m; /* kdr_intersect1 counts them, with no node */
+    return m;
+}
+
 /* Direction key: octant (3 bits) above a 4+4-bit Morton code of the
  * direction's L1-normalised |x| and |y| (its position within the octant). */
 static uint32_t dir_key(const float *d) {
@@ -68,13 +230,14 @@ static uint32_t dir_key(const float *d) {
  * counting-sort passes of 7 bits. */
 #define KEY_PASS 7
 
-/* One stable counting-sort pass of ids by bits [shift, shift+KEY_PASS). */
+/* One stable counting-sort pass of positions (indices of key) by bits
+ * [shift, shift+KEY_PASS). */
 static void sort_pass(const uint32_t *key, const size_t *in, size_t *out,
-                      size_t n, size_t first, int shift) {
+                      size_t n, int shift) {
     size_t count[1u << KEY_PASS] = {0};
     const uint32_t mask = (1u << KEY_PASS) - 1;
     for (size_t i = 0; i < n; i++)
-        count[(key[in[i] - first] >> shift) & mask]++;
+        count[(key[in[i]] >> shift) & mask]++;
     size_t sum = 0;
     for (uint32_t k = 0; k <= mask; k++) {
         size_t c = count[k];
@@ -82,19 +245,21 @@ static void sort_pass(const uint32_t *key, const size_t *in, size_t *out,
         sum += c;
     }
     for (size_t i = 0; i < n; i++)
-        out[count[(key[in[i] - first] >> shift) & mask]++] = in[i];
+        out[count[(key[in[i]] >> shift) & mask]++] = in[i];
 }
 
 /* Mean spread of the L1-normalised directions over consecutive groups of 8
  * rays (sum over axes of max - min): ~0 for camera tiles, ~2 for random
  * hemisphere or sphere directions. */
-static float order_spread(const kdr_ray_batch *b, size_t first, size_t count) {
+/* Rays ids[0..count), or (ids NULL) [first, first+count). */
+static float order_spread(const kdr_ray_batch *b, const size_t *ids, size_t first,
+                          size_t count) {
     float total = 0.0f;
     size_t groups = 0;
     for (size_t g = 0; g + 8 <= count; g += 8, groups++) {
         float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
         for (size_t i = g; i < g + 8; i++) {
-            const float *d = b->dir + 3 * (first + i);
+            const float *d = b->dir + 3 * (ids ? ids[i] : first + i);
             const float r1 = 1.0f / (fabsf(d[0]) + fabsf(d[1]) + fabsf(d[2]));
             for (int k = 0; k < 3; k++) {
                 const float x = d[k] * r1;
@@ -108,27 +273,29 @@ static float order_spread(const kdr_ray_batch *b, size_t first, size_t count) {
     return groups ? total / (float)groups : 0.0f;
 }
 
-void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
-                    int sort, size_t *ids) {
-    for (size_t i = 0; i < count; i++)
-        ids[i] = first + i;
-    if (!sort || count <= 8 || order_spread(b, first, count) < KB_SORT_SPREAD)
+void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids) {
+    if (!sort || count <= 8 || order_spread(b, ids, 0, count) < KB_SORT_SPREAD)
         return;
     /* rays never leave their run of equal origins (hemisphere rays of one
      * surface point stay one shared-origin group); the direction orders
      * them within it */
     uint32_t key[KB_CHUNK], run = 0;
-    size_t tmp[KB_CHUNK];
+    size_t pos[KB_CHUNK], tmp[KB_CHUNK];
     for (size_t i = 0; i < count; i++) {
-        const float *o = b->org + b->org_stride * (first + i);
-        if (i > 0 && memcmp(o, o - b->org_stride, 3 * sizeof(float)) != 0)
+        const float *o = b->org + b->org_stride * ids[i];
+        const float *prev = b->org + b->org_stride * ids[i > 0 ? i - 1 : 0];
+        if (memcmp(o, prev, 3 * sizeof(float)) != 0)
             run++;
-        key[i] = (run > 255 ? 255 : run) << 11 | dir_key(b->dir + 3 * (first + i));
+        key[i] = (run > 255 ? 255 : run) << 11 | dir_key(b->dir + 3 * ids[i]);
+        pos[i] = i;
     }
-    sort_pass(key, ids, tmp, count, first, 0);
-    sort_pass(key, tmp, ids, count, first, KEY_PASS);
-    sort_pass(key, ids, tmp, count, first, 2 * KEY_PASS);
-    memcpy(ids, tmp, count * sizeof *ids);
+    /* sorted are positions in ids (the keys' index), mapped back at the end */
+    sort_pass(key, pos, tmp, count, 0);
+    sort_pass(key, tmp, pos, count, KEY_PASS);
+    sort_pass(key, pos, tmp, count, 2 * KEY_PASS);
+    for (size_t i = 0; i < count; i++)
+        pos[i] = ids[tmp[i]];
+    memcpy(ids, pos, count * sizeof *ids);
 }
 
 int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
@@ -143,7 +310,7 @@ int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
     if (runs * KD_STREAM_MAX_RUN < count &&
         (runs == 1 || s->stats.bytes < KD_STREAM_RUNS_MIN_BYTES))
         return 0;
-    return order_spread(b, first, count) >= KB_SORT_SPREAD;
+    return order_spread(b, NULL, first, count) >= KB_SORT_SPREAD;
 }
 
 static int batch_args_ok(const kdr_ray_batch *b, size_t first, size_t count,
@@ -174,12 +341,12 @@ int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
         mode = KDR_TRAV_SINGLE; /* nothing to bundle over */
     switch (mode) {
     case KDR_TRAV_BUNDLE8:
-        kd_bundle8_trace(scene, batch, first, count, query, KB_FALLBACK | KB_SORT,
-                         out, stats);
+        kd_bundle8_trace(scene, batch, first, count, query,
+                         KB_FALLBACK | KB_SORT | KB_LIVE, out, stats);
         break;
     case KDR_TRAV_BUNDLE4:
-        kd_bundle4_trace(scene, batch, first, count, query, KB_FALLBACK | KB_SORT,
-                         out, stats);
+        kd_bundle4_trace(scene, batch, first, count, query,
+                         KB_FALLBACK | KB_SORT | KB_LIVE, out, stats);
         break;
     default:
         for (size_t i = first; i < first + count; i++)

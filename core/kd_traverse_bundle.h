@@ -52,8 +52,8 @@
 #include "kd_traverse.h"
 
 /* Batch drivers: same contract as kdr_trace_batch (arguments checked by the
- * caller); flags are KB_FALLBACK | KB_SORT below. With flags == 0 every
- * bundle is traced as a bundle in the caller's ray order (tests use this to
+ * caller); flags are KB_FALLBACK | KB_SORT | KB_LIVE below. With flags == 0
+ * every bundle is traced as a bundle in the caller's ray order (tests use this to
  * put every adversarial ray through the SIMD path). kd_bundle8_trace needs
  * AVX2. */
 void kd_bundle4_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
@@ -83,16 +83,26 @@ void kd_batch_single(const kdr_scene *s, const kdr_ray_batch *b, size_t i,
 int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                        size_t count);
 
-/* Orders rays [first, first+count) (count <= KB_CHUNK) for bundling: when
- * consecutive rays are incoherent (mean direction spread per 8 rays over
- * KB_SORT_SPREAD) and sort != 0, by direction octant, then by a coarse
- * Morton code of the direction, stable (kd_batch.c); else unchanged. */
-void kd_batch_order(const kdr_ray_batch *b, size_t first, size_t count,
-                    int sort, size_t *ids);
+/* Answers the rays of [first, first+count) that kd_walk_setup rejects
+ * before its root clip (tmin > tmax, NaN or inf input, zero direction) as
+ * kdr_intersect1 / kdr_occluded1 answer them (a miss; stats: a ray with no
+ * node), and lists the others in ids, in order; returns how many it listed
+ * (kd_batch.c). Rays that only miss the scene's box stay listed: telling
+ * them costs a division per ray, paid again by every live ray. */
+size_t kd_batch_live(const kdr_ray_batch *b, size_t first, size_t count, kdr_query q,
+                     kdr_hits *out, kdr_trav_stats *stats, size_t *ids);
+
+/* Orders rays ids[0..count) (count <= KB_CHUNK) in place for bundling:
+ * when consecutive rays are incoherent (mean direction spread per 8 rays
+ * over KB_SORT_SPREAD) and sort != 0, by direction octant, then by a
+ * coarse Morton code of the direction, stable, never across a run of
+ * equal origins (kd_batch.c); else unchanged. */
+void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids);
 
 /* Driver flags (the `flags` argument of kd_bundle*_trace). */
 #define KB_FALLBACK 1 /* incoherent stretches go through kd_stream_trace */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
+#define KB_LIVE 4     /* answer rays that cannot hit first (kd_batch_live) */
 
 /* Tuning: rays are incoherent when the average lane occupancy (active
  * lanes per node step / lanes that entered the tree) of a chunk's first
@@ -592,10 +602,18 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
             base = alone;
             continue;
         }
-        const int m = end - base < KB_CHUNK ? (int)(end - base) : KB_CHUNK;
-        kd_batch_order(rb, base, (size_t)m, (flags & KB_SORT) != 0, ids);
-        base += (size_t)m;
-        if (KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats)) {
+        const size_t c = end - base < KB_CHUNK ? end - base : KB_CHUNK;
+        /* rays that cannot hit are answered before ordering: they would
+         * cost the sort, a bundle slot and a single-ray call each */
+        int m = (int)c;
+        if (flags & KB_LIVE)
+            m = (int)kd_batch_live(rb, base, c, q, out, stats, ids);
+        else
+            for (size_t i = 0; i < c; i++)
+                ids[i] = base + i;
+        kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
+        base += c;
+        if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats)) {
             const size_t skip = end - base < KB_FALLBACK_CHUNKS * KB_CHUNK
                                     ? end - base
                                     : KB_FALLBACK_CHUNKS * KB_CHUNK;

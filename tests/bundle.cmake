@@ -9,3 +9,9 @@ add_test(NAME bundle_ladder COMMAND test_bundle ${KDRAY_SCENE_DIR})
 # missing ladder (exit 77) is a failure.
 set_tests_properties(bundle_ladder PROPERTIES FIXTURES_REQUIRED scenes_fetch
                      LABELS slow)
+# Where kdr_trace_batch routes a chunk (bundles or the interleaved walk):
+# one origin, runs of origins and scattered origins on scenes below and
+# above KD_STREAM_RUNS_MIN_BYTES.
+add_executable(test_batch_route ${CMAKE_CURRENT_SOURCE_DIR}/test_batch_route.c)
+target_link_libraries(test_batch_route PRIVATE kdray_core m)
+add_test(NAME bundle_route COMMAND test_batch_route)

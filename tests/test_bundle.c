@@ -16,7 +16,12 @@
  * So does the interleaved walk of incoherent rays (kd_stream.h): its scalar
  * and AVX-512 forms are called directly on every set, each also with its
  * leaves staged (the large-scene path), and through its dispatch with the
- * rays in reverse order (the id list the bundle fallback passes).
+ * rays in reverse order (the id list the bundle fallback passes); as it
+ * takes the single walk's steps, its work sums (rays, nodes entered,
+ * triangle tests) must also equal the single walk's. That is what catches
+ * a wrong NaN rule in its node step (slack-planes): the far child a NaN
+ * crossing pushes lies exactly the slack beyond the ray, holds nothing the
+ * ray hits, so dropping it changes no answer, only the work.
  */
 #include <math.h>
 #include <stdio.h>
@@ -334,15 +339,18 @@ static rayset rays_aimed(const scene_src *src, const kdr_bounds *b, int shared) 
     return r;
 }
 
-/* Odd intervals and inputs the bundles must hand to single rays. */
-static rayset rays_intervals(const kdr_bounds *b) {
-    rayset r = rays_alloc("intervals", 0);
+/* Odd intervals and inputs the bundles must hand to single rays. Shared:
+ * one origin for all (the chunks stay with bundles, so kd_batch_live's
+ * four-at-a-time test meets them), an inf direction component instead of
+ * an inf origin, and some zero directions. */
+static rayset rays_intervals(const kdr_bounds *b, int shared) {
+    rayset r = rays_alloc(shared ? "intervals-shared" : "intervals", shared);
     float diag = 0.0f;
     for (int k = 0; k < 3; k++)
         diag += (b->max[k] - b->min[k]) * (b->max[k] - b->min[k]);
     diag = sqrtf(diag);
     for (size_t i = 0; i < r.n; i++) {
-        rnd_point(b, 0.05f, r.org + 3 * i);
+        rnd_point(b, 0.05f, r.org + 3 * (shared ? 0 : i));
         rnd_dir(r.dir + 3 * i);
         float a = rnd_in(0.0f, diag), c = rnd_in(0.0f, diag);
         switch (rnd_u32() % 8) {
@@ -352,8 +360,11 @@ static rayset rays_intervals(const kdr_bounds *b) {
         case 3: r.tmin[i] = a < c ? a : c, r.tmax[i] = a < c ? c : a; break;
         case 4: r.tmax[i] = a; break;
         case 5: r.dir[3 * i + rnd_u32() % 3] = NAN; break;
-        case 6: r.org[3 * i + rnd_u32() % 3] = INFINITY; break;
-        default: break;
+        case 6: (shared ? r.dir : r.org)[3 * i + rnd_u32() % 3] = INFINITY; break;
+        default:
+            if (shared && (rnd_u32() & 1))
+                r.dir[3 * i] = r.dir[3 * i + 1] = r.dir[3 * i + 2] = 0.0f;
+            break;
         }
     }
     return r;
@@ -365,11 +376,12 @@ typedef struct results {
     float *t, *u, *v;
     int32_t *prim;
     uint8_t *hit;
+    kdr_trav_stats st[2]; /* per query (closest, any): the walk's work */
 } results;
 
 static results res_alloc(size_t n) {
     results r = {malloc(n * 4), malloc(n * 4), malloc(n * 4), malloc(n * 4),
-                 malloc(n)};
+                 malloc(n), {{0}}};
     memset(r.t, 0xA5, n * 4); /* sentinels: unwritten entries fail the test */
     memset(r.u, 0xA5, n * 4);
     memset(r.v, 0xA5, n * 4);
@@ -396,9 +408,9 @@ static results reference(const kdr_scene *s, const kdr_ray_batch *b) {
     for (size_t i = 0; i < b->n; i++) {
         kdr_ray r = batch_ray_at(b, i);
         kdr_hit h;
-        kdr_intersect1(s, &r, &h, NULL);
+        kdr_intersect1(s, &r, &h, &ref.st[KDR_CLOSEST]);
         ref.t[i] = h.t, ref.u[i] = h.u, ref.v[i] = h.v, ref.prim[i] = h.prim;
-        ref.hit[i] = (uint8_t)kdr_occluded1(s, &r, NULL);
+        ref.hit[i] = (uint8_t)kdr_occluded1(s, &r, &ref.st[KDR_ANY]);
     }
     return ref;
 }
@@ -434,6 +446,7 @@ static int way_runs(int way) {
 static void run_way(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                     size_t count, kdr_query q, int way, results *out) {
     kdr_hits h = {out->t, out->prim, out->u, out->v, out->hit};
+    kdr_trav_stats *st = &out->st[q];
     if (way == 4) {
         kd_bundle4_trace(s, b, first, count, q, 0, &h, NULL);
     } else if (way == 5) {
@@ -441,21 +454,21 @@ static void run_way(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
     } else if (way == 6 || way == 7) {
         if (s->nodes)
             kd_stream_scalar_trace(s, b, NULL, first, count, q,
-                                   way == 7 ? KD_STREAM_STAGE : 0, &h, NULL);
+                                   way == 7 ? KD_STREAM_STAGE : 0, &h, st);
     } else if (way == 8 || way == 9) {
         if (s->nodes)
             kd_stream_trace16(s, b, NULL, first, count, q,
-                              way == 9 ? KD_STREAM_STAGE : 0, &h, NULL);
+                              way == 9 ? KD_STREAM_STAGE : 0, &h, st);
     } else if (way == 11 || way == 12) {
         if (s->nodes)
             kd_stream_trace8(s, b, NULL, first, count, q,
-                             way == 12 ? KD_STREAM_STAGE : 0, &h, NULL);
+                             way == 12 ? KD_STREAM_STAGE : 0, &h, st);
     } else if (way == 10) {
         size_t *ids = malloc(count * sizeof *ids);
         for (size_t i = 0; i < count; i++)
             ids[i] = first + count - 1 - i;
         if (s->nodes)
-            kd_stream_trace(s, b, ids, 0, count, q, &h, NULL);
+            kd_stream_trace(s, b, ids, 0, count, q, &h, st);
         free(ids);
     } else if (kdr_trace_batch(s, b, first, count, q, (kdr_trav_mode)way, &h, NULL)) {
         g_failures++;
@@ -509,6 +522,25 @@ static void check_cut(const char *scene, const rayset *rs, const kdr_scene *s,
         fprintf(stderr, "FAIL %s/%s %s%s: %d of %zu rays differ\n", scene,
                 rs->name, way_names[way], sizes ? "" : " (one call)", bad, b->n);
     g_failures += bad;
+    /* The interleaved walk takes the single walk's steps ray by ray, so it
+     * enters the same nodes and tests the same triangles: equal work sums
+     * catch a step that differs without changing an answer (a far child
+     * dropped or entered that holds nothing the ray hits, e.g. a NaN
+     * crossing's far entry, see rays_slack_planes). */
+    const kdr_trav_stats *gs = &got.st[q], *rs_ = &ref->st[q];
+    if (way >= 6 && way <= 12 && s->nodes &&
+        (gs->rays != rs_->rays || gs->nodes_visited != rs_->nodes_visited ||
+         gs->tri_tests != rs_->tri_tests)) {
+        fprintf(stderr,
+                "FAIL %s/%s %s %s%s: work differs from the single walk: rays %llu "
+                "/ %llu, nodes %llu / %llu, triangle tests %llu / %llu\n",
+                scene, rs->name, way_names[way], q == KDR_ANY ? "any" : "closest",
+                sizes ? "" : " (one call)", (unsigned long long)gs->rays,
+                (unsigned long long)rs_->rays, (unsigned long long)gs->nodes_visited,
+                (unsigned long long)rs_->nodes_visited,
+                (unsigned long long)gs->tri_tests, (unsigned long long)rs_->tri_tests);
+        g_failures++;
+    }
     res_free(&got);
 }
 
@@ -539,7 +571,8 @@ static void check_scene(const scene_src *src, int integer) {
     rayset sets[] = {rays_camera(&bb),         rays_omni(&bb),
                      rays_distinct(&bb),       rays_nearby(&bb),
                      rays_zeros(&bb, integer), rays_on_splits(s, &bb, 0),
-                     rays_on_splits(s, &bb, 1), rays_intervals(&bb),
+                     rays_on_splits(s, &bb, 1), rays_intervals(&bb, 0),
+                     rays_intervals(&bb, 1),
                      rays_aimed(src, &bb, 0),  rays_aimed(src, &bb, 1),
                      rays_slack_planes(s, &bb)};
     for (size_t k = 0; k < sizeof sets / sizeof sets[0]; k++) {

@@ -1,0 +1,150 @@
+/*
+ * test_batch_route.c — where kdr_trace_batch sends a 256-ray chunk
+ * (kd_batch_scattered in core/kd_batch.c): bundles, or the interleaved walk
+ * of kd_stream.h. The answers are the same either way (test_bundle checks
+ * them), so only the route shows the rule; it is read twice: from
+ * kd_batch_scattered itself and from kdr_trav_stats.fallbacks of a
+ * kdr_trace_batch call (one per bundle-sized group the walk traced).
+ *
+ * The rule under test (docs/TRAVERSAL.md, "Where kdr_trace_batch uses
+ * it"): incoherent rays whose origins change at least every
+ * KD_STREAM_MAX_RUN rays go to the walk on any scene; runs of a shared
+ * origin (AO rays of many points) go there only on scenes of
+ * KD_STREAM_RUNS_MIN_BYTES and more; a chunk with ONE origin (stride 0, or
+ * stride 3 with every origin equal: a cone's samples of one point) stays
+ * with bundles even on such a scene, because there the walk lost.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kd_internal.h"
+#include "kd_traverse_bundle.h"
+#include "kd_tune.h"
+#include "kdray.h"
+
+#define PI 3.14159265358979323846
+
+static int g_failures;
+static uint64_t g_rng = 0x2545F4914F6CDD1Dull;
+
+static float rnd01(void) {
+    g_rng ^= g_rng << 13, g_rng ^= g_rng >> 7, g_rng ^= g_rng << 17;
+    return (float)(g_rng >> 40) * 0x1p-24f;
+}
+
+/* A soup of n small triangles in [-1, 1]^3 (sizes 0.01-0.03). */
+static float *make_soup(size_t n) {
+    float *t = malloc(n * 9 * sizeof(float));
+    for (size_t i = 0; i < n; i++) {
+        float c[3];
+        for (int k = 0; k < 3; k++)
+            c[k] = 2.0f * rnd01() - 1.0f;
+        const float size = 0.01f + 0.02f * rnd01();
+        for (int j = 0; j < 3; j++)
+            for (int k = 0; k < 3; k++)
+                t[9 * i + 3 * j + k] = c[k] + size * (2.0f * rnd01() - 1.0f);
+    }
+    return t;
+}
+
+/* A chunk of KB_CHUNK rays with directions spread over the sphere in the
+ * caller's order (a mean spread per 8 rays far above KB_SORT_SPREAD). The
+ * origins: one point for all (run = KB_CHUNK), runs of run rays sharing a
+ * point, or (run = 1) a point per ray. */
+typedef struct chunk {
+    float org[3 * KB_CHUNK], dir[3 * KB_CHUNK], tmin[KB_CHUNK], tmax[KB_CHUNK];
+    kdr_ray_batch b;
+} chunk;
+
+static void make_chunk(chunk *c, int run) {
+    float p[3] = {0};
+    for (int i = 0; i < KB_CHUNK; i++) {
+        if (i % run == 0)
+            for (int k = 0; k < 3; k++)
+                p[k] = 1.6f * rnd01() - 0.8f;
+        memcpy(c->org + 3 * i, p, sizeof p);
+        const float z = 2.0f * rnd01() - 1.0f, ph = (float)(2.0 * PI) * rnd01();
+        const float r = sqrtf(1.0f - z * z);
+        c->dir[3 * i] = r * cosf(ph);
+        c->dir[3 * i + 1] = r * sinf(ph);
+        c->dir[3 * i + 2] = z;
+        c->tmin[i] = 0.0f;
+        c->tmax[i] = INFINITY;
+    }
+    c->b = (kdr_ray_batch){KB_CHUNK, c->org, 3, c->dir, c->tmin, 1, c->tmax, 1};
+}
+
+/* Checks one chunk's route: want_walk 1 = the interleaved walk, 0 =
+ * bundles. Stride 3 unless shared (stride 0, only for run = KB_CHUNK). */
+static void check_route(const char *scene, const kdr_scene *s, const char *what, int run,
+                        int shared, int want_walk) {
+    chunk *c = malloc(sizeof *c);
+    make_chunk(c, run);
+    if (shared) c->b.org_stride = 0;
+    const int scattered = kd_batch_scattered(s, &c->b, 0, KB_CHUNK);
+    float t[KB_CHUNK], u[KB_CHUNK], v[KB_CHUNK];
+    int32_t prim[KB_CHUNK];
+    uint8_t hit[KB_CHUNK];
+    kdr_hits h = {t, prim, u, v, hit};
+    kdr_trav_stats st = {0};
+    const int rc =
+        kdr_trace_batch(s, &c->b, 0, KB_CHUNK, KDR_CLOSEST, KDR_TRAV_AUTO, &h, &st);
+    /* the walk's groups are the bundle width's (8 with AVX2, else 4) */
+    const uint64_t width = kdr_cpu_has_avx2() ? 8 : 4;
+    /* the walk route traces every group there; bundles trace KB_PROBE
+     * bundles at least before a failed probe may send the rest there */
+    const uint64_t all = KB_CHUNK / width;
+    const int fb_ok = want_walk ? st.fallbacks == all : st.fallbacks <= all - KB_PROBE;
+    size_t hits = 0;
+    for (int i = 0; i < KB_CHUNK; i++)
+        hits += prim[i] >= 0;
+    const int ok = rc == KDR_OK && scattered == want_walk && fb_ok && st.rays == KB_CHUNK;
+    printf("%-5s %-30s scattered %d, fallbacks %llu of %llu groups, %zu hits: %s\n",
+           scene, what, scattered, (unsigned long long)st.fallbacks,
+           (unsigned long long)all, hits, ok ? "ok" : "FAIL");
+    if (!ok) {
+        fprintf(stderr, "FAIL %s/%s: route %s, want %s (rc %d, rays %llu)\n", scene, what,
+                scattered ? "walk" : "bundles", want_walk ? "walk" : "bundles", rc,
+                (unsigned long long)st.rays);
+        g_failures++;
+    }
+    free(c);
+}
+
+static kdr_scene *build(size_t ntris) {
+    float *tris = make_soup(ntris);
+    kdr_scene *s = NULL;
+    if (kdr_scene_build(tris, ntris, NULL, NULL, NULL, &s) != KDR_OK) {
+        fprintf(stderr, "FAIL: building a soup of %zu triangles\n", ntris);
+        g_failures++;
+    }
+    free(tris);
+    return s;
+}
+
+int main(void) {
+    /* the large scene must reach the threshold, the small one stay below */
+    kdr_scene *big = build(200000), *small = build(20000);
+    if (!big || !small) return 1;
+    printf("scenes: big %llu bytes, small %llu bytes, threshold %zu\n",
+           (unsigned long long)big->stats.bytes, (unsigned long long)small->stats.bytes,
+           KD_STREAM_RUNS_MIN_BYTES);
+    if (big->stats.bytes < KD_STREAM_RUNS_MIN_BYTES ||
+        small->stats.bytes >= KD_STREAM_RUNS_MIN_BYTES) {
+        fprintf(stderr, "FAIL: scene sizes do not bracket KD_STREAM_RUNS_MIN_BYTES\n");
+        g_failures++;
+    }
+    check_route("big", big, "one origin, stride 3", KB_CHUNK, 0, 0);
+    check_route("big", big, "one origin, stride 0", KB_CHUNK, 1, 0);
+    check_route("big", big, "runs of 16 (AO of 16 points)", 16, 0, 1);
+    check_route("big", big, "an origin per ray", 1, 0, 1);
+    check_route("small", small, "one origin, stride 3", KB_CHUNK, 0, 0);
+    check_route("small", small, "runs of 16 (AO of 16 points)", 16, 0, 0);
+    check_route("small", small, "an origin per ray", 1, 0, 1);
+    kdr_scene_free(big);
+    kdr_scene_free(small);
+    printf("%s: %d failures\n", g_failures ? "FAILED" : "passed", g_failures);
+    return g_failures ? 1 : 0;
+}
