@@ -110,10 +110,7 @@ static void test_group4(const kdr_scene *sc, const uint32_t *ref, uint32_t left,
                         const kd_ntri_pre4 *pre4, float tmin, all_sink *s) {
     const float *rows[4];
     int32_t prims[4];
-    for (uint32_t j = 0; j < 4; j++) {
-        prims[j] = (int32_t)ref[j < left ? j : left - 1];
-        rows[j] = sc->tris + 9 * (size_t)prims[j];
-    }
+    kd_ntri_rows4(sc->tris, ref, left, prims, rows);
     f4 t, V, W, det;
     const int hits =
         kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(s->bound), &t, &V, &W, &det);

@@ -56,4 +56,15 @@ KD_AVX2 static inline void kd_ntri_load8(const float *const r[8], f8 A[3],
 #include "kd_tri_ntri_lanes.h"
 #undef KD_W
 
+/* The rows of a group of four references from a leaf list with `left`
+ * (>= 1) of them remaining: the last group repeats its final reference, so
+ * a hit found twice is kept once. prims[j] is row j's triangle. */
+static inline void kd_ntri_rows4(const float *tris, const uint32_t *ref, uint32_t left,
+                                 int32_t prims[4], const float *rows[4]) {
+    for (uint32_t j = 0; j < 4; j++) {
+        prims[j] = (int32_t)ref[j < left ? j : left - 1];
+        rows[j] = tris + 9 * (size_t)prims[j];
+    }
+}
+
 #endif /* KD_TRI_NTRI_H */

@@ -48,10 +48,7 @@ static inline int kd_walk_group4(const kdr_scene *s, const uint32_t *ref, uint32
                                  kd_walk_out *o) {
     const float *rows[4];
     int32_t prims[4];
-    for (uint32_t j = 0; j < 4; j++) {
-        prims[j] = (int32_t)ref[j < left ? j : left - 1];
-        rows[j] = s->tris + 9 * (size_t)prims[j];
-    }
+    kd_ntri_rows4(s->tris, ref, left, prims, rows);
     f4 t, V, W, det;
     const int hits =
         kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(o->t), &t, &V, &W, &det);
