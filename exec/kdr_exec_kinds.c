@@ -18,7 +18,8 @@
 /* The encoding an answer is written in: CBOR when the answer media type is
  * CBOR, else the JSON or base64 text the request asked for. */
 static kdr_encoding answer_encoding(const kdr_exec_job *j, kdr_encoding asked) {
-    return j->q->answer_media == KDR_MEDIA_CBOR ? KDR_ENCODING_CBOR : asked;
+    const kdr_media m = j->q->answer_media;
+    return m == KDR_MEDIA_CBOR || m == KDR_MEDIA_CBOR_SEQ ? KDR_ENCODING_CBOR : asked;
 }
 
 /* Result arrays plus the encoded answer's bound (protocol/ knows it exactly
@@ -144,6 +145,32 @@ static int encode_hits(kdr_exec_job *j, const kdr_hits *h, size_t n, kdr_query q
     free(normal);
     free(mesh);
     return encoded(j, rc, enc);
+}
+
+/* One streamed item's slice of hits [first, first + count): its one-shot
+ * CBOR answer, attributes included (kdr_exec_stream.c puts "first" in). */
+int kdr_exec_hits_slice(const kdr_exec_query *q, const kdr_hits *h, size_t first,
+                        size_t count, kdr_query query, unsigned fields, kdr_buf *out) {
+    kdr_hits s = {0};
+    if (query == KDR_ANY) {
+        s.hit = h->hit + first;
+    } else {
+        s.t = h->t + first;
+        s.prim = h->prim + first;
+        s.u = h->u + first;
+        s.v = h->v + first;
+    }
+    float *normal = NULL;
+    int32_t *mesh = NULL;
+    int rc = 0;
+    if (fields & KDR_FIELDS_ATTRS) rc = attrs_fill(q, s.prim, count, &normal, &mesh);
+    const kdr_hit_attrs attrs = {normal, mesh};
+    if (rc == 0)
+        rc = kdr_proto_encode_hits_attrs(&s, &attrs, count, query, fields,
+                                         KDR_ENCODING_CBOR, out);
+    free(normal);
+    free(mesh);
+    return rc;
 }
 
 /* ---- bundle ------------------------------------------------------------------ */
