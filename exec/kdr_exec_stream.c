@@ -175,5 +175,9 @@ int kdr_exec_stream_end(const kdr_exec_query *q, size_t items_sent, kdr_buf *out
         }
         stats = &sum;
     }
-    return kdr_proto_seq_end(out, r->rays, items_sent, stats);
+    const double s[3] = {r->queued_s, r->parse_s, r->trace_s};
+    uint64_t us[3];
+    for (int k = 0; k < 3; k++)
+        us[k] = s[k] > 0 ? (uint64_t)(s[k] * 1e6 + 0.5) : 0;
+    return kdr_proto_seq_end(out, r->rays, items_sent, us, stats);
 }

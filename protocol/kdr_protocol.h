@@ -393,9 +393,12 @@ int kdr_proto_seq_head(kdr_buf *out, const char *kind, size_t count, size_t item
  * is the one-shot CBOR answer of those rays alone ("count" and the arrays). */
 int kdr_proto_seq_item(kdr_buf *out, size_t first, const kdr_buf *slice);
 /* The final item after every chunk item: {"status": 200, "rays": traced,
- * "items": sent} and, when given, the cone-shadow "stats". */
+ * "items": sent, "timing": {"queue_us", "parse_us", "trace_us"}} and, when
+ * given, the cone-shadow "stats". timing_us: queue, parse, trace (what a
+ * one-shot answer's Server-Timing header says; a streamed answer's headers
+ * go out before the work is done). */
 int kdr_proto_seq_end(kdr_buf *out, uint64_t rays, size_t items,
-                      const kdr_shadow_stats *stats);
+                      const uint64_t timing_us[3], const kdr_shadow_stats *stats);
 /* The final item of a failed answer, the problem details as a map:
  * {"type": "about:blank", "title", "status", "detail"}. */
 int kdr_proto_seq_problem(kdr_buf *out, int status, const char *detail);

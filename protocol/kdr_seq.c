@@ -52,11 +52,15 @@ int kdr_proto_seq_item(kdr_buf *out, size_t first, const kdr_buf *slice) {
 }
 
 int kdr_proto_seq_end(kdr_buf *out, uint64_t rays, size_t items,
-                      const kdr_shadow_stats *stats) {
-    if (kdr_cbor_map(out, stats ? 4 : 3) || kdr_cbor_text(out, "status") ||
+                      const uint64_t timing_us[3], const kdr_shadow_stats *stats) {
+    if (kdr_cbor_map(out, stats ? 5 : 4) || kdr_cbor_text(out, "status") ||
         kdr_cbor_uint(out, 200) || kdr_cbor_text(out, "rays") ||
         kdr_cbor_uint(out, rays) || kdr_cbor_text(out, "items") ||
-        kdr_cbor_uint(out, items))
+        kdr_cbor_uint(out, items) || kdr_cbor_text(out, "timing") ||
+        kdr_cbor_map(out, 3) || kdr_cbor_text(out, "queue_us") ||
+        kdr_cbor_uint(out, timing_us[0]) || kdr_cbor_text(out, "parse_us") ||
+        kdr_cbor_uint(out, timing_us[1]) || kdr_cbor_text(out, "trace_us") ||
+        kdr_cbor_uint(out, timing_us[2]))
         return KDR_ENOMEM;
     if (!stats) return 0;
     return kdr_cbor_text(out, "stats") || kdr_cbor_map(out, 3) ||

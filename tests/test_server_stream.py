@@ -82,6 +82,8 @@ def same_as_one_shot(t, d, path, payload, what, min_items=1):
     t.check(len(chunks) >= min_items, "%s: %d chunk items" % (what, len(chunks)))
     t.eq(final.get("status"), 200, what + ": final status")
     t.eq(final.get("items"), len(chunks), what + ": final items")
+    t.eq(sorted(final.get("timing", {})), ["parse_us", "queue_us", "trace_us"],
+         what + ": timing in the final item")
     joined, at = {}, 0
     for c in chunks:
         t.eq(c["first"], at, what + ": items in order, contiguous")
