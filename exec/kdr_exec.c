@@ -247,12 +247,29 @@ static void prepare_job(kdr_exec *ex, kdr_exec_job *j) {
         j->q->on_progress(j->q->done_ctx);
 }
 
+/* Chunks below this may be claimed: all of them, or for a windowed stream
+ * those whose slot the caller has emptied (kdr_exec_stream.c). */
+static size_t claim_limit(kdr_exec_job *j) {
+    if (!j->window) return j->nchunks;
+    const size_t lim = atomic_load(&j->released) + j->window;
+    return lim < j->nchunks ? lim : j->nchunks;
+}
+
+/* Claims the next chunk; SIZE_MAX when none may be claimed now. */
+static size_t claim(kdr_exec_job *j) {
+    size_t c = atomic_load(&j->next);
+    do {
+        if (c >= claim_limit(j)) return SIZE_MAX;
+    } while (!atomic_compare_exchange_weak(&j->next, &c, c + 1));
+    return c;
+}
+
 static void drain(kdr_exec_job *j) {
     long long cpu0 = thread_cpu_ns();
     for (;;) {
         if (check_stop(j) != KDR_STOP_NONE) break;
-        size_t c = atomic_fetch_add(&j->next, 1);
-        if (c >= j->nchunks) break;
+        size_t c = claim(j);
+        if (c == SIZE_MAX) break;
         j->ops->chunk(j, c);
         atomic_fetch_add(&j->done, 1);
         if (j->chunk_done) {
@@ -366,7 +383,7 @@ static kdr_exec_job *pick(kdr_exec *ex, int *prepare) {
             *prepare = 1;
             return j;
         }
-        if (j->state == JOB_RUNNING && atomic_load(&j->next) < j->nchunks &&
+        if (j->state == JOB_RUNNING && atomic_load(&j->next) < claim_limit(j) &&
             atomic_load(&j->stop) == KDR_STOP_NONE) {
             *prepare = 0;
             return j;
@@ -439,6 +456,7 @@ static kdr_exec_job *job_new(kdr_exec_query *q, kdr_exec *ex, int *rc) {
     atomic_init(&j->core_rc, KDR_OK);
     atomic_init(&j->cpu_ns, 0);
     atomic_init(&j->stream_ready, 0);
+    atomic_init(&j->released, 0);
     memset(&q->result, 0, sizeof q->result);
     q->job = j;
     j->t_submit = kdr_exec_now();

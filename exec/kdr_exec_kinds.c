@@ -216,6 +216,8 @@ static int bundle_alloc(kdr_exec_job *j) {
     const size_t n = r->batch.n ? r->batch.n : 1;
     if (r->query == KDR_COUNT)
         return (a->nhits = malloc(n * sizeof *a->nhits)) ? 0 : KDR_ENOMEM;
+    if (j->window) /* a stream's slots (kdr_exec_stream.c) */
+        return hits_alloc(&j->k.bundle.hits, j->window * KDR_EXEC_CHUNK_RAYS, r->query);
     if (r->query != KDR_ALL) return hits_alloc(&j->k.bundle.hits, r->batch.n, r->query);
     const size_t slots = n * r->max_hits;
     a->nhits = malloc(n * sizeof *a->nhits);
@@ -227,6 +229,9 @@ static int bundle_alloc(kdr_exec_job *j) {
     return a->nhits && a->t && a->u && a->v && a->prim && j->k.bundle.offset ? 0
                                                                              : KDR_ENOMEM;
 }
+
+/* p + k, NULL staying NULL (no arithmetic on a null pointer). */
+static const float *from(const float *p, size_t k) { return p ? p + k : p; }
 
 static void bundle_chunk(kdr_exec_job *j, size_t c) {
     const kdr_bundle_request *r = &j->k.bundle.req;
@@ -243,6 +248,33 @@ static void bundle_chunk(kdr_exec_job *j, size_t c) {
         return;
     }
     kdr_trav_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE;
+    if (j->window) {
+        /* a stream's chunk: rays [first, first + count) as a batch of their
+         * own into slot c % window (answers are per ray, so the same) */
+        const kdr_ray_batch *b = &r->batch;
+        const kdr_ray_batch view = {count,
+                                    from(b->org, b->org_stride * first),
+                                    b->org_stride,
+                                    from(b->dir, 3 * first),
+                                    from(b->tmin, b->tmin_stride * first),
+                                    b->tmin_stride,
+                                    from(b->tmax, b->tmax_stride * first),
+                                    b->tmax_stride};
+        const kdr_hits *h = &j->k.bundle.hits;
+        const size_t at = (c % j->window) * KDR_EXEC_CHUNK_RAYS;
+        kdr_hits slot = {0};
+        if (r->query == KDR_ANY) {
+            slot.hit = h->hit + at;
+        } else {
+            slot.t = h->t + at;
+            slot.prim = h->prim + at;
+            slot.u = h->u + at;
+            slot.v = h->v + at;
+        }
+        kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &view, 0, count, r->query, mode,
+                                            &slot, NULL));
+        return;
+    }
     kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &r->batch, first, count, r->query,
                                         mode, &j->k.bundle.hits, NULL));
 }

@@ -33,7 +33,9 @@ int kdr_exec_stream_check(kdr_exec_job *j) {
     case KDR_EXEC_BUNDLE: {
         const kdr_bundle_request *r = &j->k.bundle.req;
         if (r->query != KDR_CLOSEST && r->query != KDR_ANY) break;
-        const size_t n = r->batch.n, per = KDR_EXEC_CHUNK_RAYS;
+        /* a window of chunk slots, not the batch's arrays */
+        j->window = KDR_EXEC_STREAM_WINDOW;
+        const size_t n = j->window * KDR_EXEC_CHUNK_RAYS, per = KDR_EXEC_CHUNK_RAYS;
         j->answer_estimate =
             (r->query == KDR_ANY ? n : 16 * n) + per * 24 +
             kdr_proto_hits_answer_max(per, r->query, r->fields, KDR_ENCODING_CBOR) + 64;
@@ -131,6 +133,17 @@ int kdr_exec_stream_head(const kdr_exec_query *q, kdr_buf *out) {
     return kdr_proto_seq_head(out, kind_name(q->kind), count, kdr_exec_stream_items(q));
 }
 
+/* Item i - 1 is encoded: its slot may take chunk i - 1 + window. Workers
+ * idle for want of a claimable chunk are woken (the executor's lock is
+ * taken for that only: once per item). */
+static void release_slot(kdr_exec_job *j, size_t taken) {
+    atomic_store(&j->released, taken);
+    if (taken + j->window > j->nchunks) return; /* no chunk left to open */
+    pthread_mutex_lock(&j->ex->lock);
+    pthread_cond_broadcast(&j->ex->work);
+    pthread_mutex_unlock(&j->ex->lock);
+}
+
 int kdr_exec_stream_item(const kdr_exec_query *q, size_t i, kdr_buf *out) {
     const kdr_exec_job *j = q->job;
     kdr_buf slice;
@@ -140,7 +153,8 @@ int kdr_exec_stream_item(const kdr_exec_query *q, size_t i, kdr_buf *out) {
     if (q->kind == KDR_EXEC_BUNDLE) {
         const kdr_bundle_request *r = &j->k.bundle.req;
         kdr_exec_chunk_range(r->batch.n, KDR_EXEC_CHUNK_RAYS, i, &first, &count);
-        rc = kdr_exec_hits_slice(q, &j->k.bundle.hits, first, count, r->query, r->fields,
+        const size_t at = j->window ? (i % j->window) * KDR_EXEC_CHUNK_RAYS : first;
+        rc = kdr_exec_hits_slice(q, &j->k.bundle.hits, at, count, r->query, r->fields,
                                  &slice);
     } else if (q->kind == KDR_EXEC_FRUSTUM) {
         const kdr_frustum_request *r = &j->k.frustum.req;
@@ -158,6 +172,7 @@ int kdr_exec_stream_item(const kdr_exec_query *q, size_t i, kdr_buf *out) {
     }
     if (rc == 0) rc = kdr_proto_seq_item(out, first, &slice);
     kdr_buf_free(&slice);
+    if (j->window && rc == 0) release_slot(q->job, i + 1);
     return rc;
 }
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """test_server_stream.py - streamed answers (Accept: application/cbor-seq).
 
-    test_server_stream.py KDRAYD CLIENTS_DIR
+    test_server_stream.py KDRAYD CLIENTS_DIR [memory]
 
 Needs Debian's python3-cbor2 (run with /usr/bin/python3): a missing module
 is a failure, not a skip. Starts kdrayd on the bundled default scene and
@@ -12,7 +12,12 @@ cone-shadow (with stats); that a request error is still an ordinary 400
 problem+json and a query that cannot stream a 406; that a deadline firing
 mid-stream ends the sequence with a 503 problem item after chunk items were
 sent (and the Python client raises); and that a client hanging up
-mid-stream cancels its query (kdray_cancellations_total).
+mid-stream cancels its query (kdray_cancellations_total); that a bundle
+stream reuses its window of result slots (answers unchanged) and that a
+client that stops reading stalls its query with no worker inside. With
+"memory" (ctest server_stream_memory, normal build only: the sanitizers
+change RSS): a streamed 1M-ray bundle's peak RSS growth is at least 24 MiB
+below the one-piece answer's.
 """
 
 import http.client
@@ -30,8 +35,8 @@ import test_server_lib as lib  # noqa: E402
 KDRAYD, CLIENTS = sys.argv[1], sys.argv[2]
 lib.add_client_path(CLIENTS)
 import cbor2  # noqa: E402  (python3-cbor2: required, see above)
-from kdray_client import (CBOR, CBOR_SEQ, Client, KdrayError, cbor_body,  # noqa: E402
-                          random_directions, read_cbor_seq)
+from kdray_client import (CBOR, CBOR_SEQ, Client, KdrayError,  # noqa: E402
+                          _f32_array, cbor_body, random_directions, read_cbor_seq)
 
 SCENE = "default"
 PATH = "/v1/scenes/%s/" % SCENE
@@ -133,6 +138,69 @@ def test_equal_to_one_shot(t, d):
          c.frustum(SCENE, cam["eye"], cam["target"], 333, 201), "client frustum")
 
 
+def test_window_wraps(t, d):
+    """A bundle stream of more chunks than its window of result slots
+    (exec: KDR_EXEC_STREAM_WINDOW = 16 chunks): slots are reused, answers
+    unchanged."""
+    c = Client(d.url, binary=True)
+    org, dirs = lib.rays_into_box(c.scene(SCENE)["bounds"], 100000, seed=9)
+    for q in ("closest", "any"):
+        same_as_one_shot(t, d, PATH + "bundle",
+                         {"origins": org, "directions": dirs, "query": q,
+                          "tmax": [1e30 if i % 7 else 2.5 for i in range(100000)]},
+                         "100K-ray bundle " + q, min_items=25)
+
+
+def test_slow_reader_holds_workers(t, d):
+    """A client that stops reading a bundle stream stalls its query once the
+    window of result slots is full: the query stays running with no worker
+    inside (its memory is the window, not the batch); reading on finishes
+    it."""
+    c = Client(d.url, binary=True)
+    n = 1 << 20
+    org, dirs = lib.rays_into_box(c.scene(SCENE)["bounds"], 4096, seed=11)
+    body = cbor_body({"origins": org[:3], "directions": dirs * (n // 4096)})
+    u = urllib.parse.urlsplit(d.url)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 32768)
+    sock.settimeout(300)
+    sock.connect((u.hostname, u.port))
+    sock.sendall(("POST %sbundle HTTP/1.1\r\nHost: x\r\nContent-Type: %s\r\n"
+                  "Accept: %s\r\nContent-Length: %d\r\n\r\n"
+                  % (PATH, CBOR, CBOR_SEQ, len(body))).encode() + body)
+    got = sock.recv(4096)
+    t.check(got.startswith(b"HTTP/1.1 200"), "streaming began: %r" % got[:80])
+    stalled, deadline = False, time.time() + 120
+    while time.time() < deadline and not stalled:
+        m = c.metrics()
+        stalled = (lib.metric(m, "kdray_queries", state="running") == 1 and
+                   lib.metric(m, "kdray_workers_busy") == 0)
+        time.sleep(0.1)
+    t.check(stalled, "a stalled reader leaves its query running with no worker inside")
+    # the answer is still whole once read
+    data = got
+    while True:
+        more = sock.recv(1 << 20)
+        if not more:
+            break
+        data += more
+        if data.endswith(b"0\r\n\r\n"):
+            break
+    sock.close()
+    head, _, chunked = data.partition(b"\r\n\r\n")
+    body_out, rest = b"", chunked
+    while rest:
+        size, _, rest = rest.partition(b"\r\n")
+        k = int(size, 16)
+        if k == 0:
+            break
+        body_out += rest[:k]
+        rest = rest[k + 2:]
+    items = items_of(body_out)
+    t.eq(items[-1].get("status"), 200, "the stalled stream ends whole")
+    t.eq(sum(i.get("count", 0) for i in items[1:-1]), n, "every ray answered")
+
+
 def test_errors_before_streaming(t, d):
     st, h, body = post(d.url, PATH + "bundle", {"origins": [0, 0, 0],
                                                 "directions": [1, 2]}, CBOR_SEQ)
@@ -228,11 +296,52 @@ def test_reader_of_cut_sequence(t, d):
         t.eq(err.status, 0, "incomplete: status 0")
 
 
+def vm_mib(pid, field):
+    with open("/proc/%d/status" % pid) as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024.0
+    raise RuntimeError("no %s in /proc/%d/status" % (field, pid))
+
+
+def test_peak_rss(t):
+    """A 1M-ray closest bundle (CBOR, one origin: a 12 MiB body) raises
+    kdrayd's peak RSS by its body, its result arrays (16 MiB) and its
+    encoded answer (16 MiB) in one piece; streamed, by its body and a window
+    of 16 chunks (1 MiB). Each in a fresh daemon (VmHWM over VmRSS)."""
+    n = 1 << 20
+    growth = {}
+    for accept in (CBOR, CBOR_SEQ):
+        d = lib.Daemon(KDRAYD, ["--threads", "2"])
+        try:
+            c = Client(d.url, binary=True)
+            _, dirs = lib.rays_into_box(c.scene(SCENE)["bounds"], 4096, seed=4)
+            payload = {"origins": [0.0, 3.0, 0.0],
+                       "directions": _f32_array(dirs * (n // 4096))}
+            base = vm_mib(d.proc.pid, "VmRSS")
+            st, _, body = post(d.url, PATH + "bundle", payload, accept)
+            t.eq(st, 200, accept + ": status")
+            growth[accept] = vm_mib(d.proc.pid, "VmHWM") - base
+        finally:
+            d.stop()
+    print("peak RSS growth, 1M-ray closest bundle: one piece %.1f MiB, streamed "
+          "%.1f MiB" % (growth[CBOR], growth[CBOR_SEQ]))
+    t.check(growth[CBOR_SEQ] + 24 <= growth[CBOR],
+            "streamed saves the result arrays and the answer (>= 24 of 32 MiB): %r"
+            % growth)
+
+
 def main():
+    if sys.argv[3:] == ["memory"]:
+        t = lib.Runner()
+        t.run(test_peak_rss)
+        return t.finish()
     t = lib.Runner()
     d = lib.Daemon(KDRAYD, ["--threads", "2", "--max-rays", "67108864"])
     try:
         t.run(test_equal_to_one_shot, d)
+        t.run(test_window_wraps, d)
+        t.run(test_slow_reader_holds_workers, d)
         t.run(test_errors_before_streaming, d)
         t.run(test_deadline_mid_stream, d)
         t.run(test_hang_up_cancels, d)
