@@ -585,6 +585,18 @@ def _vm(pid, key):
     return float("nan")
 
 
+def _cpu_ms(pid):
+    """CPU time of every thread of pid so far, ms (schedstat: ns)."""
+    total = 0
+    for tid in os.listdir("/proc/%d/task" % pid):
+        try:
+            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
+                total += int(f.read().split()[0])
+        except OSError:
+            pass  # a thread that just ended
+    return total / 1e6
+
+
 def _post_streamed(conn, path, body, cbor2):
     """One CBOR POST asking for a streamed answer (application/cbor-seq):
     (status, seconds to the first chunk item, total seconds, answer bytes,
@@ -633,16 +645,18 @@ def stream_table(args, scene):
     peak RSS is its own: first = time to the answer's first data (one piece:
     its headers, sent with the finished answer; streamed: the first chunk
     item), total = to the last byte, trace from kdrayd (Server-Timing, or
-    the final item's timing), tr+codec = 1 - trace / total, peak = VmHWM -
-    VmRSS before the requests (MiB)."""
+    the final item's timing), tr+codec = 1 - trace / total, cpu = kdrayd's
+    CPU time for that request, all threads (on a shared box wall times move
+    with the neighbours' load; CPU time does not), peak = VmHWM - VmRSS
+    before the requests (MiB)."""
     import cbor2  # Debian python3-cbor2; only this table needs it
     n, reps = args.large, args.large_repeat
     print("\n%d-ray requests in CBOR, one piece vs streamed (Accept: application/"
           "cbor-seq), %d worker threads, best of %d, fresh kdrayd per row"
           % (n, args.threads, reps))
-    print("%-15s %-8s %8s %8s %8s %8s %8s %8s" % (
+    print("%-15s %-8s %8s %8s %8s %8s %8s %8s %8s" % (
         "request", "answer", "ans MiB", "first ms", "total ms", "trace ms", "tr+codec",
-        "peak MiB"))
+        "cpu ms", "peak MiB"))
     for label, ep, kind, payload in large_payloads(scene["bounds"], n):
         body = cbor_body(payload)
         for mode in ("one-piece", "streamed"):
@@ -654,6 +668,7 @@ def stream_table(args, scene):
                 best = None
                 path = "/v1/scenes/default/" + ep
                 for _ in range(reps):
+                    cpu0 = _cpu_ms(proc.pid)
                     if mode == "streamed":
                         st, first, total, nbytes, trace = _post_streamed(
                             conn, path, body, cbor2)
@@ -672,17 +687,18 @@ def stream_table(args, scene):
                         trace = float(m.group(1)) if m else float("nan")
                     if st != 200:
                         raise SystemExit("%s %s: HTTP %d" % (label, mode, st))
+                    cpu = _cpu_ms(proc.pid) - cpu0
                     if best is None or total < best[1]:
-                        best = (first, total, nbytes, trace)
+                        best = (first, total, nbytes, trace, cpu)
                 peak = _vm(proc.pid, "VmHWM") - base
                 conn.close()
             finally:
                 proc.terminate()
                 proc.wait(60)
-            first, total, nbytes, trace = best
-            print("%-15s %-8s %8.2f %8.1f %8.1f %8.1f %7.0f%% %8.1f" % (
+            first, total, nbytes, trace, cpu = best
+            print("%-15s %-8s %8.2f %8.1f %8.1f %8.1f %7.0f%% %8.1f %8.1f" % (
                 label, mode, nbytes / 2**20, first * 1e3, total * 1e3, trace,
-                100 * (1 - trace / (total * 1e3)), peak), flush=True)
+                100 * (1 - trace / (total * 1e3)), cpu, peak), flush=True)
 
 
 def main():
