@@ -14,7 +14,9 @@ mid-stream ends the sequence with a 503 problem item after chunk items were
 sent (and the Python client raises); and that a client hanging up
 mid-stream cancels its query (kdray_cancellations_total); that a bundle
 stream reuses its window of result slots (answers unchanged) and that a
-client that stops reading stalls its query with no worker inside. With
+client that stops reading stalls its query with no worker inside, still
+stopped by its deadline (a final 503 item once read) and by a SIGTERM
+(exit 0). With
 "memory" (ctest server_stream_memory, normal build only: the sanitizers
 change RSS): a streamed 1M-ray bundle's peak RSS growth is at least 24 MiB
 below the one-piece answer's.
@@ -151,25 +153,90 @@ def test_window_wraps(t, d):
                          "100K-ray bundle " + q, min_items=25)
 
 
+def open_stalled_stream(t, url, payload, endpoint="bundle"):
+    """A socket with a streamed query sent whose answer it does not read
+    (a 32 KiB receive buffer): the stream stalls once the buffers fill."""
+    body = cbor_body(payload)
+    u = urllib.parse.urlsplit(url)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 32768)
+    sock.settimeout(300)
+    sock.connect((u.hostname, u.port))
+    sock.sendall(("POST %s%s HTTP/1.1\r\nHost: x\r\nContent-Type: %s\r\n"
+                  "Accept: %s\r\nContent-Length: %d\r\n\r\n"
+                  % (PATH, endpoint, CBOR, CBOR_SEQ, len(body))).encode() + body)
+    got = sock.recv(4096)
+    t.check(got.startswith(b"HTTP/1.1 200"), "streaming began: %r" % got[:80])
+    return sock, got
+
+
+def read_chunked(sock, got):
+    """The rest of a chunked answer, de-chunked."""
+    data = got
+    while not data.endswith(b"0\r\n\r\n"):
+        more = sock.recv(1 << 20)
+        if not more:
+            break
+        data += more
+    sock.close()
+    _, _, rest = data.partition(b"\r\n\r\n")
+    out = b""
+    while rest:
+        size, _, rest = rest.partition(b"\r\n")
+        k = int(size, 16)
+        if k == 0:
+            break
+        out += rest[:k]
+        rest = rest[k + 2:]
+    return out
+
+
+def big_bundle(c, n=1 << 20, **extra):
+    _, dirs = lib.rays_into_box(c.scene(SCENE)["bounds"], 4096, seed=11)
+    return dict({"origins": [0.0, 3.0, 0.0],
+                 "directions": _f32_array(dirs * (n // 4096))}, **extra)
+
+
+def test_stalled_stream_deadline(t, d):
+    """A stalled bundle stream (window full, no worker inside) still stops
+    at its deadline: read on, the client gets the traced items and a final
+    503 deadline item."""
+    c = Client(d.url, binary=True)
+    sock, got = open_stalled_stream(t, d.url, big_bundle(c, deadline_ms=1500))
+    time.sleep(2.5)
+    items = items_of(read_chunked(sock, got))
+    t.check(len(items) >= 3, "head, items, final: %d items" % len(items))
+    t.eq(items[-1].get("status"), 503, "final item: 503")
+    t.check("deadline" in items[-1].get("detail", ""), "deadline: %r" % items[-1])
+    t.check(sum(i.get("count", 0) for i in items[1:-1]) < 1 << 20,
+            "stopped before the end")
+
+
+def test_shutdown_with_stalled_stream(t):
+    """SIGTERM while a stream stalls: the daemon stops its query and exits
+    0 (the grace period, then the executor's shutdown)."""
+    d = lib.Daemon(KDRAYD, ["--threads", "2", "--shutdown-grace-s", "1"])
+    try:
+        c = Client(d.url, binary=True)
+        sock, _ = open_stalled_stream(t, d.url, big_bundle(c))
+        time.sleep(0.5)
+        t0 = time.time()
+        d.signal()
+        rc = d.wait(60)
+        t.eq(rc, 0, "exit status")
+        t.check(time.time() - t0 < 30, "exited in %.1f s" % (time.time() - t0))
+        sock.close()
+    finally:
+        d.stop()
+
+
 def test_slow_reader_holds_workers(t, d):
     """A client that stops reading a bundle stream stalls its query once the
     window of result slots is full: the query stays running with no worker
     inside (its memory is the window, not the batch); reading on finishes
     it."""
     c = Client(d.url, binary=True)
-    n = 1 << 20
-    org, dirs = lib.rays_into_box(c.scene(SCENE)["bounds"], 4096, seed=11)
-    body = cbor_body({"origins": org[:3], "directions": dirs * (n // 4096)})
-    u = urllib.parse.urlsplit(d.url)
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 32768)
-    sock.settimeout(300)
-    sock.connect((u.hostname, u.port))
-    sock.sendall(("POST %sbundle HTTP/1.1\r\nHost: x\r\nContent-Type: %s\r\n"
-                  "Accept: %s\r\nContent-Length: %d\r\n\r\n"
-                  % (PATH, CBOR, CBOR_SEQ, len(body))).encode() + body)
-    got = sock.recv(4096)
-    t.check(got.startswith(b"HTTP/1.1 200"), "streaming began: %r" % got[:80])
+    sock, got = open_stalled_stream(t, d.url, big_bundle(c))
     stalled, deadline = False, time.time() + 120
     while time.time() < deadline and not stalled:
         m = c.metrics()
@@ -177,28 +244,9 @@ def test_slow_reader_holds_workers(t, d):
                    lib.metric(m, "kdray_workers_busy") == 0)
         time.sleep(0.1)
     t.check(stalled, "a stalled reader leaves its query running with no worker inside")
-    # the answer is still whole once read
-    data = got
-    while True:
-        more = sock.recv(1 << 20)
-        if not more:
-            break
-        data += more
-        if data.endswith(b"0\r\n\r\n"):
-            break
-    sock.close()
-    head, _, chunked = data.partition(b"\r\n\r\n")
-    body_out, rest = b"", chunked
-    while rest:
-        size, _, rest = rest.partition(b"\r\n")
-        k = int(size, 16)
-        if k == 0:
-            break
-        body_out += rest[:k]
-        rest = rest[k + 2:]
-    items = items_of(body_out)
+    items = items_of(read_chunked(sock, got))
     t.eq(items[-1].get("status"), 200, "the stalled stream ends whole")
-    t.eq(sum(i.get("count", 0) for i in items[1:-1]), n, "every ray answered")
+    t.eq(sum(i.get("count", 0) for i in items[1:-1]), 1 << 20, "every ray answered")
 
 
 def test_errors_before_streaming(t, d):
@@ -342,6 +390,7 @@ def main():
         t.run(test_equal_to_one_shot, d)
         t.run(test_window_wraps, d)
         t.run(test_slow_reader_holds_workers, d)
+        t.run(test_stalled_stream_deadline, d)
         t.run(test_errors_before_streaming, d)
         t.run(test_deadline_mid_stream, d)
         t.run(test_hang_up_cancels, d)
@@ -349,6 +398,7 @@ def main():
     finally:
         rc = d.stop()
     t.eq(rc, 0, "kdrayd exit status")
+    t.run(test_shutdown_with_stalled_stream)
     return t.finish()
 
 
