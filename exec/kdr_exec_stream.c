@@ -34,7 +34,8 @@ int kdr_exec_stream_check(kdr_exec_job *j) {
         const kdr_bundle_request *r = &j->k.bundle.req;
         if (r->query != KDR_CLOSEST && r->query != KDR_ANY) break;
         /* a window of chunk slots, not the batch's arrays */
-        j->window = KDR_EXEC_STREAM_WINDOW;
+        j->window =
+            j->nchunks < KDR_EXEC_STREAM_WINDOW ? j->nchunks : KDR_EXEC_STREAM_WINDOW;
         const size_t n = j->window * KDR_EXEC_CHUNK_RAYS, per = KDR_EXEC_CHUNK_RAYS;
         j->answer_estimate =
             (r->query == KDR_ANY ? n : 16 * n) + per * 24 +
