@@ -9,9 +9,13 @@
  * pixels, which is how the answer's arrays are laid out). Readiness is
  * read from the per-chunk flags the workers set (acquire, pairing with
  * their release), so the caller reads each item's output only after every
- * chunk that wrote it is done. The result arrays are the whole batch's,
- * allocated at the start as for a one-shot answer; what streaming saves is
- * the one-shot encoded answer (as large again) and the wait for it.
+ * chunk that wrote it is done. No one-shot answer is encoded (for hits it
+ * is as large as the result arrays). A bundle stream's result arrays are a
+ * window of chunk slots (chunk c in slot c % window): the scheduler opens
+ * chunk c only once item c - window has been taken (release_slot), so a
+ * reader that stops stalls the query instead of growing its memory.
+ * Frustum and cone-shadow streams keep the batch's arrays: the core writes
+ * frustum pixels by image index, and visibilities are small.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -27,8 +31,8 @@ static size_t frustum_tiles_x(const kdr_frustum_request *r) {
 
 int kdr_exec_stream_check(kdr_exec_job *j) {
     const kdr_exec_query *q = j->q;
-    /* an answer's result arrays (as for one shot) plus one item's bound,
-     * the only encoded bytes held at a time */
+    /* the result arrays (a bundle's: its window of slots) plus one item's
+     * bound, the only encoded bytes held at a time */
     switch (q->kind) {
     case KDR_EXEC_BUNDLE: {
         const kdr_bundle_request *r = &j->k.bundle.req;
