@@ -29,6 +29,14 @@ the answer's transfer). "tr+codec" = 1 - trace / HTTP time: the share of
 that one request spent on transport and codecs, which neighbours' load
 cannot skew the way it skews two runs at different moments. 0 skips them.
 
+    bench_service.py KDRAYD KDRAY_TRACE --stream-only [--large N] [--large-repeat R]
+
+gives the large requests in CBOR only, answered in one piece and streamed
+(Accept: application/cbor-seq: chunk items sent while later chunks trace),
+each in a fresh kdrayd: time to the answer's first data, total time,
+kdrayd's trace time and the transport + codecs share, and kdrayd's peak RSS
+growth (VmHWM over VmRSS before the requests). Needs python3-cbor2.
+
     bench_service.py KDRAYD KDRAY_TRACE --soak 60 [--soak-only]
 
 adds a soak run (the issue's "zero errors and no growth in memory under a
@@ -568,6 +576,131 @@ def large_table(args, url, scene, tmp):
     conn.close()
 
 
+def _vm(pid, key):
+    """A /proc/PID/status line's value in MiB (VmRSS, VmHWM)."""
+    with open("/proc/%d/status" % pid) as f:
+        for line in f:
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _cpu_ms(pid):
+    """CPU time of every thread of pid so far, ms (schedstat: ns)."""
+    total = 0
+    for tid in os.listdir("/proc/%d/task" % pid):
+        try:
+            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
+                total += int(f.read().split()[0])
+        except OSError:
+            pass  # a thread that just ended
+    return total / 1e6
+
+
+def _post_streamed(conn, path, body, cbor2):
+    """One CBOR POST asking for a streamed answer (application/cbor-seq):
+    (status, seconds to the first chunk item, total seconds, answer bytes,
+    trace ms from the final item's timing). Items are decoded as they come
+    (typed arrays stay bytes), as a client consuming them would."""
+    t0 = time.perf_counter()
+    conn.request("POST", path, body, {"Content-Type": "application/cbor",
+                                      "Accept": "application/cbor-seq"})
+    resp = conn.getresponse()
+    if resp.status != 200:
+        resp.read()
+        return resp.status, 0, 0, 0, 0
+    counted = _Counting(resp)
+    dec = cbor2.CBORDecoder(counted)
+    first, final = None, None
+    head = dec.decode()
+    for _ in range(head["items"]):
+        dec.decode()
+        if first is None:
+            first = time.perf_counter() - t0
+    final = dec.decode()
+    total = time.perf_counter() - t0
+    if resp.read(1):
+        raise SystemExit("streamed answer: bytes after the final item")
+    if final.get("status") != 200:
+        raise SystemExit("streamed answer failed: %r" % final)
+    return 200, first if first is not None else total, total, counted.n, \
+        final["timing"]["trace_us"] / 1e3
+
+
+class _Counting:
+    """A file-like that counts the bytes read through it."""
+
+    def __init__(self, fp):
+        self.fp, self.n = fp, 0
+
+    def read(self, k=-1):
+        b = self.fp.read(k)
+        self.n += len(b)
+        return b
+
+
+def stream_table(args, scene):
+    """Each large request in CBOR, answered in one piece (application/cbor)
+    and streamed (application/cbor-seq), each in a fresh kdrayd so that its
+    peak RSS is its own: first = time to the answer's first data (one piece:
+    its headers, sent with the finished answer; streamed: the first chunk
+    item), total = to the last byte, trace from kdrayd (Server-Timing, or
+    the final item's timing), tr+codec = 1 - trace / total, cpu = kdrayd's
+    CPU time for that request, all threads (on a shared box wall times move
+    with the neighbours' load; CPU time does not), peak = VmHWM - VmRSS
+    before the requests (MiB)."""
+    import cbor2  # Debian python3-cbor2; only this table needs it
+    n, reps = args.large, args.large_repeat
+    print("\n%d-ray requests in CBOR, one piece vs streamed (Accept: application/"
+          "cbor-seq), %d worker threads, best of %d, fresh kdrayd per row"
+          % (n, args.threads, reps))
+    print("%-15s %-8s %8s %8s %8s %8s %8s %8s %8s" % (
+        "request", "answer", "ans MiB", "first ms", "total ms", "trace ms", "tr+codec",
+        "cpu ms", "peak MiB"))
+    for label, ep, kind, payload in large_payloads(scene["bounds"], n):
+        body = cbor_body(payload)
+        for mode in ("one-piece", "streamed"):
+            proc, url = start_daemon(args.kdrayd, args.scene, args.threads)
+            try:
+                base = _vm(proc.pid, "VmRSS")
+                host, port = url.split("//")[1].split(":")
+                conn = http.client.HTTPConnection(host, int(port), timeout=600)
+                best = None
+                path = "/v1/scenes/default/" + ep
+                for _ in range(reps):
+                    cpu0 = _cpu_ms(proc.pid)
+                    if mode == "streamed":
+                        st, first, total, nbytes, trace = _post_streamed(
+                            conn, path, body, cbor2)
+                    else:
+                        t0 = time.perf_counter()
+                        conn.request("POST", path, body,
+                                     {"Content-Type": "application/cbor",
+                                      "Accept": "application/cbor"})
+                        resp = conn.getresponse()
+                        first = time.perf_counter() - t0
+                        data = resp.read()
+                        total = time.perf_counter() - t0
+                        st, nbytes = resp.status, len(data)
+                        m = re.search(r"trace;dur=([\d.]+)",
+                                      resp.getheader("Server-Timing") or "")
+                        trace = float(m.group(1)) if m else float("nan")
+                    if st != 200:
+                        raise SystemExit("%s %s: HTTP %d" % (label, mode, st))
+                    cpu = _cpu_ms(proc.pid) - cpu0
+                    if best is None or total < best[1]:
+                        best = (first, total, nbytes, trace, cpu)
+                peak = _vm(proc.pid, "VmHWM") - base
+                conn.close()
+            finally:
+                proc.terminate()
+                proc.wait(60)
+            first, total, nbytes, trace, cpu = best
+            print("%-15s %-8s %8.2f %8.1f %8.1f %8.1f %7.0f%% %8.1f %8.1f" % (
+                label, mode, nbytes / 2**20, first * 1e3, total * 1e3, trace,
+                100 * (1 - trace / (total * 1e3)), cpu, peak), flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("kdrayd")
@@ -585,10 +718,25 @@ def main():
                     help="only the large-request rows")
     ap.add_argument("--large-repeat", type=int, default=3, metavar="R",
                     help="requests per large row, best kept")
+    ap.add_argument("--stream-only", action="store_true",
+                    help="only the large requests in CBOR, one piece vs streamed "
+                    "(application/cbor-seq), with time to first data and peak RSS")
     args = ap.parse_args()
     if not shutil.which("wrk"):
         raise SystemExit("wrk is not installed")
     t_start = time.time()
+    if args.stream_only:
+        proc, url = start_daemon(args.kdrayd, args.scene, args.threads)
+        try:
+            scene = Client(url).scene("default")
+        finally:
+            proc.terminate()
+            proc.wait(60)
+        print("kdrayd: scene default, %d triangles, %d threads, loopback"
+              % (scene["triangles"], args.threads))
+        stream_table(args, scene)
+        print("bench_service: %.1f s" % (time.time() - t_start))
+        return
     proc, url = start_daemon(args.kdrayd, args.scene, args.threads)
     tmp = tempfile.mkdtemp(prefix="kdray-bench-")
     try:

@@ -29,6 +29,8 @@ As a command (see --help):
     kdray_client.py frustum --eye 0,0,5 --target 0,0,0 --width 320 --height 240 \\
         --pgm depth.pgm
     kdray_client.py --binary bundle --random 100000 --fields t
+    kdray_client.py --stream frustum --eye 0,0,5 --target 0,0,0 --width 1024 \\
+        --height 1024   # the answer streamed while later chunks trace
 """
 
 import argparse
@@ -46,6 +48,7 @@ import urllib.request
 DEFAULT_URL = "http://127.0.0.1:8080"
 DEFAULT_TIMEOUT_S = 120.0
 CBOR = "application/cbor"
+CBOR_SEQ = "application/cbor-seq"  # RFC 8742: a streamed answer's items
 JSON = "application/json"
 # RFC 8746 typed-array tags: element type and the array typecode holding it
 TYPED_ARRAYS = {85: "f", 78: "i", 64: "B"}  # float32 LE, int32 LE, uint8
@@ -171,15 +174,91 @@ def decode_cbor(data):
     return _cbor2().loads(data, tag_hook=_typed_hook)
 
 
+def read_cbor_seq(fp):
+    """The items of an application/cbor-seq body read from the file-like fp,
+    one at a time as they arrive (typed arrays decoded to lists). Stops at
+    the end of fp; a cut item raises the decoder's EOFError."""
+    cbor2 = _cbor2()
+    decoder = cbor2.CBORDecoder(fp, tag_hook=_typed_hook)
+    while True:
+        first = fp.read(1)
+        if not first:
+            return
+        # the byte read to see the end is the item's first: decode from it
+        decoder.fp = _Prefixed(first, fp)
+        yield decoder.decode()
+
+
+class _Prefixed:
+    """fp with bytes put back in front of it (for read_cbor_seq)."""
+
+    def __init__(self, prefix, fp):
+        self.prefix, self.fp = prefix, fp
+
+    def read(self, n=-1):
+        if not self.prefix:
+            return self.fp.read(n)
+        head, self.prefix = self.prefix[:n], self.prefix[n:]
+        if len(head) < n:
+            head += self.fp.read(n - len(head))
+        return head
+
+
+def stream_items(items):
+    """Checks a streamed answer's items (head, chunk items, final item) and
+    yields them: the head first, then each chunk item ({"first", "count",
+    arrays} of rays first..first+count-1), then the final {"status": 200,
+    ...} item. A final problem item raises KdrayError with it, after the
+    chunks before it were yielded; a sequence without its final item raises
+    KdrayError(0, ...): the answer is incomplete."""
+    items = iter(items)
+    head = next(items, None)
+    if not isinstance(head, dict) or "kind" not in head:
+        raise KdrayError(0, "streamed answer: no head item")
+    yield head
+    for item in items:
+        if isinstance(item, dict) and "status" in item:
+            if item["status"] != 200:
+                raise KdrayError(item["status"], item)
+            yield item
+            return
+        yield item
+    raise KdrayError(0, "streamed answer cut before its final item")
+
+
+def assemble_stream(items):
+    """The one-shot answer from a streamed answer's items: the chunk items'
+    arrays appended in order, "count" from the head, the cone-shadow "stats"
+    from the final item."""
+    answer, final, count = {}, None, None
+    for item in stream_items(items):
+        if "kind" in item:
+            count = item["count"]
+        elif "status" in item:
+            final = item
+        else:
+            for key, value in item.items():
+                if key not in ("first", "count"):
+                    answer.setdefault(key, []).extend(value)
+    answer["count"] = count
+    if final and "stats" in final:
+        answer["stats"] = final["stats"]
+    return answer
+
+
 class Client:
     """One kdrayd; every method is one HTTP request (thread-safe). binary:
-    query bodies and answers in CBOR instead of JSON."""
+    query bodies and answers in CBOR instead of JSON. stream: bundle,
+    cone-shadow and frustum answers streamed (application/cbor-seq, chunk by
+    chunk while later chunks trace) and put together (implies binary)."""
 
-    def __init__(self, url=DEFAULT_URL, timeout=DEFAULT_TIMEOUT_S, binary=False):
+    def __init__(self, url=DEFAULT_URL, timeout=DEFAULT_TIMEOUT_S, binary=False,
+                 stream=False):
         self.url = url.rstrip("/")
         self.timeout = timeout
-        self.binary = binary
-        if binary:
+        self.binary = binary or stream
+        self.stream = stream
+        if self.binary:
             _cbor2()  # fail now, not at the first query
 
     def request(self, method, path, body=None, content_type="application/json",
@@ -222,6 +301,42 @@ class Client:
             retry = hdrs.get("retry-after", "")
             raise KdrayError(status, parsed, int(retry) if retry.isdigit() else None)
         return parsed
+
+    def stream_query(self, path, payload):
+        """POSTs a query (CBOR) asking for a streamed answer and yields its
+        items as they arrive (see stream_items: head, chunk items, final
+        item). An error answer before streaming began raises KdrayError with
+        its problem, as call() does; so does a final problem item."""
+        req = urllib.request.Request(
+            self.url + path, data=cbor_body(payload), method="POST",
+            headers={"Content-Type": CBOR, "Accept": CBOR_SEQ})
+        try:
+            resp = urllib.request.urlopen(req, timeout=self.timeout)
+        except urllib.error.HTTPError as err:
+            with err:
+                data = err.read()
+                try:
+                    problem = json.loads(data)
+                except ValueError:
+                    problem = data.decode("utf-8", "replace")
+                retry = err.headers.get("Retry-After", "")
+                raise KdrayError(err.code, problem,
+                                 int(retry) if retry.isdigit() else None) from None
+        with resp:
+            ctype = resp.headers.get("Content-Type", "")
+            if not ctype.startswith(CBOR_SEQ):
+                raise KdrayError(resp.status, "not a streamed answer: " + ctype)
+            try:
+                yield from stream_items(read_cbor_seq(resp))
+            except (EOFError, OSError, ValueError) as err:
+                if isinstance(err, KdrayError):
+                    raise
+                raise KdrayError(0, "streamed answer cut: %s" % err) from None
+
+    def _query(self, path, payload):
+        if self.stream:
+            return assemble_stream(self.stream_query(path, payload))
+        return decode_answer(self.call("POST", path, payload))
 
     def _send(self, send):
         return "cbor" if self.binary else send
@@ -272,7 +387,7 @@ class Client:
         if max_hits is not None:
             payload["max_hits"] = max_hits
         path = "/v1/scenes/%s/bundle" % scene
-        return decode_answer(self.call("POST", path, payload))
+        return self._query(path, payload)
 
     def shadow(self, scene, points, lights, normals=None, samples=None,
                seed=None, epsilon=None, stats=False, encoding="json", send="json"):
@@ -292,7 +407,7 @@ class Client:
         if stats:
             payload["stats"] = True
         path = "/v1/scenes/%s/cone-shadow" % scene
-        return decode_answer(self.call("POST", path, payload))
+        return self._query(path, payload)
 
     def frustum(self, scene, eye, target, width, height, up=(0, 1, 0),
                 fov_y_deg=60.0, tile=8, query="closest", encoding="base64",
@@ -304,7 +419,7 @@ class Client:
         if fields is not None:
             payload["fields"] = list(fields)
         path = "/v1/scenes/%s/frustum" % scene
-        return decode_answer(self.call("POST", path, payload))
+        return self._query(path, payload)
 
     def render(self, scene, **params):
         """GET render.png: a picture (PNG bytes) and its stage times and
@@ -441,6 +556,9 @@ def _parser():
     p.add_argument("--full", action="store_true", help="print whole arrays")
     p.add_argument("--binary", action="store_true",
                    help="queries in CBOR (application/cbor; needs python3-cbor2)")
+    p.add_argument("--stream", action="store_true",
+                   help="bundle, shadow, frustum: the answer streamed chunk by "
+                   "chunk (Accept: application/cbor-seq; implies --binary)")
     sub = p.add_subparsers(dest="cmd", required=True)
     for name in ("health", "ready", "metrics", "scenes"):
         sub.add_parser(name)
@@ -490,7 +608,7 @@ def _parser():
 def main(argv=None):
     args = _parser().parse_args(argv)
     try:
-        client = Client(args.url, binary=args.binary)
+        client = Client(args.url, binary=args.binary, stream=args.stream)
     except RuntimeError as err:
         print("kdray_client: %s" % err, file=sys.stderr)
         return 2

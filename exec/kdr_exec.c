@@ -198,6 +198,8 @@ static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
         apply_deadline(j, j->deadline_ms);
         ok = check_stop(j) == KDR_STOP_NONE;
     }
+    /* before the charge: a stream's answer estimate is its own */
+    if (ok && q->stream) ok = kdr_exec_stream_check(j) == 0;
     if (ok && q->claim) {
         kdr_exec_settle(ex, q->claim, q->len + j->parsed_bytes);
         kdr_admit a = kdr_exec_charge(ex, q->claim, j->answer_estimate);
@@ -216,7 +218,16 @@ static void prepare_work(kdr_exec *ex, kdr_exec_job *j) {
         kdr_exec_fail(j, 503, "out of memory for the results");
         ok = 0;
     }
+    if (ok && q->stream) {
+        j->chunk_done = calloc(j->nchunks ? j->nchunks : 1, sizeof *j->chunk_done);
+        if (!j->chunk_done) {
+            kdr_exec_fail(j, 503, "out of memory for the results");
+            ok = 0;
+        }
+    }
     if (!ok) j->nchunks = 0;
+    /* the stream's head may go out from now on; the chunks open next */
+    if (ok && q->stream) atomic_store(&j->stream_ready, 1);
     atomic_fetch_add(&j->cpu_ns, thread_cpu_ns() - cpu0);
 }
 
@@ -231,16 +242,41 @@ static void prepare_job(kdr_exec *ex, kdr_exec_job *j) {
     j->state = JOB_RUNNING;
     if (j->nchunks > 1) pthread_cond_broadcast(&ex->work);
     pthread_mutex_unlock(&ex->lock);
+    /* this worker is still inside the job, so it cannot finish meanwhile */
+    if (j->q->on_progress && atomic_load(&j->stream_ready))
+        j->q->on_progress(j->q->done_ctx);
+}
+
+/* Chunks below this may be claimed: all of them, or for a windowed stream
+ * those whose slot the caller has emptied (kdr_exec_stream.c). */
+static size_t claim_limit(kdr_exec_job *j) {
+    if (!j->window) return j->nchunks;
+    const size_t lim = atomic_load(&j->released) + j->window;
+    return lim < j->nchunks ? lim : j->nchunks;
+}
+
+/* Claims the next chunk; SIZE_MAX when none may be claimed now. */
+static size_t claim(kdr_exec_job *j) {
+    size_t c = atomic_load(&j->next);
+    do {
+        if (c >= claim_limit(j)) return SIZE_MAX;
+    } while (!atomic_compare_exchange_weak(&j->next, &c, c + 1));
+    return c;
 }
 
 static void drain(kdr_exec_job *j) {
     long long cpu0 = thread_cpu_ns();
     for (;;) {
         if (check_stop(j) != KDR_STOP_NONE) break;
-        size_t c = atomic_fetch_add(&j->next, 1);
-        if (c >= j->nchunks) break;
+        size_t c = claim(j);
+        if (c == SIZE_MAX) break;
         j->ops->chunk(j, c);
         atomic_fetch_add(&j->done, 1);
+        if (j->chunk_done) {
+            /* release: the caller that sees the flag sees the chunk's output */
+            atomic_store_explicit(&j->chunk_done[c], 1, memory_order_release);
+            if (j->q->on_progress) j->q->on_progress(j->q->done_ctx);
+        }
     }
     atomic_fetch_add(&j->cpu_ns, thread_cpu_ns() - cpu0);
 }
@@ -282,6 +318,9 @@ static void finish_job(kdr_exec_job *j) {
         else if (rc != KDR_OK) {
             if (!j->ops->core_error || !j->ops->core_error(j, rc))
                 kdr_exec_fail(j, 500, "core error: %s", kdr_strerror(rc));
+        } else if (q->stream) {
+            kdr_exec_stream_finish(j); /* the caller encodes, item by item */
+            r->status = 200;
         } else if (j->ops->encode(j) == 0)
             r->status = 200;
     }
@@ -291,8 +330,13 @@ static void finish_job(kdr_exec_job *j) {
     }
     double t_done = kdr_exec_now();
     r->cpu_s = (double)(atomic_load(&j->cpu_ns) + thread_cpu_ns() - cpu0) * 1e-9;
-    j->ops->release(j);
-    if (q->claim) kdr_exec_settle(ex, q->claim, q->len + r->body.len);
+    /* A stream's caller may still be encoding an item from the result
+     * arrays: they are freed (and their charge kept) until
+     * kdr_exec_query_done. */
+    if (!q->stream) {
+        j->ops->release(j);
+        if (q->claim) kdr_exec_settle(ex, q->claim, q->len + r->body.len);
+    }
     r->stopped = stop;
     r->deadline_ms = j->deadline_ms;
     r->work_rays = j->work_rays;
@@ -339,7 +383,7 @@ static kdr_exec_job *pick(kdr_exec *ex, int *prepare) {
             *prepare = 1;
             return j;
         }
-        if (j->state == JOB_RUNNING && atomic_load(&j->next) < j->nchunks &&
+        if (j->state == JOB_RUNNING && atomic_load(&j->next) < claim_limit(j) &&
             atomic_load(&j->stop) == KDR_STOP_NONE) {
             *prepare = 0;
             return j;
@@ -411,6 +455,8 @@ static kdr_exec_job *job_new(kdr_exec_query *q, kdr_exec *ex, int *rc) {
     atomic_init(&j->cancel, 0);
     atomic_init(&j->core_rc, KDR_OK);
     atomic_init(&j->cpu_ns, 0);
+    atomic_init(&j->stream_ready, 0);
+    atomic_init(&j->released, 0);
     memset(&q->result, 0, sizeof q->result);
     q->job = j;
     j->t_submit = kdr_exec_now();
@@ -537,6 +583,8 @@ int kdr_exec_wait(kdr_exec_query *q, double timeout_s) {
 void kdr_exec_query_done(kdr_exec_query *q) {
     kdr_exec_job *j = q->job;
     if (j) {
+        if (q->stream) j->ops->release(j);
+        free(j->chunk_done);
         pthread_cond_destroy(&j->cv);
         pthread_mutex_destroy(&j->m);
         free(j);

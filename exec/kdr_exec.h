@@ -195,6 +195,16 @@ typedef struct kdr_exec_query {
      * q may be freed by another thread as soon as it is called. */
     void (*on_done)(void *ctx);
     void *done_ctx;
+    /* A streamed answer (kdrayd, Accept: application/cbor-seq; bundle
+     * closest/any, cone-shadow and frustum only, else a 406): no one-shot
+     * answer is encoded; the caller takes the answer item by item
+     * (kdr_exec_stream_*) while later chunks trace. The result arrays stay
+     * allocated (and charged) until kdr_exec_query_done. */
+    int stream;
+    /* optional, stream only: called (with done_ctx) once the parse
+     * succeeded and the chunks opened, and after every chunk traced, by the
+     * worker; it must not block. Never called after on_done. */
+    void (*on_progress)(void *ctx);
     /* filled by the executor once kdr_exec_wait returns 1 */
     kdr_exec_result result;
     kdr_exec_job *job; /* private */
@@ -223,6 +233,26 @@ void kdr_exec_cancel(kdr_exec_query *q);
 /* After kdr_exec_wait returned 1: frees the job and the result body
  * (unless the caller took it: set q->result.body to {0}). */
 void kdr_exec_query_done(kdr_exec_query *q);
+/* ---- streamed answers (kdr_exec_stream.c) ----------------------------------------
+ * One caller thread at a time takes a stream query's items, in order:
+ * the head, items 0..kdr_exec_stream_items-1 as each is ready, then the
+ * final item once kdr_exec_wait returned 1. Item i is ready once every
+ * chunk it covers is traced (a bundle or cone-shadow item is one chunk, a
+ * frustum item one row of tiles, whole rows of pixels). Each function
+ * appends to out and returns 0, or KDR_ENOMEM. */
+
+/* 1 once the query was parsed, its arrays allocated and its chunks opened:
+ * the answer will stream. 0 before, and for a query that failed first (its
+ * result is then an ordinary problem). */
+int kdr_exec_stream_ready(const kdr_exec_query *q);
+size_t kdr_exec_stream_items(const kdr_exec_query *q);
+int kdr_exec_stream_item_ready(kdr_exec_query *q, size_t i);
+int kdr_exec_stream_head(const kdr_exec_query *q, kdr_buf *out);
+int kdr_exec_stream_item(const kdr_exec_query *q, size_t i, kdr_buf *out);
+/* After kdr_exec_wait returned 1: {"status": 200, ...} when the query
+ * succeeded, else its problem (q->result.status, detail). */
+int kdr_exec_stream_end(const kdr_exec_query *q, size_t items_sent, kdr_buf *out);
+
 /* Refuses new admissions and stops every query in flight at its next
  * chunk with a 503 "shutting down". */
 void kdr_exec_shutdown(kdr_exec *ex);

@@ -64,6 +64,16 @@ struct kdr_exec_job {
 
     double t_submit, t_pick, t_trace0, t_trace1;
 
+    /* streamed answers (q->stream; kdr_exec_stream.c) */
+    atomic_uchar *chunk_done; /* nchunks flags, set once a chunk is traced */
+    atomic_int stream_ready;  /* parsed, allocated, chunks open */
+    size_t stream_prefix;     /* the caller's: chunks [0, prefix) are traced */
+    /* bundle streams: chunk c is traced into slot c % window of the result
+     * arrays, so no chunk may be claimed before the item window chunks
+     * before it has been taken (encoded) by the caller; 0: no window */
+    size_t window;
+    atomic_size_t released; /* items the caller has taken */
+
     /* completion, for kdr_exec_wait */
     pthread_mutex_t m;
     pthread_cond_t cv;
@@ -140,6 +150,15 @@ void kdr_exec_fail_proto(kdr_exec_job *j, const kdr_proto_error *err);
 const kdr_exec_kind_ops *kdr_exec_render_ops(void);
 /* Notes a core error from a chunk (the first one wins). */
 void kdr_exec_note_rc(kdr_exec_job *j, int rc);
+/* Stream queries (kdr_exec_stream.c): a 406 problem when the query cannot
+ * stream (0 when it can); the rays of a finished stream query. */
+int kdr_exec_stream_check(kdr_exec_job *j);
+void kdr_exec_stream_finish(kdr_exec_job *j);
+/* Chunks a windowed stream may trace ahead of the items taken. */
+#define KDR_EXEC_STREAM_WINDOW 16
+/* The one-shot CBOR answer of hits [first, first + count) (kdr_exec_kinds.c). */
+int kdr_exec_hits_slice(const kdr_exec_query *q, const kdr_hits *h, size_t first,
+                        size_t count, kdr_query query, unsigned fields, kdr_buf *out);
 /* First item and count of chunk c, for work of total items in chunks of per. */
 void kdr_exec_chunk_range(size_t total, size_t per, size_t c, size_t *first,
                           size_t *count);

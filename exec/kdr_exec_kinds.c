@@ -18,7 +18,8 @@
 /* The encoding an answer is written in: CBOR when the answer media type is
  * CBOR, else the JSON or base64 text the request asked for. */
 static kdr_encoding answer_encoding(const kdr_exec_job *j, kdr_encoding asked) {
-    return j->q->answer_media == KDR_MEDIA_CBOR ? KDR_ENCODING_CBOR : asked;
+    const kdr_media m = j->q->answer_media;
+    return m == KDR_MEDIA_CBOR || m == KDR_MEDIA_CBOR_SEQ ? KDR_ENCODING_CBOR : asked;
 }
 
 /* Result arrays plus the encoded answer's bound (protocol/ knows it exactly
@@ -146,6 +147,32 @@ static int encode_hits(kdr_exec_job *j, const kdr_hits *h, size_t n, kdr_query q
     return encoded(j, rc, enc);
 }
 
+/* One streamed item's slice of hits [first, first + count): its one-shot
+ * CBOR answer, attributes included (kdr_exec_stream.c puts "first" in). */
+int kdr_exec_hits_slice(const kdr_exec_query *q, const kdr_hits *h, size_t first,
+                        size_t count, kdr_query query, unsigned fields, kdr_buf *out) {
+    kdr_hits s = {0};
+    if (query == KDR_ANY) {
+        s.hit = h->hit + first;
+    } else {
+        s.t = h->t + first;
+        s.prim = h->prim + first;
+        s.u = h->u + first;
+        s.v = h->v + first;
+    }
+    float *normal = NULL;
+    int32_t *mesh = NULL;
+    int rc = 0;
+    if (fields & KDR_FIELDS_ATTRS) rc = attrs_fill(q, s.prim, count, &normal, &mesh);
+    const kdr_hit_attrs attrs = {normal, mesh};
+    if (rc == 0)
+        rc = kdr_proto_encode_hits_attrs(&s, &attrs, count, query, fields,
+                                         KDR_ENCODING_CBOR, out);
+    free(normal);
+    free(mesh);
+    return rc;
+}
+
 /* ---- bundle ------------------------------------------------------------------ */
 
 static int bundle_parse(kdr_exec_job *j) {
@@ -189,6 +216,8 @@ static int bundle_alloc(kdr_exec_job *j) {
     const size_t n = r->batch.n ? r->batch.n : 1;
     if (r->query == KDR_COUNT)
         return (a->nhits = malloc(n * sizeof *a->nhits)) ? 0 : KDR_ENOMEM;
+    if (j->window) /* a stream's slots (kdr_exec_stream.c) */
+        return hits_alloc(&j->k.bundle.hits, j->window * KDR_EXEC_CHUNK_RAYS, r->query);
     if (r->query != KDR_ALL) return hits_alloc(&j->k.bundle.hits, r->batch.n, r->query);
     const size_t slots = n * r->max_hits;
     a->nhits = malloc(n * sizeof *a->nhits);
@@ -200,6 +229,9 @@ static int bundle_alloc(kdr_exec_job *j) {
     return a->nhits && a->t && a->u && a->v && a->prim && j->k.bundle.offset ? 0
                                                                              : KDR_ENOMEM;
 }
+
+/* p + k, NULL staying NULL (no arithmetic on a null pointer). */
+static const float *from(const float *p, size_t k) { return p ? p + k : p; }
 
 static void bundle_chunk(kdr_exec_job *j, size_t c) {
     const kdr_bundle_request *r = &j->k.bundle.req;
@@ -216,6 +248,33 @@ static void bundle_chunk(kdr_exec_job *j, size_t c) {
         return;
     }
     kdr_trav_mode mode = j->q->mode == KDR_EXEC_FAST ? KDR_TRAV_AUTO : KDR_TRAV_SINGLE;
+    if (j->window) {
+        /* a stream's chunk: rays [first, first + count) as a batch of their
+         * own into slot c % window (answers are per ray, so the same) */
+        const kdr_ray_batch *b = &r->batch;
+        const kdr_ray_batch view = {count,
+                                    from(b->org, b->org_stride * first),
+                                    b->org_stride,
+                                    from(b->dir, 3 * first),
+                                    from(b->tmin, b->tmin_stride * first),
+                                    b->tmin_stride,
+                                    from(b->tmax, b->tmax_stride * first),
+                                    b->tmax_stride};
+        const kdr_hits *h = &j->k.bundle.hits;
+        const size_t at = (c % j->window) * KDR_EXEC_CHUNK_RAYS;
+        kdr_hits slot = {0};
+        if (r->query == KDR_ANY) {
+            slot.hit = h->hit + at;
+        } else {
+            slot.t = h->t + at;
+            slot.prim = h->prim + at;
+            slot.u = h->u + at;
+            slot.v = h->v + at;
+        }
+        kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &view, 0, count, r->query, mode,
+                                            &slot, NULL));
+        return;
+    }
     kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &r->batch, first, count, r->query,
                                         mode, &j->k.bundle.hits, NULL));
 }

@@ -108,6 +108,7 @@ const char *kdr_proto_status_title(int status) {
     case 400: return "Bad Request";
     case 404: return "Not Found";
     case 405: return "Method Not Allowed";
+    case 406: return "Not Acceptable";
     case 413: return "Content Too Large";
     case 415: return "Unsupported Media Type";
     case 500: return "Internal Server Error";

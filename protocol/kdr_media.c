@@ -12,7 +12,8 @@
 
 #include "kdr_proto_internal.h"
 
-static const char *const MEDIA_NAMES[2] = {"application/json", "application/cbor"};
+static const char *const MEDIA_NAMES[3] = {"application/json", "application/cbor",
+                                           "application/cbor-seq"};
 
 static const char *skip_ws(const char *s) { return s + strspn(s, " \t"); }
 
@@ -75,12 +76,14 @@ static int range_q(const char *p, const char *end) {
 kdr_media kdr_proto_answer_media(const char *accept, kdr_media request) {
     /* per media type: q of the most specific matching range so far */
     int q[2] = {-1, -1}, spec[2] = {0, 0};
+    int qs = 0; /* application/cbor-seq, named exactly (a stream is opt-in) */
     if (!accept) return request;
     for (const char *p = accept; *p;) {
         const char *end = p + strcspn(p, ",");
         const char *r = skip_ws(p);
         const size_t n = strcspn(r, "; \t,");
         const int rq = range_q(r + n, end);
+        if (rq > qs && word_is(r, n, MEDIA_NAMES[KDR_MEDIA_CBOR_SEQ])) qs = rq;
         for (int m = 0; m < 2 && rq >= 0; m++) {
             int s = 0; /* 3 exact, 2 application/STAR, 1 STAR/STAR */
             if (word_is(r, n, MEDIA_NAMES[m])) s = 3;
@@ -95,12 +98,14 @@ kdr_media kdr_proto_answer_media(const char *accept, kdr_media request) {
     }
     const int qj = q[KDR_MEDIA_JSON] > 0 ? q[KDR_MEDIA_JSON] : 0;
     const int qc = q[KDR_MEDIA_CBOR] > 0 ? q[KDR_MEDIA_CBOR] : 0;
+    if (qs > 0 && qs >= qj && qs >= qc) return KDR_MEDIA_CBOR_SEQ;
     if (qj == qc) return request;
     return qc > qj ? KDR_MEDIA_CBOR : KDR_MEDIA_JSON;
 }
 
 const char *kdr_proto_media_name(kdr_media m) {
-    return m == KDR_MEDIA_CBOR ? MEDIA_NAMES[KDR_MEDIA_CBOR] : MEDIA_NAMES[KDR_MEDIA_JSON];
+    return m == KDR_MEDIA_CBOR || m == KDR_MEDIA_CBOR_SEQ ? MEDIA_NAMES[m]
+                                                          : MEDIA_NAMES[KDR_MEDIA_JSON];
 }
 
 const char *kdr_proto_encoding_media(kdr_encoding enc) {

@@ -143,6 +143,10 @@ typedef enum kdr_media {
     KDR_MEDIA_OTHER = -1, /* not one we read: 415 */
     KDR_MEDIA_JSON = 0,   /* application/json (charset, if given, UTF-8) */
     KDR_MEDIA_CBOR = 1,   /* application/cbor (RFC 8949) */
+    /* application/cbor-seq (RFC 8742): an answer only, streamed as a
+     * sequence of CBOR items (docs/API.md, "Streamed answers"); chosen only
+     * when Accept names it exactly, never through a wildcard */
+    KDR_MEDIA_CBOR_SEQ = 2,
 } kdr_media;
 
 /* The media type of a request body from its Content-Type (NULL: OTHER). */
@@ -153,7 +157,7 @@ kdr_media kdr_proto_media_of(const char *content_type);
  * neither (an answer is then still sent, as RFC 9110 allows, rather than a
  * 406), the request's own media type. Errors are always problem+json. */
 kdr_media kdr_proto_answer_media(const char *accept, kdr_media request);
-/* "application/json" / "application/cbor". */
+/* "application/json" / "application/cbor" / "application/cbor-seq". */
 const char *kdr_proto_media_name(kdr_media m);
 /* The Content-Type of an answer written with enc. */
 const char *kdr_proto_encoding_media(kdr_encoding enc);
@@ -377,6 +381,27 @@ int kdr_proto_encode_scenes(const kdr_proto_scene_info *scenes, size_t n,
                             kdr_buf *out);
 /* {"status":"ok","scenes":K} */
 int kdr_proto_encode_health(const char *status, size_t nscenes, kdr_buf *out);
+
+/* ---- streamed answers (application/cbor-seq, kdr_seq.c) --------------------- */
+
+/* The items of a streamed answer (docs/API.md, "Streamed answers"), each a
+ * CBOR map appended to out; 0 or KDR_ENOMEM (KDR_EINVAL for a slice that is
+ * not a one-shot CBOR answer map). The head: {"kind", "count" (rays,
+ * pixels or points of the whole answer), "items" (chunk items to follow)}. */
+int kdr_proto_seq_head(kdr_buf *out, const char *kind, size_t count, size_t items);
+/* A chunk item: {"first": first, then every member of slice}, where slice
+ * is the one-shot CBOR answer of those rays alone ("count" and the arrays). */
+int kdr_proto_seq_item(kdr_buf *out, size_t first, const kdr_buf *slice);
+/* The final item after every chunk item: {"status": 200, "rays": traced,
+ * "items": sent, "timing": {"queue_us", "parse_us", "trace_us"}} and, when
+ * given, the cone-shadow "stats". timing_us: queue, parse, trace (what a
+ * one-shot answer's Server-Timing header says; a streamed answer's headers
+ * go out before the work is done). */
+int kdr_proto_seq_end(kdr_buf *out, uint64_t rays, size_t items,
+                      const uint64_t timing_us[3], const kdr_shadow_stats *stats);
+/* The final item of a failed answer, the problem details as a map:
+ * {"type": "about:blank", "title", "status", "detail"}. */
+int kdr_proto_seq_problem(kdr_buf *out, int status, const char *detail);
 
 /* ---- building blocks (public for the tests and the fuzzer) ---------------- */
 

@@ -39,6 +39,7 @@
 
 #include "log.h"
 #include "server.h"
+#include "stream.h"
 #include "watch.h"
 
 /* MHD per-connection memory: bigger reads mean fewer callbacks per body. */
@@ -73,6 +74,7 @@ struct kdr_http {
 };
 
 struct req_state {
+    kdr_http *h;
     double start;
     kdr_endpoint ep;
     int refused;          /* answered before the body: the body is discarded */
@@ -91,6 +93,7 @@ struct req_state {
     kdr_render_params render; /* render.png: the query string, parsed */
     char render_err[256];     /* the first bad parameter, "" if none */
     kdr_watch_entry watch;
+    kdr_stream *stream; /* Accept: application/cbor-seq (stream.c) */
     /* for the access log */
     unsigned status;
     uint64_t rays;
@@ -256,6 +259,56 @@ static enum MHD_Result render_arg(void *cls, enum MHD_ValueKind kind, const char
     return MHD_YES;
 }
 
+/* stream.c's end of a streamed answer: its final item is encoded, so the
+ * query is finished here (the watcher lets go of it first). */
+static void stream_end(void *ctx, unsigned status) {
+    req_state *rs = ctx;
+    kdr_response fin = {0};
+    watch_remove(rs->h, rs);
+    kdr_query_finish(&rs->call, &fin);
+    free(fin.body);
+    rs->started = 2;
+    rs->status = fin.no_answer ? 499 : status;
+    rs->rays = fin.rays;
+    kdr_metrics_request(rs->ep, rs->status, kdr_now() - rs->start);
+}
+
+/* A streamed answer for the three ray queries when Accept asks for it;
+ * the other queries (and render.png) are refused by the executor (406). */
+static int wants_stream(const req_state *rs, const kdr_request *req) {
+    return rs->ep != KDR_EP_RENDER &&
+           kdr_proto_answer_media(req->accept, kdr_proto_media_of(req->content_type)) ==
+               KDR_MEDIA_CBOR_SEQ;
+}
+
+/* Starts a streamed query; the connection sleeps until the executor has
+ * parsed it (or refused it). */
+static enum MHD_Result start_stream(kdr_http *h, struct MHD_Connection *c, req_state *rs,
+                                    const kdr_request *req, size_t scene) {
+    rs->stream = kdr_stream_new(c, &rs->call, stream_end, rs);
+    if (!rs->stream) {
+        kdr_response now = {0};
+        kdr_route_problem(&now, 503, "out of memory for the answer's stream");
+        now.retry_after = 1;
+        now.ep = rs->ep;
+        return queue(h, c, rs, &now);
+    }
+    kdr_stream_sleep(rs->stream);
+    rs->started = 1;
+    if (kdr_query_start_stream(h->srv, &rs->call, scene, rs->ep, req, kdr_stream_progress,
+                               kdr_stream_done, rs->stream, &rs->early) == 0) {
+        watch_add(h, rs);
+        return MHD_YES;
+    }
+    rs->start_failed = 1;
+    kdr_stream_done(rs->stream); /* wakes the connection: rs->early follows */
+    return MHD_YES;
+}
+
+/* Called again after a wake of a streamed query: start the chunked answer
+ * once the query is parsed, or answer its problem like any query. */
+static enum MHD_Result stream_step(kdr_http *h, struct MHD_Connection *c, req_state *rs);
+
 /* The body is complete. A small one may be answered here at once;
  * otherwise the connection is suspended before the query reaches the
  * workers, so that their resume can never overtake the suspension. */
@@ -276,6 +329,8 @@ static enum MHD_Result start_query(kdr_http *h, struct MHD_Connection *c, req_st
         kdr_route_problem(&now, 404, "no such scene");
     } else if (rs->render_err[0]) {
         kdr_route_problem(&now, 400, rs->render_err);
+    } else if (wants_stream(rs, req)) {
+        return start_stream(h, c, rs, req, (size_t)scene);
     } else if (req->len <= INLINE_BODY_MAX) {
         rc = kdr_query_try_inline(h->srv, &rs->call, (size_t)scene, rs->ep, req,
                                   on_query_done, rs, &now);
@@ -322,10 +377,27 @@ static enum MHD_Result finish_query(kdr_http *h, struct MHD_Connection *c,
     return queue(h, c, rs, &resp);
 }
 
+static enum MHD_Result stream_step(kdr_http *h, struct MHD_Connection *c, req_state *rs) {
+    if (rs->start_failed) return finish_query(h, c, rs);
+    const int s = kdr_stream_poll(rs->stream);
+    if (s < 0) return MHD_YES; /* asleep again */
+    if (s == 0) return finish_query(h, c, rs);
+    struct MHD_Response *resp = kdr_stream_response(rs->stream);
+    if (!resp) return MHD_NO; /* closed: on_completed cancels the query */
+    if (atomic_load(&h->srv->stopping))
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_CONNECTION, "close");
+    enum MHD_Result ok = MHD_queue_response(c, 200, resp);
+    MHD_destroy_response(resp);
+    rs->queued = 1;
+    rs->status = 200;
+    return ok;
+}
+
 static req_state *req_begin(kdr_http *h, struct MHD_Connection *c,
                             const kdr_request *req) {
     req_state *rs = calloc(1, sizeof *rs);
     if (!rs) return NULL;
+    rs->h = h;
     rs->start = kdr_now();
     rs->conn = c;
     const union MHD_ConnectionInfo *fd =
@@ -419,7 +491,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
         *upload_size = 0;
         return MHD_YES;
     }
-    if (rs->started == 1) return finish_query(h, c, rs);
+    if (rs->started == 1)
+        return rs->stream ? stream_step(h, c, rs) : finish_query(h, c, rs);
     if (*upload_size) {
         int ok = append(h, rs, upload, *upload_size) == 0;
         *upload_size = 0;
@@ -451,6 +524,7 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **req_cls,
     (void)toe;
     req_state *rs = *req_cls;
     if (!rs) return;
+    if (rs->stream) rs->bytes_out = kdr_stream_sent(rs->stream);
     if (h->srv->access_log.fd >= 0) {
         kdr_access_entry e = {rs->client,    rs->method,
                               rs->path,      rs->queued ? rs->status : 499,
@@ -466,9 +540,11 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **req_cls,
         watch_remove(h, rs);
         kdr_exec_cancel(&rs->call.q);
         kdr_exec_wait(&rs->call.q, -1);
+        if (rs->stream) kdr_stream_wait_done(rs->stream);
         kdr_query_finish(&rs->call, &dropped);
         free(dropped.body);
     }
+    kdr_stream_free(rs->stream);
     kdr_exec_release(h->srv->exec, &rs->claim);
     free(rs->body);
     free(rs->refusal.body); /* set when the client left before our answer */

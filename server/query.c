@@ -151,6 +151,16 @@ int kdr_query_start(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_end
     return kdr_exec_submit(srv->exec, &call->q) == 0 ? 0 : not_started(call, out);
 }
 
+int kdr_query_start_stream(kdr_server *srv, kdr_query_call *call, size_t scene,
+                           kdr_endpoint ep, const kdr_request *req,
+                           void (*on_progress)(void *), void (*on_done)(void *), void *ctx,
+                           kdr_response *out) {
+    if (setup(srv, call, scene, ep, req, on_done, ctx, out) != 0) return -1;
+    call->q.stream = 1;
+    call->q.on_progress = on_progress;
+    return kdr_exec_submit(srv->exec, &call->q) == 0 ? 0 : not_started(call, out);
+}
+
 int kdr_query_try_inline(kdr_server *srv, kdr_query_call *call, size_t scene,
                          kdr_endpoint ep, const kdr_request *req, void (*on_done)(void *),
                          void *ctx, kdr_response *out) {

@@ -107,6 +107,13 @@ typedef struct kdr_query_call {
 int kdr_query_start(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoint ep,
                     const kdr_request *req, void (*on_done)(void *), void *ctx,
                     kdr_response *out);
+/* As kdr_query_start, for an answer streamed item by item (Accept:
+ * application/cbor-seq; stream.c): on_progress(ctx) after the parse and
+ * after every chunk, on_done(ctx) once. */
+int kdr_query_start_stream(kdr_server *srv, kdr_query_call *call, size_t scene,
+                           kdr_endpoint ep, const kdr_request *req,
+                           void (*on_progress)(void *), void (*on_done)(void *), void *ctx,
+                           kdr_response *out);
 /* The short way for a small body, on the HTTP thread: parses it and, if
  * its work should take under 0.2 ms there (the scene's measured cost per
  * ray for this kind of query; 256 rays until one is known), or it is an

@@ -8,6 +8,14 @@ target_link_libraries(test_exec PRIVATE kdray_exec)
 add_test(NAME exec COMMAND test_exec)
 set_tests_properties(exec PROPERTIES TIMEOUT 300)
 
+# Streamed answers (exec/kdr_exec_stream.c) without HTTP: items equal the
+# one-shot answer, the bundle window (wrap, stall, deadline, cancel), 406.
+add_executable(test_exec_stream ${CMAKE_CURRENT_SOURCE_DIR}/test_exec_stream.c)
+target_include_directories(test_exec_stream PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
+target_link_libraries(test_exec_stream PRIVATE kdray_exec)
+add_test(NAME exec_stream COMMAND test_exec_stream)
+set_tests_properties(exec_stream PROPERTIES TIMEOUT 300)
+
 # render/ and the executor's render kind: parameters, framing, bands in any
 # order, the shadow index contract, PNG decoded by libpng equal to the image.
 find_package(PNG REQUIRED)

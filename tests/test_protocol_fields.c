@@ -60,6 +60,40 @@ static void test_fields_json(void) {
     }
 }
 
+/* ---- streamed answer items (kdr_seq.c)
+ * ----------------------------------------------------------------------- */
+
+static void test_seq_items(void) {
+    /* a chunk item is the slice's own answer map with "first" in front */
+    float t[3] = {1.0f, 2.0f, 3.0f};
+    int32_t prim[3] = {4, -1, 6};
+    const kdr_hits h = {.t = t, .prim = prim, .u = t, .v = t};
+    kdr_buf slice, item, want;
+    kdr_buf_init(&slice);
+    kdr_buf_init(&item);
+    kdr_buf_init(&want);
+    CHECK(kdr_proto_encode_hits_fields(&h, 3, KDR_CLOSEST, KDR_FIELD_T | KDR_FIELD_PRIM,
+                                KDR_ENCODING_CBOR, &slice) == 0,
+          "slice");
+    CHECK(kdr_proto_seq_item(&item, 70000, &slice) == 0, "item");
+    /* map(4) "first" 70000, then the slice's 3 members as they were */
+    static const unsigned char head[] = {0xa4, 0x65, 'f', 'i', 'r',  's',
+                                         't',  0x1a, 0,   1,   0x11, 0x70};
+    CHECK(item.len == sizeof head + slice.len - 1 &&
+              !memcmp(item.data, head, sizeof head) &&
+              !memcmp(item.data + sizeof head, slice.data + 1, slice.len - 1),
+          "item bytes");
+    kdr_buf bad = {.data = (char *)"\x83\x01", .len = 2, .cap = 2};
+    CHECK(kdr_proto_seq_item(&want, 0, &bad) == KDR_EINVAL, "not a map");
+    kdr_buf_free(&item);
+    CHECK(kdr_proto_seq_problem(&item, 503, "deadline") == 0 &&
+              item.data[0] == (char)0xa4,
+          "problem item");
+    kdr_buf_free(&item);
+    kdr_buf_free(&slice);
+    kdr_buf_free(&want);
+}
+
 /* ---- media types
  * ----------------------------------------------------------------------- */
 
@@ -98,11 +132,22 @@ static void test_media(void) {
         {"application/cbor; q=1.5", KDR_MEDIA_JSON, KDR_MEDIA_JSON},
         {"application/problem+json, application/cbor;q=0.1", KDR_MEDIA_JSON,
          KDR_MEDIA_CBOR},
+        /* a streamed answer is opt-in: named exactly, never via wildcards */
+        {"application/cbor-seq", KDR_MEDIA_JSON, KDR_MEDIA_CBOR_SEQ},
+        {"application/cbor-seq, application/cbor;q=0.5", KDR_MEDIA_CBOR,
+         KDR_MEDIA_CBOR_SEQ},
+        {"application/cbor, application/cbor-seq;q=0.5", KDR_MEDIA_JSON, KDR_MEDIA_CBOR},
+        {"application/cbor-seq;q=0, application/cbor", KDR_MEDIA_JSON, KDR_MEDIA_CBOR},
+        {"application/cbor-seqx", KDR_MEDIA_JSON, KDR_MEDIA_JSON},
     };
     for (size_t i = 0; i < sizeof acc / sizeof acc[0]; i++)
         CHECK(kdr_proto_answer_media(acc[i].accept, acc[i].req) == acc[i].want,
               "Accept %s (request %d)", acc[i].accept ? acc[i].accept : "(none)",
               acc[i].req);
+    CHECK(kdr_proto_media_of("application/cbor-seq") == KDR_MEDIA_OTHER,
+          "cbor-seq bodies are not read (415)");
+    CHECK(!strcmp(kdr_proto_media_name(KDR_MEDIA_CBOR_SEQ), "application/cbor-seq"),
+          "cbor-seq name");
     CHECK(!strcmp(kdr_proto_encoding_media(KDR_ENCODING_CBOR), "application/cbor") &&
               !strcmp(kdr_proto_encoding_media(KDR_ENCODING_BASE64), "application/json"),
           "answer media names");
@@ -317,6 +362,7 @@ int main(void) {
     test_closest_bounds();
     test_fields_json();
     test_media();
+    test_seq_items();
     test_answer_bounds();
     test_all_bounds();
     if (failures) {
