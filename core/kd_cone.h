@@ -57,6 +57,7 @@ typedef struct kd_cone {
     float inv_lo[3], inv_nhi[3]; /* 1 / lo, -1 / hi */
     float band;         /* positional slack (apex rounding, triangle test) */
     float t_far;        /* axial reach: every segment ends before it */
+    float t_near;       /* every segment starts after it (0 but for groups) */
     double dapex[3], axis[3];
     double cos_p, sin_p, tan_p; /* half-angle widened for the cull */
 } kd_cone;
@@ -65,6 +66,14 @@ typedef struct kd_cone {
  * with half-angle asin(sin_a) from the frame's apex. */
 void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
                   const double *axis, double sin_a);
+
+/* The cone of a group of points toward one light (kd_cone_group.c): it
+ * holds every sample segment of the n frames fs (same light, fixed apexes)
+ * and a margin over each point's own walk and cull. 0 (no group) if a
+ * frame has no fixed apex, or the ball around the apexes is wider than
+ * max_spread times the light's ball (or the cone would be wide). */
+int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
+                  double max_spread, kd_cone *c);
 
 /* Leaf by leaf, front to back (kd_cone_walk_next returns NULL at the end). */
 typedef struct kd_cone_item {
@@ -153,6 +162,10 @@ typedef struct kd_cone_pair {
     size_t max_cands;    /* a walk with more candidates is over budget
                             (<= CONE_MAX_CANDS) */
     uint32_t last;       /* last blocker (in and out) */
+    const uint32_t *group; /* non-NULL: the group's list (kd_group_cone's
+                              walk, every triangle any of the pair's
+                              segments can touch) replaces the pair's walk */
+    size_t ngroup;
     kdr_shadow_stats st; /* added to */
     int rc;
 } kd_cone_pair;
@@ -215,6 +228,8 @@ typedef enum kd_walk_policy {
     KD_WALK_AUTO = 0,
     KD_WALK_ALWAYS = 1, /* every point walks (at least to its first candidate) */
     KD_WALK_NEVER = 2,  /* no whole-light walk: samples go to the any-hit path */
+    KD_WALK_GROUPS = 3, /* every point walks, through its group's list wherever
+                           the group's cone exists (kd_group_cone, any spread) */
 } kd_walk_policy;
 
 /* kdr_shadow_trace with an explicit walk policy (KDR_SHADOW_CONE only; the

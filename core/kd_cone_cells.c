@@ -302,6 +302,21 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
     return rc;
 }
 
+/* walk_with_proofs over the group's list instead of the tree: the pair's
+ * cull, then the proofs (the list is sorted and has no duplicates). */
+static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
+                       const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
+    for (size_t j = 0; j < pr->ngroup; j++) {
+        const uint32_t prim = pr->group[j];
+        if (!kd_cone_tri_may_block(kc, pr->scene->tris + 9 * (size_t)prim))
+            continue;
+        const int rc = judge(c, pr, dc, prim, out, nl, covered);
+        if (rc != KDR_OK || *covered)
+            return rc;
+    }
+    return KDR_OK;
+}
+
 /* The candidates of the cell: the parent's filtered by the cell's cone, or
  * its own walk's. Returns the list (in depth's buffer) and its length in
  * *nl, or NULL when the walk went over budget (incomplete); *covered is set
@@ -322,6 +337,12 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
             *covered = 1;
             return out;
         }
+    }
+    if (plist == WALK_LIST && pr->proofs && pr->group) {
+        const int rc = judge_group(c, pr, dc, kc, out, nl, covered);
+        if (rc == KDR_ENOMEM)
+            pr->rc = KDR_ENOMEM;
+        return rc == KDR_OK ? out : NULL;
     }
     if (plist == WALK_LIST && pr->proofs) {
         const int rc = walk_with_proofs(c, pr, dc, kc, out, nl, covered);
@@ -361,6 +382,15 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
     return out;
 }
 
+/* The phase of every sample, made when the whole light first splits (most
+ * pairs are decided before: no sample is ever looked at). Returns 1. */
+static int phases(kd_cells *c, const kd_cone_pair *pr, int depth) {
+    if (depth == 0)
+        for (uint32_t s = 0; s < pr->n; s++)
+            c->phase[s] = kd_shadow_frame_phase(pr->f, s);
+    return 1;
+}
+
 static uint32_t process(kd_cells *c, kd_cone_pair *pr, const cell *ce,
                         const uint32_t *plist, size_t np, int depth) {
     const uint32_t count = ce->i1 - ce->i0;
@@ -391,7 +421,7 @@ static uint32_t process(kd_cells *c, kd_cone_pair *pr, const cell *ce,
         lit = 0; /* umbra: every sample blocked */
     } else if (nl == 0) {
         lit = count; /* lit: no candidate left */
-    } else if (!leaf && children(c, pr, ce, kids, &nk)) {
+    } else if (!leaf && phases(c, pr, depth) && children(c, pr, ce, kids, &nk)) {
         for (int k = 0; k < nk; k++)
             lit += process(c, pr, &kids[k], list, nl, depth + 1);
     } else {
@@ -412,10 +442,8 @@ int kd_cells_lit(kd_cells *c, kd_cone_pair *pr, uint32_t *lit) {
         if (!c->lists)
             return KDR_ENOMEM;
     }
-    for (uint32_t s = 0; s < pr->n; s++) {
-        c->idx[s] = s;
-        c->phase[s] = kd_shadow_frame_phase(pr->f, s);
-    }
+    for (uint32_t s = 0; s < pr->n; s++)
+        c->idx[s] = s; /* phases: when the root splits (phases()) */
     const cell root = {0, pr->n, 0, pr->n, 0.0, 1.0, -1.0, 0.0, 0};
     c->nviews = 0;
     pr->rc = KDR_OK;
