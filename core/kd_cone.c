@@ -59,6 +59,7 @@ typedef struct light_state {
 typedef struct shadow_ws {
     kd_cand_list cl;
     kd_cand_list gl; /* a group's list (trace_grouped) */
+    kd_tri_pre *gpre; /* its triangles' cull data (GROUP_MAX_CANDS) */
     kdr_ray *rays;  /* the samples of one (point, light) */
     uint32_t *idx;  /* pending (not yet decided) samples */
     uint64_t *keys; /* Morton key << 12 | sample, for grouping */
@@ -362,7 +363,7 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
                        .proofs = f->along == 0.0f, .last = ls->last,
                        .max_cands = cand_budget(nsamples, ls),
-                       .group = group ? group->v : NULL,
+                       .group = group ? ws->gpre : NULL,
                        .ngroup = group ? group->n : 0};
     /* every tmax is the float of (near side - along) >= D - r - along */
     pr.tmax_lo = ((f->dist - f->radius) - (double)f->along) * (1.0 - 0x1p-22);
@@ -468,7 +469,15 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
                                   &ws->st.nodes_visited);
     if (r == KDR_ENOMEM)
         *rc = KDR_ENOMEM;
-    return r == KDR_OK;
+    if (r != KDR_OK)
+        return 0;
+    if (!ws->gpre && !(ws->gpre = malloc(GROUP_MAX_CANDS * sizeof *ws->gpre))) {
+        *rc = KDR_ENOMEM;
+        return 0;
+    }
+    for (size_t j = 0; j < gl->n; j++)
+        kd_tri_pre_init(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
+    return 1;
 }
 
 /* Cone-mode points through shared walks: runs of up to GROUP_POINTS
@@ -565,6 +574,7 @@ int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
     }
     free(ws.cl.v);
     free(ws.gl.v);
+    free(ws.gpre);
     free(ws.rays);
     free(ws.idx);
     free(ws.keys);

@@ -106,6 +106,22 @@ typedef struct kd_cand_list {
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
                     size_t max_cands, uint64_t max_nodes, uint64_t *nodes);
 
+/* A triangle's cull data, made once for the many cones of a group
+ * (kd_cone_trav.c): unit normal and offset of its plane, its bounding
+ * sphere, and the outward unit normals and offsets of its prism's sides. */
+typedef struct kd_tri_pre {
+    double n[3], n_off;
+    double c[3], r;
+    double e[3][3], e_off[3];
+    int flat;     /* plane and prism usable (not degenerate) */
+    uint32_t prim;
+} kd_tri_pre;
+
+void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
+/* kd_cone_tri_may_block from the precomputed data, with margins at least
+ * as wide: 0 only if the triangle provably misses every segment of c. */
+int kd_cone_pre_may_block(const kd_cone *c, const kd_tri_pre *p);
+
 /* ---- proofs about one triangle (kd_cone_proof.c) -------------------------- */
 
 /* What one triangle does to every sample segment of a cone. */
@@ -143,6 +159,9 @@ void kd_tri_view_init(kd_tri_view *v, const float *tri, uint32_t prim,
 void kd_dir_cone_set(kd_dir_cone *c, const double axis[3], double cos_b, double sin_b,
                      double tmax_lo);
 kd_verdict kd_tri_view_classify(const kd_tri_view *v, const kd_dir_cone *c);
+/* 1 only if kd_tri_view_classify would find the triangle MISSES by two
+ * robust edges of opposite signs, with wider margins and no view made. */
+int kd_tri_edges_miss(const float *tri, const float apex[3], const kd_dir_cone *c);
 
 /* ---- adaptive sub-cones (kd_cone_cells.c) --------------------------------- */
 
@@ -162,9 +181,9 @@ typedef struct kd_cone_pair {
     size_t max_cands;    /* a walk with more candidates is over budget
                             (<= CONE_MAX_CANDS) */
     uint32_t last;       /* last blocker (in and out) */
-    const uint32_t *group; /* non-NULL: the group's list (kd_group_cone's
-                              walk, every triangle any of the pair's
-                              segments can touch) replaces the pair's walk */
+    const kd_tri_pre *group; /* non-NULL: the group's list (kd_group_cone's
+                                walk, every triangle any of the pair's
+                                segments can touch) replaces the pair's walk */
     size_t ngroup;
     kdr_shadow_stats st; /* added to */
     int rc;

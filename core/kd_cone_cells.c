@@ -245,11 +245,14 @@ static int seen_before(kd_cells *c, uint32_t prim) {
     }
 }
 
-/* Judges triangle prim for the cell (a view, then its verdict): listed
+/* Judges triangle prim for the cell (the cheap edge test, else a view and
+ * its verdict): listed
  * (as a view index) unless it misses; KD_CONE_OVER past CONE_MAX_CANDS. */
 static int judge(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
                  uint32_t *out, size_t *nl, int *covered) {
     uint32_t at;
+    if (kd_tri_edges_miss(pr->scene->tris + 9 * (size_t)prim, pr->f->apex, dc))
+        return KDR_OK; /* beside the cone: no view needed */
     if (push_view(c, pr, prim, &at) != KDR_OK)
         return KDR_ENOMEM;
     const kd_verdict v = kd_tri_view_classify(&c->views[at], dc);
@@ -307,10 +310,9 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
 static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
                        const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
     for (size_t j = 0; j < pr->ngroup; j++) {
-        const uint32_t prim = pr->group[j];
-        if (!kd_cone_tri_may_block(kc, pr->scene->tris + 9 * (size_t)prim))
+        if (!kd_cone_pre_may_block(kc, &pr->group[j]))
             continue;
-        const int rc = judge(c, pr, dc, prim, out, nl, covered);
+        const int rc = judge(c, pr, dc, pr->group[j].prim, out, nl, covered);
         if (rc != KDR_OK || *covered)
             return rc;
     }
@@ -327,7 +329,8 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
     uint32_t *out = list_at(c, depth);
     *nl = 0;
     *covered = 0;
-    if (plist == WALK_LIST && pr->proofs && pr->last != UINT32_MAX) {
+    if (plist == WALK_LIST && pr->proofs && pr->last != UINT32_MAX &&
+        !kd_tri_edges_miss(pr->scene->tris + 9 * (size_t)pr->last, pr->f->apex, dc)) {
         /* in umbra the light's last blocker often covers the next cone too
          * (points arrive in image order): a view of it before any walk */
         kd_tri_view v;

@@ -48,8 +48,7 @@ static float apex_magnitude(const kdr_scene *scene, const float *apex) {
 
 int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
                   double max_spread, kd_cone *c) {
-    if (n == 0)
-        return 0;
+    if (n == 0) return 0;
     /* the ball around the apexes: centre of their box, farthest apex */
     double lo[3], hi[3], cg[3], rg = 0.0, rl = 0.0;
     float mag = 0.0f;
@@ -81,8 +80,8 @@ int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size
     }
     /* every point's margins: its band, and the cull's relative slack over
      * the distances involved */
-    const double pad = (double)mag * KD_SLACK_REL + GROUP_REL_PAD * (rg + rl) +
-                       1e-6 * (dmax + rg + rl);
+    const double pad =
+        (double)mag * KD_SLACK_REL + GROUP_REL_PAD * (rg + rl) + 1e-6 * (dmax + rg + rl);
     rg += pad;
     rl = rl * (1.0 + GROUP_REL_PAD) + pad;
     const double D = dist3(lc, cg);
@@ -96,14 +95,12 @@ int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size
         u[k] = (lc[k] - cg[k]) / D;
         apex[k] = (float)(cg[k] - u[k] * dA);
     }
-    if (!isfinite(apex[0]) || !isfinite(apex[1]) || !isfinite(apex[2]))
-        return 0;
+    if (!isfinite(apex[0]) || !isfinite(apex[1]) || !isfinite(apex[2])) return 0;
     /* from the rounded apex: the axis toward the light, the half-angle
      * holding both balls */
     const double a[3] = {apex[0], apex[1], apex[2]};
     const double dl = dist3(a, lc), dg = dist3(a, cg);
-    if (!(dl > rl) || !(dg > rg))
-        return 0;
+    if (!(dl > rl) || !(dg > rg)) return 0;
     double axis[3], cosg = 0.0;
     for (int k = 0; k < 3; k++) {
         axis[k] = (lc[k] - a[k]) / dl;

@@ -12,6 +12,8 @@
  *    every triangle, on coherent runs of points (a grid in scan order on
  *    a tessellated floor and on a sphere, under occluders, toward small,
  *    large and straddling lights, one and two lights a query);
+ *  - the cheap edge test (kd_tri_edges_miss) says MISSES only where the
+ *    full proof does and no float ray of the cone hits the triangle;
  *  - sharing: points in free space under an empty sky are decided by one
  *    walk per group (fewer nodes than their own walks), and all lit.
  */
@@ -23,20 +25,21 @@
 #include "compare.h"
 #include "kd_cone.h"
 #include "kd_internal.h"
+#include "kd_tri.h"
 #include "kdray.h"
 
 #define KPI 3.14159265358979323846
 
 static int failures;
 
-#define CHECK(cond, ...)                                                     \
-    do {                                                                     \
-        if (!(cond)) {                                                       \
-            failures++;                                                      \
-            fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                    \
-            fputc('\n', stderr);                                             \
-        }                                                                    \
+#define CHECK(cond, ...)                                                                 \
+    do {                                                                                 \
+        if (!(cond)) {                                                                   \
+            failures++;                                                                  \
+            fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);            \
+            fprintf(stderr, __VA_ARGS__);                                                \
+            fputc('\n', stderr);                                                         \
+        }                                                                                \
     } while (0)
 
 /* ---- scenes ---------------------------------------------------------------- */
@@ -50,8 +53,7 @@ static void tb_add(tri_buf *b, const float t[9]) {
     if (b->n == b->cap) {
         b->cap = b->cap ? 2 * b->cap : 256;
         b->v = realloc(b->v, b->cap * 9 * sizeof *b->v);
-        if (!b->v)
-            exit(1);
+        if (!b->v) exit(1);
     }
     memcpy(b->v + 9 * b->n++, t, 9 * sizeof *t);
 }
@@ -77,7 +79,8 @@ static void floor_grid(tri_buf *b, int cells, float bump) {
             }
             const float x0 = -1.0f + h * (float)i, z0 = -1.0f + h * (float)j;
             const float t1[9] = {x0, y[0], z0, x0 + h, y[1], z0, x0, y[2], z0 + h};
-            const float t2[9] = {x0 + h, y[1], z0, x0 + h, y[3], z0 + h, x0, y[2], z0 + h};
+            const float t2[9] = {x0 + h, y[1], z0,   x0 + h, y[3],
+                                 z0 + h, x0,   y[2], z0 + h};
             tb_add(b, t1);
             tb_add(b, t2);
         }
@@ -107,10 +110,10 @@ static void sphere(tri_buf *b, const float c[3], float r, int rings, int segs) {
                 p[k][1] = c[1] + r * (float)cos(th);
                 p[k][2] = c[2] + r * (float)(sin(th) * sin(ph));
             }
-            const float t1[9] = {p[0][0], p[0][1], p[0][2], p[1][0], p[1][1], p[1][2],
-                                 p[2][0], p[2][1], p[2][2]};
-            const float t2[9] = {p[1][0], p[1][1], p[1][2], p[3][0], p[3][1], p[3][2],
-                                 p[2][0], p[2][1], p[2][2]};
+            const float t1[9] = {p[0][0], p[0][1], p[0][2], p[1][0], p[1][1],
+                                 p[1][2], p[2][0], p[2][1], p[2][2]};
+            const float t2[9] = {p[1][0], p[1][1], p[1][2], p[3][0], p[3][1],
+                                 p[3][2], p[2][0], p[2][1], p[2][2]};
             tb_add(b, t1);
             tb_add(b, t2);
         }
@@ -143,10 +146,11 @@ static void floor_points(const kdr_scene *s, int res, float span, points *pts) {
         for (int x = 0; x < res; x++) {
             kdr_ray r = {.org = {span * (2.0f * (x + 0.5f) / res - 1.0f), 5.0f,
                                  span * (2.0f * (y + 0.5f) / res - 1.0f)},
-                         .dir = {0, -1, 0}, .tmin = 0, .tmax = INFINITY};
+                         .dir = {0, -1, 0},
+                         .tmin = 0,
+                         .tmax = INFINITY};
             kdr_hit h;
-            if (!kdr_intersect1(s, &r, &h, NULL))
-                continue;
+            if (!kdr_intersect1(s, &r, &h, NULL)) continue;
             float *p = pts->p + 3 * pts->count, *n = pts->n + 3 * pts->count;
             p[0] = r.org[0];
             p[1] = r.org[1] - h.t;
@@ -164,7 +168,8 @@ static void sphere_points(const float c[3], float r, int res, points *pts) {
     pts->count = 0;
     for (int i = 0; i < res; i++)
         for (int j = 0; j < res; j++) {
-            const double th = 0.5 * KPI * (i + 0.5) / res, ph = 2.0 * KPI * (j + 0.5) / res;
+            const double th = 0.5 * KPI * (i + 0.5) / res,
+                         ph = 2.0 * KPI * (j + 0.5) / res;
             const double d[3] = {sin(th) * cos(ph), cos(th), sin(th) * sin(ph)};
             float *p = pts->p + 3 * pts->count, *n = pts->n + 3 * pts->count;
             for (int k = 0; k < 3; k++) {
@@ -187,7 +192,8 @@ static void test_containment(void) {
         enum { N = 16 };
         float pts[3 * N], nrm[3 * N];
         const float spread = (float)pow(10.0, -3.0 + 3.0 * rnd());
-        float base[3] = {(float)(rnd() - 0.5), (float)(0.5 * rnd()), (float)(rnd() - 0.5)};
+        float base[3] = {(float)(rnd() - 0.5), (float)(0.5 * rnd()),
+                         (float)(rnd() - 0.5)};
         for (int i = 0; i < N; i++)
             for (int k = 0; k < 3; k++) {
                 pts[3 * i + k] = base[k] + spread * (float)(rnd() - 0.5);
@@ -197,8 +203,13 @@ static void test_containment(void) {
         kdr_sphere_light light = {{(float)(dist * (rnd() - 0.5)), (float)(0.6 + dist),
                                    (float)(dist * (rnd() - 0.5))},
                                   (float)(pow(10.0, -2.0 + 2.0 * rnd()) * dist)};
-        kdr_shadow_query q = {.n = N, .points = pts, .normals = nrm, .lights = &light,
-                              .nlights = 1, .samples = 64, .seed = (uint64_t)trial,
+        kdr_shadow_query q = {.n = N,
+                              .points = pts,
+                              .normals = nrm,
+                              .lights = &light,
+                              .nlights = 1,
+                              .samples = 64,
+                              .seed = (uint64_t)trial,
                               .offset = KDR_OFFSET_AUTO};
         kd_shadow_frame fr[N];
         const kd_shadow_frame *fs[N];
@@ -208,8 +219,7 @@ static void test_containment(void) {
             fs[i] = &fr[i];
         }
         kd_cone c;
-        if (!ok || !kd_group_cone(s, fs, N, 1.0, &c))
-            continue;
+        if (!ok || !kd_group_cone(s, fs, N, 1.0, &c)) continue;
         groups++;
         const double cos_h = c.cos_p; /* the cull's half-angle: widest */
         for (int i = 0; i < N; i++)
@@ -226,9 +236,11 @@ static void test_containment(void) {
                     }
                     len = sqrt(len);
                     if (!(ax >= cos_h * len && ax >= c.t_near && ax <= c.t_far)) {
-                        CHECK(0, "trial %d point %d sample %u t %g: axial %g of %g "
-                                 "(cos %g, want >= %g), range [%g, %g]",
-                              trial, i, k, t, ax, len, ax / len, cos_h, c.t_near, c.t_far);
+                        CHECK(0,
+                              "trial %d point %d sample %u t %g: axial %g of %g "
+                              "(cos %g, want >= %g), range [%g, %g]",
+                              trial, i, k, t, ax, len, ax / len, cos_h, c.t_near,
+                              c.t_far);
                         i = N, k = q.samples, m = 9; /* one report a trial */
                     }
                 }
@@ -238,6 +250,95 @@ static void test_containment(void) {
     CHECK(groups > 100, "too few groups formed (%d)", groups);
     kdr_scene_free(s);
     free(b.v);
+}
+
+/* ---- the cheap edge test --------------------------------------------------------- */
+
+static void basis(const double a[3], double b1[3], double b2[3]) {
+    const double t[3] = {fabs(a[0]) < 0.6 ? 1.0 : 0.0, fabs(a[0]) < 0.6 ? 0.0 : 1.0, 0.0};
+    b1[0] = a[1] * t[2] - a[2] * t[1];
+    b1[1] = a[2] * t[0] - a[0] * t[2];
+    b1[2] = a[0] * t[1] - a[1] * t[0];
+    const double l = sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2]);
+    for (int k = 0; k < 3; k++)
+        b1[k] /= l;
+    b2[0] = a[1] * b1[2] - a[2] * b1[1];
+    b2[1] = a[2] * b1[0] - a[0] * b1[2];
+    b2[2] = a[0] * b1[1] - a[1] * b1[0];
+}
+
+/* kd_tri_edges_miss decides only what the full view decides as MISSES, and
+ * no float ray of the cone (rim included, and the ray through an edge point
+ * the cone touches) hits the triangle. Cones are aimed beside a triangle,
+ * across one of its edges at a small distance, at every scale. */
+static void test_edges_miss(void) {
+    long said = 0, rays = 0;
+    int wrong = 0;
+    for (int trial = 0; trial < 30000 && wrong < 5; trial++) {
+        const double L = pow(10.0, -2.0 + 7.0 * rnd());
+        float apex[3], tri[9];
+        double c[3], dir[3], b1[3], b2[3], axis[3];
+        for (int k = 0; k < 3; k++) {
+            apex[k] = (float)((2.0 * rnd() - 1.0) * L);
+            dir[k] = rnd() - 0.5;
+        }
+        const double dl = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+        const double M = L * pow(10.0, -3.0 + 3.0 * rnd()),
+                     dist = M * pow(10.0, 2.0 * rnd());
+        double nrm[3] = {rnd() - 0.5, rnd() - 0.5, rnd() - 0.5};
+        basis(nrm[0] || nrm[1] || nrm[2] ? nrm : dir, b1, b2);
+        for (int k = 0; k < 3; k++)
+            c[k] = apex[k] + dist * dir[k] / dl;
+        for (int i = 0; i < 3; i++) {
+            const double an = 2.0944 * i + 0.7 * (rnd() - 0.5), r = M * (0.3 + rnd());
+            for (int k = 0; k < 3; k++)
+                tri[3 * i + k] = (float)(c[k] + r * (cos(an) * b1[k] + sin(an) * b2[k]));
+        }
+        /* the cone's axis through a point just outside edge e */
+        const int e = trial % 3, j = (e + 1) % 3, o = (e + 2) % 3;
+        const double f = 0.1 + 0.8 * rnd(), out = pow(10.0, -6.0 + 6.0 * rnd());
+        double m[3], ml = 0.0;
+        for (int k = 0; k < 3; k++) {
+            const double pe = (1 - f) * tri[3 * e + k] + f * tri[3 * j + k];
+            m[k] = pe + out * (pe - tri[3 * o + k]) - apex[k];
+            ml += m[k] * m[k];
+        }
+        ml = sqrt(ml);
+        for (int k = 0; k < 3; k++)
+            axis[k] = m[k] / ml;
+        const double bgeo = pow(10.0, -6.0 + 5.5 * rnd()), b = bgeo + 2e-7;
+        kd_dir_cone dc;
+        kd_dir_cone_set(&dc, axis, cos(b), sin(b), 1e30);
+        if (!kd_tri_edges_miss(tri, apex, &dc)) continue;
+        said++;
+        kd_tri_view v;
+        kd_tri_view_init(&v, tri, 0, apex);
+        if (kd_tri_view_classify(&v, &dc) != KD_TRI_MISSES) {
+            wrong++;
+            CHECK(0, "trial %d: edges_miss but the view says %d", trial,
+                  (int)kd_tri_view_classify(&v, &dc));
+        }
+        double a1[3], a2[3];
+        basis(axis, a1, a2);
+        for (int r = 0; r < 64; r++) {
+            const double th = r < 32 ? bgeo : bgeo * sqrt(rnd()),
+                         ph = 6.283185307 * rnd();
+            float d[3], t, u, w;
+            for (int k = 0; k < 3; k++)
+                d[k] = (float)(cos(th) * axis[k] +
+                               sin(th) * (cos(ph) * a1[k] + sin(ph) * a2[k]));
+            kd_ray_pre pre;
+            kd_ray_precompute(apex, d, &pre);
+            rays++;
+            if (kd_tri_intersect(&pre, tri, 0.0f, INFINITY, &t, &u, &w)) {
+                wrong++;
+                CHECK(0, "trial %d: edges_miss but ray %d hits at t %g", trial, r, t);
+                break;
+            }
+        }
+    }
+    printf("edges_miss: %ld of 30000 cones decided, %ld rays checked\n", said, rays);
+    CHECK(said > 3000, "too few cones decided by the edge test (%ld)", said);
 }
 
 /* ---- answers ------------------------------------------------------------------ */
@@ -261,12 +362,11 @@ static kdr_shadow_stats check_policies(const char *label, const kdr_scene *s,
               "%s %s", label, names[k]);
         size_t bad = 0, first = 0;
         for (size_t j = 0; j < m; j++)
-            if (memcmp(&v[j], &vr[j], sizeof *v) != 0 && bad++ == 0)
-                first = j;
-        CHECK(bad == 0, "%s: policy %s differs from rays on %zu pairs (first %zu: %.6f vs %.6f)",
+            if (memcmp(&v[j], &vr[j], sizeof *v) != 0 && bad++ == 0) first = j;
+        CHECK(bad == 0,
+              "%s: policy %s differs from rays on %zu pairs (first %zu: %.6f vs %.6f)",
               label, names[k], bad, first, v[first], vr[first]);
-        if (k == 0)
-            sa = st;
+        if (k == 0) sa = st;
     }
     /* brute force on a spread subset of the pairs */
     size_t bad = 0;
@@ -304,7 +404,8 @@ static void test_answers(void) {
     const kdr_sphere_light small = {{0.3f, 3.0f, 0.2f}, 0.1f};
     const kdr_sphere_light large = {{-0.2f, 1.2f, 0.1f}, 0.5f};
     const kdr_sphere_light straddle = {{0.0f, 0.35f, 0.0f}, 0.04f}; /* among the soup */
-    const kdr_sphere_light two[2] = {{{0.3f, 3.0f, 0.2f}, 0.1f}, {{-2.0f, 2.0f, 1.0f}, 0.3f}};
+    const kdr_sphere_light two[2] = {{{0.3f, 3.0f, 0.2f}, 0.1f},
+                                     {{-2.0f, 2.0f, 1.0f}, 0.3f}};
     const struct {
         const char *label;
         const points *p;
@@ -322,9 +423,13 @@ static void test_answers(void) {
         {"sphere, two lights, 32 spp", &sp, two, 2, 32},
     };
     for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
-        kdr_shadow_query q = {.n = cases[c].p->count, .points = cases[c].p->p,
-                              .normals = cases[c].p->n, .lights = cases[c].l,
-                              .nlights = cases[c].nl, .samples = cases[c].spp, .seed = 11,
+        kdr_shadow_query q = {.n = cases[c].p->count,
+                              .points = cases[c].p->p,
+                              .normals = cases[c].p->n,
+                              .lights = cases[c].l,
+                              .nlights = cases[c].nl,
+                              .samples = cases[c].spp,
+                              .seed = 11,
                               .offset = KDR_OFFSET_AUTO};
         check_policies(cases[c].label, s, &b, &q);
         /* the diagonal offsets render uses */
@@ -357,13 +462,19 @@ static void test_sharing(void) {
         nrm[3 * i + 1] = 1.0f;
     }
     const kdr_sphere_light light = {{0.0f, 4.0f, 0.0f}, 0.5f};
-    kdr_shadow_query q = {.n = RES * RES, .points = pts, .normals = nrm, .lights = &light,
-                          .nlights = 1, .samples = 64, .seed = 3, .offset = KDR_OFFSET_AUTO};
+    kdr_shadow_query q = {.n = RES * RES,
+                          .points = pts,
+                          .normals = nrm,
+                          .lights = &light,
+                          .nlights = 1,
+                          .samples = 64,
+                          .seed = 3,
+                          .offset = KDR_OFFSET_AUTO};
     const kdr_shadow_stats sa = check_policies("free space, grouped", s, &b, &q);
     float v[RES * RES];
     kdr_shadow_stats sw = {0};
-    CHECK(kd_shadow_trace_policy(s, &q, 0, q.n, KDR_SHADOW_CONE, KD_WALK_ALWAYS, v, &sw) ==
-              KDR_OK,
+    CHECK(kd_shadow_trace_policy(s, &q, 0, q.n, KDR_SHADOW_CONE, KD_WALK_ALWAYS, v,
+                                 &sw) == KDR_OK,
           "always");
     for (int i = 0; i < RES * RES; i++)
         CHECK(v[i] == 1.0f, "free-space point %d: %.6f", i, v[i]);
@@ -378,6 +489,7 @@ static void test_sharing(void) {
 
 int main(void) {
     test_containment();
+    test_edges_miss();
     test_answers();
     test_sharing();
     if (failures) {
