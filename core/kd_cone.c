@@ -458,10 +458,13 @@ static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
  * cone exists and its walk stayed within budget, else 0 (each point then
  * walks on its own). */
 static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
-                      shadow_ws *ws, kd_cand_list *gl, int *rc) {
+                      uint32_t nsamples, shadow_ws *ws, kd_cand_list *gl, int *rc) {
     const double spread = ws->policy == KD_WALK_GROUPS ? 1.0 : GROUP_MAX_SPREAD;
     kd_cone gc;
-    if (n < 2 || !kd_group_cone(scene, fs, n, spread, &gc))
+    /* points that will not walk (walk_pays) gain only from an empty list,
+     * rare where walks do not pay: no group walk for them */
+    if (n < 2 || !walk_pays(nsamples, fs[0]->sin_a, ws->policy) ||
+        !kd_group_cone(scene, fs, n, spread, &gc))
         return 0;
     const uint64_t max_nodes =
         GROUP_WALK_NODES_BASE + GROUP_WALK_NODES_PER_POINT * (uint64_t)n;
@@ -497,7 +500,7 @@ static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size
             }
             if (rc != KDR_OK)
                 break;
-            const int grouped = group_list(scene, fs, n, ws, &ws->gl, &rc);
+            const int grouped = group_list(scene, fs, n, q->samples, ws, &ws->gl, &rc);
             for (size_t j = 0; rc == KDR_OK && j < n; j++)
                 rc = visibility_by_cone(scene, &fr[j], q->samples, ws, &ws->lights[l],
                                         grouped ? &ws->gl : NULL,
