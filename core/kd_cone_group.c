@@ -70,6 +70,12 @@ int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size
     for (size_t i = 0; i < n; i++) {
         const double a[3] = {fs[i]->apex[0], fs[i]->apex[1], fs[i]->apex[2]};
         rg = fmax(rg, dist3(a, cg));
+    }
+    /* rl >= the light's radius: most groups that fail, fail here, before
+     * any per-point trigonometry */
+    if (!(rg <= max_spread * fs[0]->radius * (1.0 + 1e-3)))
+        return 0;
+    for (size_t i = 0; i < n; i++) {
         /* the point's truncated cone, angular slack included, reaches this
          * far from the light's centre: its disc at t_far */
         const kd_shadow_frame *f = fs[i];
