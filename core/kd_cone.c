@@ -10,7 +10,8 @@
  * straight to any-hit bundles (kdr_trace_batch), chunked over consecutive
  * points below CONE_WALK_FROM. Otherwise it decides the (point, light) by
  * cones, from the whole light down to small groups of samples, and traces
- * only what no cone decides:
+ * only what no cone decides (runs of consecutive points first try to share
+ * step 1's walk: trace_grouped, kd_cone_group.c):
  *  1. Candidates: the cone of the whole light walks the kd-tree with a
  *     budget (kd_cone_trav.c); every triangle its cull keeps is judged by
  *     a proof against the float triangle test (kd_cone_proof.c, which needs

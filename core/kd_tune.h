@@ -197,7 +197,11 @@
  * ball around their apexes is at most GROUP_MAX_SPREAD times the light's;
  * the group's walk is over budget (the points then walk on their own) past
  * GROUP_MAX_CANDS triangles or GROUP_WALK_NODES_BASE +
- * GROUP_WALK_NODES_PER_POINT x points nodes. */
+ * GROUP_WALK_NODES_PER_POINT x points nodes. Flat around these values on
+ * the 1024x768 64-spp default render (callgrind, instructions of the
+ * picture, at 55b8c0d): spread 0.8 +0.3 %, 32 candidates +0.3 %, 8 points
+ * +1.0 %, 32 points +6.6 %; failed groups cut into halves down to 4 points
+ * +3.8 %. */
 #define GROUP_POINTS 16u
 #define GROUP_MAX_SPREAD 0.5
 #define GROUP_MAX_CANDS 64u
