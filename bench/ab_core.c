@@ -27,6 +27,9 @@
  *            light (bench_cone's, r = 0.03 diagonal), points and normals
  *            of ao's surface points (rays / 16 points)
  *   cone64   the same with bench_cone's large light (r = 0.25) at 64 spp
+ *   conecam  the small light at 64 spp from the camera's hit points in scan
+ *            order, normals toward the eye, 1e-4 x diagonal offsets (what
+ *            a render asks: coherent runs of points; rays / 64 pixels)
  *   shadow   any hit, one ray per surface point (ao's points) toward a
  *            random point of bench_cone's small light, tmax 1, per ray
  *   brandom, bao, baoc, bshadow
@@ -113,16 +116,16 @@ static double cpu_s(void) {
 enum {
     SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
     SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
-    SET_BSHADOW, NSETS
+    SET_BSHADOW, SET_CONECAM, NSETS
 };
 static const char *const set_names[NSETS] = {"camera", "random",  "ao",
                                              "ao64",   "b8ao",    "b8cam",
                                              "frustum", "cone16", "cone64",
                                              "shadow", "brandom", "bao",
-                                             "baoc",   "bshadow"};
+                                             "baoc",   "bshadow", "conecam"};
 /* Sets Embree traces too (per ray, rtcIntersect1 / rtcOccluded1). */
 static const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0,
-                                                1, 1, 1, 1, 1};
+                                                1, 1, 1, 1, 1, 0};
 /* Rays per kdr_trace_batch call of the b* sets (the daemon's chunk). */
 #define AB_BATCH 4096
 
@@ -284,6 +287,44 @@ static void cone_query(const scene_in *s, size_t npts, int large, uint32_t spp,
     memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
     *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
                             .lights = li, .nlights = 1, .samples = spp,
+                            .seed = 7, .offset = KDR_OFFSET_DIAGONAL,
+                            .epsilon = 1e-4f};
+}
+
+/* conecam's query: the hit points of a side x side camera (side^2 <= max
+ * pixels, traced by core A), row by row, normals toward the eye. */
+static void conecam_query(const scene_in *s, const kdr_scene *kd, size_t max, float *pts,
+                          kdr_sphere_light *li, kdr_shadow_query *q) {
+    kdr_camera cam;
+    camera_of(s, max, &cam);
+    light_of(s, 0, li);
+    float *nrm = pts + 3 * max;
+    size_t m = 0;
+    for (uint32_t y = 0; y < cam.height; y++)
+        for (uint32_t x = 0; x < cam.width; x++) {
+            kdr_ray r;
+            kdr_hit h;
+            kdr_camera_ray(&cam, x, y, &r);
+            if (!cores[0].intersect1(kd, &r, &h, NULL))
+                continue;
+            const float *t = s->tris + 9 * (size_t)h.prim;
+            float e1[3], e2[3], n[3], dot = 0.0f;
+            for (int k = 0; k < 3; k++) {
+                pts[3 * m + k] = r.org[k] + h.t * r.dir[k];
+                e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
+            }
+            n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+            n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+            n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+            for (int k = 0; k < 3; k++)
+                dot += n[k] * r.dir[k];
+            for (int k = 0; k < 3; k++)
+                nrm[3 * m + k] = dot > 0.0f ? -n[k] : n[k];
+            m++;
+        }
+    memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
+    *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
+                            .lights = li, .nlights = 1, .samples = 64,
                             .seed = 7, .offset = KDR_OFFSET_DIAGONAL,
                             .epsilon = 1e-4f};
 }
@@ -562,6 +603,10 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             cone_query(&si, n / spp, large, spp, rays, bdir, &li, &sq);
             j.sq = &sq;
             j.n = sq.n * spp;
+        } else if (set == SET_CONECAM) {
+            conecam_query(&si, kd[0], n / 64, bdir, &li, &sq);
+            j.sq = &sq;
+            j.n = sq.n * 64;
         } else {
             for (size_t i = 0; i < j.n; i++) {
                 memcpy(bdir + 3 * i, rays[i].dir, 12);
@@ -623,7 +668,7 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &o) != 0) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
-                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow]...\n", argv[0]);
+                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam]...\n", argv[0]);
         return 2;
     }
     ladder_entry *v;

@@ -63,6 +63,7 @@ static int one_run(const kdr_scene *s, const kdr_render_params *p, run *r) {
                               .nlights = 1,
                               .samples = p->samples,
                               .seed = KDR_RENDER_SEED,
+                              .offset = KDR_OFFSET_DIAGONAL, /* as render's */
                               .epsilon = KDR_RENDER_EPSILON};
         double c0 = cpu_now();
         int rc = kdr_shadow_trace(s, &q, 0, n, KDR_SHADOW_CONE, vis, NULL);

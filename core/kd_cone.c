@@ -10,7 +10,8 @@
  * straight to any-hit bundles (kdr_trace_batch), chunked over consecutive
  * points below CONE_WALK_FROM. Otherwise it decides the (point, light) by
  * cones, from the whole light down to small groups of samples, and traces
- * only what no cone decides:
+ * only what no cone decides (runs of consecutive points first try to share
+ * step 1's walk: trace_grouped, kd_cone_group.c):
  *  1. Candidates: the cone of the whole light walks the kd-tree with a
  *     budget (kd_cone_trav.c); every triangle its cull keeps is judged by
  *     a proof against the float triangle test (kd_cone_proof.c, which needs
@@ -58,6 +59,8 @@ typedef struct light_state {
 
 typedef struct shadow_ws {
     kd_cand_list cl;
+    kd_cand_list gl; /* a group's list (trace_grouped) */
+    kd_tri_pre *gpre; /* its triangles' cull data (GROUP_MAX_CANDS) */
     kdr_ray *rays;  /* the samples of one (point, light) */
     uint32_t *idx;  /* pending (not yet decided) samples */
     uint64_t *keys; /* Morton key << 12 | sample, for grouping */
@@ -317,7 +320,7 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
  * CONE_WALK_WIDE_FROM samples on. */
 static int walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
     if (policy != KD_WALK_AUTO)
-        return policy == KD_WALK_ALWAYS;
+        return policy == KD_WALK_ALWAYS || policy == KD_WALK_GROUPS;
     if (nsamples < CONE_WALK_FROM)
         return 0;
     return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM;
@@ -340,12 +343,18 @@ static size_t cand_budget(uint32_t nsamples, light_state *ls) {
 
 static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
                               uint32_t nsamples, shadow_ws *ws, light_state *ls,
-                              float *vis) {
+                              const kd_cand_list *group, float *vis) {
     uint32_t lit = 0;
     const uint64_t traced = ws->st.rays_traced;
     int rc = ws_reserve(ws, nsamples);
     if (rc != KDR_OK)
         return rc;
+    if (group && group->n == 0) {
+        /* the group's cone reaches no triangle: every segment is unblocked */
+        ws->st.cones_decided++;
+        *vis = 1.0f;
+        return KDR_OK;
+    }
     if (!walk_pays(nsamples, f->sin_a, ws->policy)) {
         /* a wide cone at moderate samples: straight to the bundles */
         make_samples(f, nsamples, ws);
@@ -354,7 +363,9 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     }
     kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
                        .proofs = f->along == 0.0f, .last = ls->last,
-                       .max_cands = cand_budget(nsamples, ls)};
+                       .max_cands = cand_budget(nsamples, ls),
+                       .group = group ? ws->gpre : NULL,
+                       .ngroup = group ? group->n : 0};
     /* every tmax is the float of (near side - along) >= D - r - along */
     pr.tmax_lo = ((f->dist - f->radius) - (double)f->along) * (1.0 - 0x1p-22);
     rc = kd_cells_lit(&ws->cells, &pr, &lit);
@@ -444,6 +455,62 @@ static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
     return rc;
 }
 
+/* The group list of frames fs[0..n) (one light), in *gl: 1 if the group's
+ * cone exists and its walk stayed within budget, else 0 (each point then
+ * walks on its own). */
+static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
+                      uint32_t nsamples, shadow_ws *ws, kd_cand_list *gl, int *rc) {
+    const double spread = ws->policy == KD_WALK_GROUPS ? 1.0 : GROUP_MAX_SPREAD;
+    kd_cone gc;
+    /* points that will not walk (walk_pays) gain only from an empty list,
+     * rare where walks do not pay: no group walk for them */
+    if (n < 2 || !walk_pays(nsamples, fs[0]->sin_a, ws->policy) ||
+        !kd_group_cone(scene, fs, n, spread, &gc))
+        return 0;
+    const uint64_t max_nodes =
+        GROUP_WALK_NODES_BASE + GROUP_WALK_NODES_PER_POINT * (uint64_t)n;
+    const int r = kd_cone_collect(scene, &gc, gl, GROUP_MAX_CANDS, max_nodes,
+                                  &ws->st.nodes_visited);
+    if (r == KDR_ENOMEM)
+        *rc = KDR_ENOMEM;
+    if (r != KDR_OK)
+        return 0;
+    if (!ws->gpre && !(ws->gpre = malloc(GROUP_MAX_CANDS * sizeof *ws->gpre))) {
+        *rc = KDR_ENOMEM;
+        return 0;
+    }
+    for (size_t j = 0; j < gl->n; j++)
+        kd_tri_pre_init(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
+    return 1;
+}
+
+/* Cone-mode points through shared walks: runs of up to GROUP_POINTS
+ * consecutive points, light by light, share one walk of their group's cone
+ * (kd_group_cone) when it exists; each point then judges that list. */
+static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size_t first,
+                         size_t count, float *visibility, shadow_ws *ws) {
+    kd_shadow_frame fr[GROUP_POINTS];
+    const kd_shadow_frame *fs[GROUP_POINTS];
+    int rc = KDR_OK;
+    for (size_t i0 = first; rc == KDR_OK && i0 < first + count; i0 += GROUP_POINTS) {
+        const size_t n = first + count - i0 < GROUP_POINTS ? first + count - i0 : GROUP_POINTS;
+        for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
+            for (size_t j = 0; rc == KDR_OK && j < n; j++) {
+                rc = kd_shadow_frame_init(scene, q, i0 + j, l, &fr[j]);
+                fs[j] = &fr[j];
+            }
+            if (rc != KDR_OK)
+                break;
+            const int grouped = group_list(scene, fs, n, q->samples, ws, &ws->gl, &rc);
+            for (size_t j = 0; rc == KDR_OK && j < n; j++)
+                rc = visibility_by_cone(scene, &fr[j], q->samples, ws, &ws->lights[l],
+                                        grouped ? &ws->gl : NULL,
+                                        &visibility[(i0 + j) * q->nlights + l]);
+        }
+    }
+    return rc;
+}
+
 static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q,
                         size_t first, size_t count, kdr_shadow_mode mode,
                         float *visibility, shadow_ws *ws) {
@@ -451,6 +518,9 @@ static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q,
         (ws->policy == KD_WALK_NEVER ||
          (ws->policy == KD_WALK_AUTO && q->samples < CONE_WALK_FROM)))
         return trace_unwalked(scene, q, first, count, visibility, ws);
+    if (mode == KDR_SHADOW_CONE &&
+        (ws->policy == KD_WALK_GROUPS || (ws->policy == KD_WALK_AUTO && GROUP_POINTS > 1)))
+        return trace_grouped(scene, q, first, count, visibility, ws);
     for (size_t i = first; i < first + count; i++) {
         for (size_t l = 0; l < q->nlights; l++) {
             kd_shadow_frame f;
@@ -464,7 +534,8 @@ static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q,
                            (float)q->samples;
                 }
             } else if (rc == KDR_OK) {
-                rc = visibility_by_cone(scene, &f, q->samples, ws, &ws->lights[l], vis);
+                rc = visibility_by_cone(scene, &f, q->samples, ws, &ws->lights[l], NULL,
+                                        vis);
             }
             if (rc != KDR_OK)
                 return rc;
@@ -488,7 +559,8 @@ int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
         return KDR_EINVAL;
     if (mode != KDR_SHADOW_CONE && mode != KDR_SHADOW_RAYS)
         return KDR_EINVAL;
-    if (policy != KD_WALK_AUTO && policy != KD_WALK_ALWAYS && policy != KD_WALK_NEVER)
+    if (policy != KD_WALK_AUTO && policy != KD_WALK_ALWAYS && policy != KD_WALK_NEVER &&
+        policy != KD_WALK_GROUPS)
         return KDR_EINVAL;
     shadow_ws ws = {0};
     ws.policy = policy;
@@ -505,6 +577,8 @@ int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
         stats->nodes_visited += ws.st.nodes_visited;
     }
     free(ws.cl.v);
+    free(ws.gl.v);
+    free(ws.gpre);
     free(ws.rays);
     free(ws.idx);
     free(ws.keys);

@@ -57,6 +57,7 @@ typedef struct kd_cone {
     float inv_lo[3], inv_nhi[3]; /* 1 / lo, -1 / hi */
     float band;         /* positional slack (apex rounding, triangle test) */
     float t_far;        /* axial reach: every segment ends before it */
+    float t_near;       /* every segment starts after it (0 but for groups) */
     double dapex[3], axis[3];
     double cos_p, sin_p, tan_p; /* half-angle widened for the cull */
 } kd_cone;
@@ -65,6 +66,14 @@ typedef struct kd_cone {
  * with half-angle asin(sin_a) from the frame's apex. */
 void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
                   const double *axis, double sin_a);
+
+/* The cone of a group of points toward one light (kd_cone_group.c): it
+ * holds every sample segment of the n frames fs (same light, fixed apexes)
+ * and a margin over each point's own walk and cull. 0 (no group) if a
+ * frame has no fixed apex, or the ball around the apexes is wider than
+ * max_spread times the light's ball (or the cone would be wide). */
+int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
+                  double max_spread, kd_cone *c);
 
 /* Leaf by leaf, front to back (kd_cone_walk_next returns NULL at the end). */
 typedef struct kd_cone_item {
@@ -96,6 +105,22 @@ typedef struct kd_cand_list {
  * list is then incomplete). Adds the nodes visited to *nodes. */
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
                     size_t max_cands, uint64_t max_nodes, uint64_t *nodes);
+
+/* A triangle's cull data, made once for the many cones of a group
+ * (kd_cone_trav.c): unit normal and offset of its plane, its bounding
+ * sphere, and the outward unit normals and offsets of its prism's sides. */
+typedef struct kd_tri_pre {
+    double n[3], n_off;
+    double c[3], r;
+    double e[3][3], e_off[3];
+    int flat;     /* plane and prism usable (not degenerate) */
+    uint32_t prim;
+} kd_tri_pre;
+
+void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
+/* kd_cone_tri_may_block from the precomputed data, with margins at least
+ * as wide: 0 only if the triangle provably misses every segment of c. */
+int kd_cone_pre_may_block(const kd_cone *c, const kd_tri_pre *p);
 
 /* ---- proofs about one triangle (kd_cone_proof.c) -------------------------- */
 
@@ -134,6 +159,9 @@ void kd_tri_view_init(kd_tri_view *v, const float *tri, uint32_t prim,
 void kd_dir_cone_set(kd_dir_cone *c, const double axis[3], double cos_b, double sin_b,
                      double tmax_lo);
 kd_verdict kd_tri_view_classify(const kd_tri_view *v, const kd_dir_cone *c);
+/* 1 only if kd_tri_view_classify would find the triangle MISSES by two
+ * robust edges of opposite signs, with wider margins and no view made. */
+int kd_tri_edges_miss(const float *tri, const float apex[3], const kd_dir_cone *c);
 
 /* ---- adaptive sub-cones (kd_cone_cells.c) --------------------------------- */
 
@@ -153,6 +181,10 @@ typedef struct kd_cone_pair {
     size_t max_cands;    /* a walk with more candidates is over budget
                             (<= CONE_MAX_CANDS) */
     uint32_t last;       /* last blocker (in and out) */
+    const kd_tri_pre *group; /* non-NULL: the group's list (kd_group_cone's
+                                walk, every triangle any of the pair's
+                                segments can touch) replaces the pair's walk */
+    size_t ngroup;
     kdr_shadow_stats st; /* added to */
     int rc;
 } kd_cone_pair;
@@ -215,6 +247,8 @@ typedef enum kd_walk_policy {
     KD_WALK_AUTO = 0,
     KD_WALK_ALWAYS = 1, /* every point walks (at least to its first candidate) */
     KD_WALK_NEVER = 2,  /* no whole-light walk: samples go to the any-hit path */
+    KD_WALK_GROUPS = 3, /* every point walks, through its group's list wherever
+                           the group's cone exists (kd_group_cone, any spread) */
 } kd_walk_policy;
 
 /* kdr_shadow_trace with an explicit walk policy (KDR_SHADOW_CONE only; the

@@ -245,11 +245,14 @@ static int seen_before(kd_cells *c, uint32_t prim) {
     }
 }
 
-/* Judges triangle prim for the cell (a view, then its verdict): listed
+/* Judges triangle prim for the cell (the cheap edge test, else a view and
+ * its verdict): listed
  * (as a view index) unless it misses; KD_CONE_OVER past CONE_MAX_CANDS. */
 static int judge(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
                  uint32_t *out, size_t *nl, int *covered) {
     uint32_t at;
+    if (kd_tri_edges_miss(pr->scene->tris + 9 * (size_t)prim, pr->f->apex, dc))
+        return KDR_OK; /* beside the cone: no view needed */
     if (push_view(c, pr, prim, &at) != KDR_OK)
         return KDR_ENOMEM;
     const kd_verdict v = kd_tri_view_classify(&c->views[at], dc);
@@ -302,6 +305,20 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
     return rc;
 }
 
+/* walk_with_proofs over the group's list instead of the tree: the pair's
+ * cull, then the proofs (the list is sorted and has no duplicates). */
+static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
+                       const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
+    for (size_t j = 0; j < pr->ngroup; j++) {
+        if (!kd_cone_pre_may_block(kc, &pr->group[j]))
+            continue;
+        const int rc = judge(c, pr, dc, pr->group[j].prim, out, nl, covered);
+        if (rc != KDR_OK || *covered)
+            return rc;
+    }
+    return KDR_OK;
+}
+
 /* The candidates of the cell: the parent's filtered by the cell's cone, or
  * its own walk's. Returns the list (in depth's buffer) and its length in
  * *nl, or NULL when the walk went over budget (incomplete); *covered is set
@@ -312,7 +329,8 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
     uint32_t *out = list_at(c, depth);
     *nl = 0;
     *covered = 0;
-    if (plist == WALK_LIST && pr->proofs && pr->last != UINT32_MAX) {
+    if (plist == WALK_LIST && pr->proofs && pr->last != UINT32_MAX &&
+        !kd_tri_edges_miss(pr->scene->tris + 9 * (size_t)pr->last, pr->f->apex, dc)) {
         /* in umbra the light's last blocker often covers the next cone too
          * (points arrive in image order): a view of it before any walk */
         kd_tri_view v;
@@ -322,6 +340,12 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
             *covered = 1;
             return out;
         }
+    }
+    if (plist == WALK_LIST && pr->proofs && pr->group) {
+        const int rc = judge_group(c, pr, dc, kc, out, nl, covered);
+        if (rc == KDR_ENOMEM)
+            pr->rc = KDR_ENOMEM;
+        return rc == KDR_OK ? out : NULL;
     }
     if (plist == WALK_LIST && pr->proofs) {
         const int rc = walk_with_proofs(c, pr, dc, kc, out, nl, covered);
@@ -361,6 +385,15 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
     return out;
 }
 
+/* The phase of every sample, made when the whole light first splits (most
+ * pairs are decided before: no sample is ever looked at). Returns 1. */
+static int phases(kd_cells *c, const kd_cone_pair *pr, int depth) {
+    if (depth == 0)
+        for (uint32_t s = 0; s < pr->n; s++)
+            c->phase[s] = kd_shadow_frame_phase(pr->f, s);
+    return 1;
+}
+
 static uint32_t process(kd_cells *c, kd_cone_pair *pr, const cell *ce,
                         const uint32_t *plist, size_t np, int depth) {
     const uint32_t count = ce->i1 - ce->i0;
@@ -391,7 +424,7 @@ static uint32_t process(kd_cells *c, kd_cone_pair *pr, const cell *ce,
         lit = 0; /* umbra: every sample blocked */
     } else if (nl == 0) {
         lit = count; /* lit: no candidate left */
-    } else if (!leaf && children(c, pr, ce, kids, &nk)) {
+    } else if (!leaf && phases(c, pr, depth) && children(c, pr, ce, kids, &nk)) {
         for (int k = 0; k < nk; k++)
             lit += process(c, pr, &kids[k], list, nl, depth + 1);
     } else {
@@ -412,10 +445,8 @@ int kd_cells_lit(kd_cells *c, kd_cone_pair *pr, uint32_t *lit) {
         if (!c->lists)
             return KDR_ENOMEM;
     }
-    for (uint32_t s = 0; s < pr->n; s++) {
-        c->idx[s] = s;
-        c->phase[s] = kd_shadow_frame_phase(pr->f, s);
-    }
+    for (uint32_t s = 0; s < pr->n; s++)
+        c->idx[s] = s; /* phases: when the root splits (phases()) */
     const cell root = {0, pr->n, 0, pr->n, 0.0, 1.0, -1.0, 0.0, 0};
     c->nviews = 0;
     pr->rc = KDR_OK;

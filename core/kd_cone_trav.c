@@ -69,6 +69,7 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
     }
     c->band = magnitude(scene, f->apex, f->along) * KD_SLACK_REL + FLT_MIN;
     c->t_far = (float)f->dist * (1.0f + 0x1p-16f) + f->along;
+    c->t_near = 0.0f;
     const double a = asin(sin_a) + CULL_ANGLE_SLACK;
     c->cos_p = a < CULL_MAX_ANGLE ? cos(a) : 0.0; /* 0: cull disabled */
     c->sin_p = sin(fmin(a, HALF_PI));
@@ -115,7 +116,7 @@ static int cone_side(const kd_cone *c, int k, float split, int below, float tn,
 /* Clips [0, t_far] to the scene's padded root box. */
 static int cone_clip_root(const kdr_scene *scene, const kd_cone *c, float *tn,
                           float *tf) {
-    *tn = 0.0f;
+    *tn = c->t_near;
     *tf = c->t_far;
     for (int k = 0; k < 3; k++) {
         if (!cone_side(c, k, scene->root.min[k], 0, *tn, *tf, tn, tf))
@@ -134,11 +135,60 @@ static int cone_clip_root(const kdr_scene *scene, const kd_cone *c, float *tn,
 static inline double dmin(double a, double b) { return a < b ? a : b; }
 static inline double dmax(double a, double b) { return a > b ? a : b; }
 
+/* The signed distance range of the truncated cone over the plane through
+ * p with unit normal m: [*lo, *hi]. */
+static void cone_range(const kd_cone *cc, const double m[3], const float *p, double *lo,
+                       double *hi, double *wlen) {
+    double w[3];
+    for (int k = 0; k < 3; k++)
+        w[k] = cc->dapex[k] - p[k];
+    const double d_apex = m[0] * w[0] + m[1] * w[1] + m[2] * w[2];
+    const double mv = m[0] * cc->axis[0] + m[1] * cc->axis[1] + m[2] * cc->axis[2];
+    const double d_disc = d_apex + (double)cc->t_far * mv;
+    const double spread = (double)cc->t_far * cc->tan_p * sqrt(dmax(0.0, 1.0 - mv * mv));
+    *lo = dmin(d_apex, d_disc - spread);
+    *hi = dmax(d_apex, d_disc + spread);
+    *wlen = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+}
+
+/* 1 if the truncated cone lies wholly outside one side of the triangle's
+ * prism (the plane through an edge, perpendicular to the triangle, facing
+ * away from the third vertex): no point of the triangle is in the cone.
+ * Catches the large triangles beside a cone that the bounding-sphere test
+ * keeps (walls, floors), each of which would otherwise get a proof. */
+static int prism_misses(const kd_cone *cc, const float *tri, const double n[3]) {
+    for (int i = 0; i < 3; i++) {
+        const float *a = tri + 3 * i, *b = tri + 3 * ((i + 1) % 3), *o = tri + 3 * ((i + 2) % 3);
+        double e[3], m[3], lo, hi, wlen;
+        for (int k = 0; k < 3; k++)
+            e[k] = (double)b[k] - a[k];
+        m[0] = e[1] * n[2] - e[2] * n[1];
+        m[1] = e[2] * n[0] - e[0] * n[2];
+        m[2] = e[0] * n[1] - e[1] * n[0];
+        const double ml = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        if (!(ml > 0.0))
+            continue;
+        double side = 0.0;
+        for (int k = 0; k < 3; k++) {
+            m[k] /= ml;
+            side += m[k] * ((double)o[k] - a[k]);
+        }
+        if (side > 0.0) /* face away from the third vertex */
+            for (int k = 0; k < 3; k++)
+                m[k] = -m[k];
+        cone_range(cc, m, a, &lo, &hi, &wlen);
+        if (lo > cc->band + CULL_REL_SLACK * (wlen + (double)cc->t_far))
+            return 1;
+    }
+    return 0;
+}
+
 /* 1 if the triangle's plane has the whole truncated cone strictly on one
  * side. The truncated cone is the convex hull of the apex and its disc at
  * axial distance reach, so the plane's signed distance over it ranges over
- * the apex's value and the disc's centre value +- the disc's extent. */
-static int plane_misses(const kd_cone *cc, const float *tri) {
+ * the apex's value and the disc's centre value +- the disc's extent.
+ * Otherwise sets un to the plane's unit normal (0 for a degenerate one). */
+static int plane_misses(const kd_cone *cc, const float *tri, double un[3]) {
     double e1[3], e2[3], w[3];
     for (int k = 0; k < 3; k++) {
         e1[k] = (double)tri[3 + k] - tri[k];
@@ -158,7 +208,11 @@ static int plane_misses(const kd_cone *cc, const float *tri) {
     const double slack = cc->band + CULL_REL_SLACK * (wlen + (double)cc->t_far);
     const double lo = dmin(d_apex, d_disc - spread);
     const double hi = dmax(d_apex, d_disc + spread);
-    return lo > slack || hi < -slack;
+    if (lo > slack || hi < -slack)
+        return 1;
+    for (int k = 0; k < 3; k++)
+        un[k] = n[k] / nn;
+    return 0;
 }
 
 /* 0 only if the triangle provably misses every sample segment: its plane
@@ -167,7 +221,8 @@ static int plane_misses(const kd_cone *cc, const float *tri) {
 static int tri_may_block(const kd_cone *cc, const float *tri) {
     if (cc->cos_p == 0.0) /* near-hemisphere cone: keep everything */
         return 1;
-    if (plane_misses(cc, tri))
+    double un[3] = {0, 0, 0};
+    if (plane_misses(cc, tri, un))
         return 0;
     double m[3], w[3], r2 = 0.0;
     for (int k = 0; k < 3; k++) {
@@ -190,15 +245,114 @@ static int tri_may_block(const kd_cone *cc, const float *tri) {
     const double wlen = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
     const double r = sqrt(r2);
     const double rad = r + cc->band + CULL_REL_SLACK * (wlen + r);
-    if (proj - rad > (double)cc->t_far)
+    if (proj - rad > (double)cc->t_far || proj + rad < (double)cc->t_near)
         return 0;
     if (proj * cc->cos_p + perp * cc->sin_p <= 0.0) /* nearest: the apex */
-        return wlen <= rad;
-    return perp * cc->cos_p - proj * cc->sin_p <= rad;
+        return wlen <= rad && !prism_misses(cc, tri, un);
+    return perp * cc->cos_p - proj * cc->sin_p <= rad && !prism_misses(cc, tri, un);
 }
 
 int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
     return tri_may_block(c, tri);
+}
+
+void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
+    double e1[3], e2[3], r2 = 0.0;
+    p->prim = prim;
+    for (int k = 0; k < 3; k++) {
+        const double lo = dmin(tri[k], dmin(tri[3 + k], tri[6 + k]));
+        const double hi = dmax(tri[k], dmax(tri[3 + k], tri[6 + k]));
+        p->c[k] = 0.5 * (lo + hi);
+        e1[k] = (double)tri[3 + k] - tri[k];
+        e2[k] = (double)tri[6 + k] - tri[k];
+    }
+    for (int j = 0; j < 3; j++) {
+        double d2 = 0.0;
+        for (int k = 0; k < 3; k++)
+            d2 += (tri[3 * j + k] - p->c[k]) * (tri[3 * j + k] - p->c[k]);
+        r2 = dmax(r2, d2);
+    }
+    p->r = sqrt(r2);
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    const double nn = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    p->flat = nn > 0.0;
+    for (int k = 0; k < 3; k++)
+        p->n[k] = p->flat ? n[k] / nn : 0.0;
+    p->n_off = p->n[0] * tri[0] + p->n[1] * tri[1] + p->n[2] * tri[2];
+    for (int i = 0; i < 3; i++) {
+        const float *a = tri + 3 * i, *b = tri + 3 * ((i + 1) % 3), *o = tri + 3 * ((i + 2) % 3);
+        double e[3], m[3], side = 0.0;
+        for (int k = 0; k < 3; k++)
+            e[k] = (double)b[k] - a[k];
+        m[0] = e[1] * p->n[2] - e[2] * p->n[1];
+        m[1] = e[2] * p->n[0] - e[0] * p->n[2];
+        m[2] = e[0] * p->n[1] - e[1] * p->n[0];
+        const double ml = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
+        for (int k = 0; k < 3; k++) {
+            m[k] = ml > 0.0 ? m[k] / ml : 0.0;
+            side += m[k] * ((double)o[k] - a[k]);
+        }
+        const double s = side > 0.0 ? -1.0 : 1.0; /* away from the third vertex */
+        for (int k = 0; k < 3; k++)
+            p->e[i][k] = s * m[k];
+        p->e_off[i] = p->e[i][0] * a[0] + p->e[i][1] * a[1] + p->e[i][2] * a[2];
+    }
+}
+
+/* The signed distance range [*lo, *hi] of the truncated cone over the
+ * plane {x : m . x = off} (m unit). */
+static void pre_range(const kd_cone *cc, const double m[3], double off, double *lo,
+                      double *hi) {
+    const double d_apex = m[0] * cc->dapex[0] + m[1] * cc->dapex[1] + m[2] * cc->dapex[2] - off;
+    const double mv = m[0] * cc->axis[0] + m[1] * cc->axis[1] + m[2] * cc->axis[2];
+    const double d_disc = d_apex + (double)cc->t_far * mv;
+    const double spread = (double)cc->t_far * cc->tan_p * sqrt(dmax(0.0, 1.0 - mv * mv));
+    *lo = dmin(d_apex, d_disc - spread);
+    *hi = dmax(d_apex, d_disc + spread);
+}
+
+/* tri_may_block's three tests in the same order. Its slacks use distances
+ * from the apex to a vertex or the sphere's centre; here all are bounded by
+ * |apex - c| + r, so the margins are at least as wide, plus 1e-9 relative
+ * for the offsets' own rounding (|off| up to the scene's magnitude). */
+int kd_cone_pre_may_block(const kd_cone *cc, const kd_tri_pre *p) {
+    if (cc->cos_p == 0.0)
+        return 1;
+    double w[3];
+    for (int k = 0; k < 3; k++)
+        w[k] = p->c[k] - cc->dapex[k];
+    const double wlen = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    const double own = 1e-9 * (fabs(cc->dapex[0]) + fabs(cc->dapex[1]) + fabs(cc->dapex[2]) +
+                               fabs(p->c[0]) + fabs(p->c[1]) + fabs(p->c[2]) + p->r);
+    const double slack = cc->band + CULL_REL_SLACK * (wlen + p->r + (double)cc->t_far) + own;
+    double lo, hi;
+    if (p->flat) {
+        pre_range(cc, p->n, p->n_off, &lo, &hi);
+        if (lo > slack || hi < -slack)
+            return 0;
+    }
+    const double proj = w[0] * cc->axis[0] + w[1] * cc->axis[1] + w[2] * cc->axis[2];
+    const double cx = w[1] * cc->axis[2] - w[2] * cc->axis[1];
+    const double cy = w[2] * cc->axis[0] - w[0] * cc->axis[2];
+    const double cz = w[0] * cc->axis[1] - w[1] * cc->axis[0];
+    const double perp = sqrt(cx * cx + cy * cy + cz * cz);
+    const double rad = p->r + cc->band + CULL_REL_SLACK * (wlen + p->r) + own;
+    if (proj - rad > (double)cc->t_far || proj + rad < (double)cc->t_near)
+        return 0;
+    if (proj * cc->cos_p + perp * cc->sin_p <= 0.0) {
+        if (wlen > rad)
+            return 0;
+    } else if (perp * cc->cos_p - proj * cc->sin_p > rad) {
+        return 0;
+    }
+    if (p->flat)
+        for (int i = 0; i < 3; i++) {
+            pre_range(cc, p->e[i], p->e_off[i], &lo, &hi);
+            if (lo > slack)
+                return 0;
+        }
+    return 1;
 }
 
 static int cmp_u32(const void *a, const void *b) {

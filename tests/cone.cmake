@@ -11,3 +11,10 @@ add_test(NAME cone COMMAND test_cone --caps cone)
 add_executable(test_cone_accuracy ${CMAKE_CURRENT_SOURCE_DIR}/test_cone_accuracy.c)
 target_link_libraries(test_cone_accuracy PRIVATE kdray_testsupport kdray_core m)
 add_test(NAME cone_accuracy COMMAND test_cone_accuracy)
+
+# Shared walks: a group's cone holds every segment of its points, and every
+# walk policy (groups automatic and forced, walks on and off) equals the
+# reference mode and brute force on coherent runs of points.
+add_executable(test_cone_group ${CMAKE_CURRENT_SOURCE_DIR}/test_cone_group.c)
+target_link_libraries(test_cone_group PRIVATE kdray_testsupport kdray_core m)
+add_test(NAME cone_group COMMAND test_cone_group)

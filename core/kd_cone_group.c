@@ -1,0 +1,130 @@
+/*
+ * kd_cone_group.c — one kd-tree walk shared by a group of consecutive
+ * points toward one light (kd_cone.c says when groups are formed).
+ *
+ * The group's cone holds every sample segment of every point of the group:
+ * each segment runs from a point's apex into the light's ball, so it lies in
+ * the convex hull of a ball around the apexes and the light's ball, and the
+ * cone tangent to both balls (apex behind the points, on the line of the
+ * two centres) holds that hull. The walk of that cone with its cull
+ * (kd_cone_trav.c) lists every triangle any segment of the group can touch;
+ * each point then judges that list with its own cull and proofs instead of
+ * walking the tree (kd_cone_cells.c). An empty list decides the whole group
+ * lit.
+ *
+ * Margins: a point's own walk and cull keep a triangle up to its margins
+ * (positional band, relative slack, angular slack) outside the point's cone;
+ * the balls are inflated so that the group's cone holds each point's cone
+ * widened by those margins, and the group's band is the largest of the
+ * points'. The list is therefore a superset of what each point's own walk
+ * would keep, and every decision is still taken by the point's proofs.
+ */
+#include <math.h>
+
+#include "kd_cone.h"
+#include "kd_internal.h"
+#include "kd_traverse.h"
+
+/* Relative inflation of the balls, far above double rounding and above the
+ * cull's CULL_REL_SLACK (1e-6) and angular slack (1e-5 rad). */
+#define GROUP_REL_PAD 1e-4
+
+static double dist3(const double *a, const double *b) {
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++)
+        d2 += (a[k] - b[k]) * (a[k] - b[k]);
+    return sqrt(d2);
+}
+
+/* The largest coordinate magnitude a point's walk uses for its band. */
+static float apex_magnitude(const kdr_scene *scene, const float *apex) {
+    float m = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        m = fmaxf(m, fmaxf(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
+        m = fmaxf(m, fabsf(apex[k]));
+    }
+    return m;
+}
+
+int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
+                  double max_spread, kd_cone *c) {
+    if (n == 0) return 0;
+    /* the ball around the apexes: centre of their box, farthest apex */
+    double lo[3], hi[3], cg[3], rg = 0.0, rl = 0.0;
+    float mag = 0.0f;
+    for (int k = 0; k < 3; k++)
+        lo[k] = hi[k] = fs[0]->apex[k];
+    for (size_t i = 0; i < n; i++) {
+        if (fs[i]->along != 0.0f) /* no fixed apex: no group */
+            return 0;
+        for (int k = 0; k < 3; k++) {
+            lo[k] = fmin(lo[k], fs[i]->apex[k]);
+            hi[k] = fmax(hi[k], fs[i]->apex[k]);
+        }
+        mag = fmaxf(mag, apex_magnitude(scene, fs[i]->apex));
+    }
+    for (int k = 0; k < 3; k++)
+        cg[k] = 0.5 * (lo[k] + hi[k]);
+    const double *lc = fs[0]->center;
+    double dmax = 0.0;
+    for (size_t i = 0; i < n; i++) {
+        const double a[3] = {fs[i]->apex[0], fs[i]->apex[1], fs[i]->apex[2]};
+        rg = fmax(rg, dist3(a, cg));
+    }
+    /* rl >= the light's radius: most groups that fail, fail here, before
+     * any per-point trigonometry */
+    if (!(rg <= max_spread * fs[0]->radius * (1.0 + 1e-3)))
+        return 0;
+    for (size_t i = 0; i < n; i++) {
+        /* the point's truncated cone, angular slack included, reaches this
+         * far from the light's centre: its disc at t_far */
+        const kd_shadow_frame *f = fs[i];
+        const double tfar = f->dist * (1.0 + 0x1p-16);
+        const double tan_p = tan(asin(f->sin_a) + 2e-5);
+        rl = fmax(rl, hypot(tfar - f->dist, tfar * tan_p));
+        dmax = fmax(dmax, f->dist);
+    }
+    /* every point's margins: its band, and the cull's relative slack over
+     * the distances involved */
+    const double pad =
+        (double)mag * KD_SLACK_REL + GROUP_REL_PAD * (rg + rl) + 1e-6 * (dmax + rg + rl);
+    rg += pad;
+    rl = rl * (1.0 + GROUP_REL_PAD) + pad;
+    const double D = dist3(lc, cg);
+    if (!(rl > rg) || !(rg <= max_spread * rl) || !(D > rg + rl) || !isfinite(D))
+        return 0;
+    /* the tangent cone's apex, behind the group: rg / dA = rl / (dA + D) */
+    const double dA = rg * D / (rl - rg);
+    float apex[3];
+    double u[3];
+    for (int k = 0; k < 3; k++) {
+        u[k] = (lc[k] - cg[k]) / D;
+        apex[k] = (float)(cg[k] - u[k] * dA);
+    }
+    if (!isfinite(apex[0]) || !isfinite(apex[1]) || !isfinite(apex[2])) return 0;
+    /* from the rounded apex: the axis toward the light, the half-angle
+     * holding both balls */
+    const double a[3] = {apex[0], apex[1], apex[2]};
+    const double dl = dist3(a, lc), dg = dist3(a, cg);
+    if (!(dl > rl) || !(dg > rg)) return 0;
+    double axis[3], cosg = 0.0;
+    for (int k = 0; k < 3; k++) {
+        axis[k] = (lc[k] - a[k]) / dl;
+        cosg += axis[k] * (cg[k] - a[k]) / dg;
+    }
+    const double half = fmax(asin(rl / dl), acos(fmin(1.0, cosg)) + asin(rg / dg)) + 1e-9;
+    if (!(half < 1.2)) /* a wide cone: the points walk on their own */
+        return 0;
+    kd_shadow_frame g = {.dist = dl + rl, .along = 0.0f};
+    for (int k = 0; k < 3; k++)
+        g.apex[k] = apex[k];
+    kd_cone_init(c, scene, &g, axis, sin(half));
+    /* the band of the farthest point, at least */
+    c->band = fmaxf(c->band, mag * KD_SLACK_REL + FLT_MIN);
+    /* segments start in the apexes' ball: nothing nearer to the apex */
+    double proj = 0.0;
+    for (int k = 0; k < 3; k++)
+        proj += (cg[k] - a[k]) * axis[k];
+    c->t_near = (float)fmax(0.0, (proj - rg) * (1.0 - 1e-6));
+    return 1;
+}
