@@ -92,6 +92,7 @@ void kdr_point_triangle(const float p[3], const float *tri, double out_q[3],
 typedef struct cp_todo {
     const kd_node *node;
     float lo[3], hi[3];
+    double d2; /* box_d2 of the cell, taken when it was pushed */
 } cp_todo;
 
 typedef struct cp_best {
@@ -201,6 +202,11 @@ static void test_leaf(const kdr_scene *s, const kd_node *n, const float p[3], in
     }
 }
 
+/* A child's cell is as far from p as its parent's when p is on its side
+ * of the split (the cell loses only the part beyond the split, away from
+ * p), so the near child needs no test of its own; the far child's
+ * distance is taken when it is pushed and compared again with the best
+ * when it is popped. */
 static void search(const kdr_scene *s, const float p[3], double slack, cp_best *b) {
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     cp_todo stack[KD_MAX_DEPTH + 1];
@@ -208,10 +214,11 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
     stack[sp].node = s->nodes;
     memcpy(stack[sp].lo, s->root.min, sizeof stack[sp].lo);
     memcpy(stack[sp].hi, s->root.max, sizeof stack[sp].hi);
+    stack[sp].d2 = box_d2(p, stack[sp].lo, stack[sp].hi);
     sp++;
     while (sp > 0) {
         cp_todo t = stack[--sp];
-        if (!worth(box_d2(p, t.lo, t.hi), b->d2, slack)) continue;
+        if (!worth(t.d2, b->d2, slack)) continue;
         const kd_node *n = t.node;
         while (!kd_is_leaf(n)) {
             b->nodes++;
@@ -223,21 +230,25 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
                           *farc = p_above ? below : above;
             const int near_empty = p_above ? kd_above_empty(n) : kd_below_empty(n);
             const int far_empty = p_above ? kd_below_empty(n) : kd_above_empty(n);
-            cp_todo far = t;
-            far.node = farc;
-            if (p_above) {
-                far.hi[axis] = split < far.hi[axis] ? split : far.hi[axis];
-                t.lo[axis] = split > t.lo[axis] ? split : t.lo[axis];
-            } else {
-                far.lo[axis] = split > far.lo[axis] ? split : far.lo[axis];
-                t.hi[axis] = split < t.hi[axis] ? split : t.hi[axis];
+            if (!far_empty) {
+                cp_todo *far = &stack[sp];
+                *far = t;
+                far->node = farc;
+                if (p_above)
+                    far->hi[axis] = split < far->hi[axis] ? split : far->hi[axis];
+                else
+                    far->lo[axis] = split > far->lo[axis] ? split : far->lo[axis];
+                far->d2 = box_d2(p, far->lo, far->hi);
+                sp += worth(far->d2, b->d2, slack);
             }
-            if (!far_empty && worth(box_d2(p, far.lo, far.hi), b->d2, slack))
-                stack[sp++] = far;
-            if (near_empty || !worth(box_d2(p, t.lo, t.hi), b->d2, slack)) {
+            if (near_empty) {
                 n = NULL;
                 break;
             }
+            if (p_above)
+                t.lo[axis] = split > t.lo[axis] ? split : t.lo[axis];
+            else
+                t.hi[axis] = split < t.hi[axis] ? split : t.hi[axis];
             n = nearc;
         }
         if (n) {
