@@ -22,7 +22,10 @@
  * bit. Ties (equal squared distance) go to the smaller prim. Zero-area
  * triangles are never found (they are not in the tree). Before the exact
  * test a reference is culled by its triangle's bounding-box distance, in
- * float with a relative margin; on AVX2 CPUs eight boxes at a time.
+ * float with a relative margin. On AVX2 CPUs a leaf's boxes are measured
+ * eight at a time and the exact tests run four at a time in double lanes
+ * that repeat the scalar operations (point_triangle4), so the answer is
+ * the same bit for bit.
  */
 #include <math.h>
 #include <string.h>
@@ -156,15 +159,136 @@ static inline void test_ref(const kdr_scene *s, int32_t prim, float box, const f
     }
 }
 
+/* ---- AVX2: four exact tests at once, in double ------------------------------
+ * kdr_point_triangle for the rows r[0..3], one per lane, by the same double
+ * operations in the same order (the build has -ffp-contract=off: no FMA),
+ * so each lane's distance, weights and point are bit for bit the scalar
+ * ones. The scalar test branches over the Voronoi regions; here every
+ * region's weights are computed in every lane and the first region whose
+ * condition holds (in the scalar order) is selected: a lane's divisions by
+ * zero in a region it does not select are discarded. */
+
+typedef __m256d d4;
+
+KD_AVX2 static inline d4 d4_dot(const d4 x[3], const d4 y[3]) {
+    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x[0], y[0]), _mm256_mul_pd(x[1], y[1])),
+                         _mm256_mul_pd(x[2], y[2]));
+}
+KD_AVX2 static inline d4 d4_le(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_LE_OQ); }
+KD_AVX2 static inline d4 d4_ge(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_GE_OQ); }
+KD_AVX2 static inline d4 d4_and(d4 a, d4 b) { return _mm256_and_pd(a, b); }
+/* lanes of m: a, others b */
+KD_AVX2 static inline d4 d4_sel(d4 m, d4 a, d4 b) { return _mm256_blendv_pd(b, a, m); }
+
+typedef struct cp_lanes {
+    _Alignas(32) double d2[4], u[4], v[4], q[3][4];
+} cp_lanes;
+
+KD_AVX2 static void point_triangle4(const float p[3], const float *const r[4],
+                                    cp_lanes *out) {
+    f4 A4[3], B4[3], C4[3];
+    kd_ntri_load4(r, A4, B4, C4);
+    d4 a[3], ab[3], ac[3], ap[3], bp[3], cp[3], pk[3];
+    for (int k = 0; k < 3; k++) {
+        pk[k] = _mm256_set1_pd((double)p[k]);
+        a[k] = _mm256_cvtps_pd(A4[k]);
+        const d4 b = _mm256_cvtps_pd(B4[k]), c = _mm256_cvtps_pd(C4[k]);
+        ab[k] = _mm256_sub_pd(b, a[k]);
+        ac[k] = _mm256_sub_pd(c, a[k]);
+        ap[k] = _mm256_sub_pd(pk[k], a[k]);
+        bp[k] = _mm256_sub_pd(pk[k], b);
+        cp[k] = _mm256_sub_pd(pk[k], c);
+    }
+    const d4 d1 = d4_dot(ab, ap), d2 = d4_dot(ac, ap);
+    const d4 d3 = d4_dot(ab, bp), d4v = d4_dot(ac, bp);
+    const d4 d5 = d4_dot(ab, cp), d6 = d4_dot(ac, cp);
+    const d4 vc = _mm256_sub_pd(_mm256_mul_pd(d1, d4v), _mm256_mul_pd(d3, d2));
+    const d4 vb = _mm256_sub_pd(_mm256_mul_pd(d5, d2), _mm256_mul_pd(d1, d6));
+    const d4 va = _mm256_sub_pd(_mm256_mul_pd(d3, d6), _mm256_mul_pd(d5, d4v));
+    const d4 zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
+    /* the face, then each region of higher priority over it */
+    const d4 den = _mm256_div_pd(one, _mm256_add_pd(_mm256_add_pd(va, vb), vc));
+    d4 u = _mm256_mul_pd(vb, den), v = _mm256_mul_pd(vc, den);
+    const d4 e43 = _mm256_sub_pd(d4v, d3), e56 = _mm256_sub_pd(d5, d6);
+    const d4 m_bc = d4_and(d4_le(va, zero), d4_and(d4_ge(e43, zero), d4_ge(e56, zero)));
+    const d4 v_bc = _mm256_div_pd(e43, _mm256_add_pd(e43, e56));
+    u = d4_sel(m_bc, _mm256_sub_pd(one, v_bc), u);
+    v = d4_sel(m_bc, v_bc, v);
+    const d4 m_ac = d4_and(d4_le(vb, zero), d4_and(d4_ge(d2, zero), d4_le(d6, zero)));
+    u = d4_sel(m_ac, zero, u);
+    v = d4_sel(m_ac, _mm256_div_pd(d2, _mm256_sub_pd(d2, d6)), v);
+    const d4 m_c = d4_and(d4_ge(d6, zero), d4_le(d5, d6));
+    u = d4_sel(m_c, zero, u);
+    v = d4_sel(m_c, one, v);
+    const d4 m_ab = d4_and(d4_le(vc, zero), d4_and(d4_ge(d1, zero), d4_le(d3, zero)));
+    u = d4_sel(m_ab, _mm256_div_pd(d1, _mm256_sub_pd(d1, d3)), u);
+    v = d4_sel(m_ab, zero, v);
+    const d4 m_b = d4_and(d4_ge(d3, zero), d4_le(d4v, d3));
+    u = d4_sel(m_b, one, u);
+    v = d4_sel(m_b, zero, v);
+    const d4 m_a = d4_and(d4_le(d1, zero), d4_le(d2, zero));
+    u = d4_sel(m_a, zero, u);
+    v = d4_sel(m_a, zero, v);
+    d4 sum = zero;
+    for (int k = 0; k < 3; k++) {
+        const d4 q = _mm256_add_pd(_mm256_add_pd(a[k], _mm256_mul_pd(u, ab[k])),
+                                   _mm256_mul_pd(v, ac[k]));
+        const d4 e = _mm256_sub_pd(pk[k], q);
+        _mm256_store_pd(out->q[k], q);
+        sum = _mm256_add_pd(sum, _mm256_mul_pd(e, e));
+    }
+    _mm256_store_pd(out->d2, sum);
+    _mm256_store_pd(out->u, u);
+    _mm256_store_pd(out->v, v);
+}
+
+/* The exact tests of n (1..4) references, four lanes at once (the last
+ * lanes repeat the last reference: a triangle measured twice changes
+ * nothing), taken into the best in reference order. */
+KD_AVX2 static void test_refs4(const kdr_scene *s, const int32_t *prim, int n,
+                               const float p[3], cp_best *b) {
+    const float *rows[4];
+    for (int j = 0; j < 4; j++)
+        rows[j] = s->tris + 9 * (size_t)prim[j < n ? j : n - 1];
+    cp_lanes l;
+    point_triangle4(p, rows, &l);
+    b->tests += (uint64_t)n;
+    for (int j = 0; j < n; j++) {
+        const double d2 = l.d2[j];
+        if (d2 < b->d2 || (d2 == b->d2 && (uint32_t)prim[j] < (uint32_t)b->prim)) {
+            b->d2 = d2;
+            b->prim = prim[j];
+            b->u = l.u[j];
+            b->v = l.v[j];
+            for (int k = 0; k < 3; k++)
+                b->q[k] = l.q[k][j];
+        }
+    }
+}
+
+/* The float bound a box distance must exceed to be culled: at least the
+ * scalar test's b->d2 (1 + 2^-16), rounded up to a float, so a box culled
+ * here would be culled there too. */
+static inline float cull_bound(double d2) {
+    const double t = d2 * (1.0 + 0x1p-16);
+    float f = (float)t;
+    if ((double)f < t) f = nextafterf(f, INFINITY);
+    return f;
+}
+
 /* A leaf's references eight at a time (AVX2): the box distances of a
  * group by the same float operations as tri_box_d2 (min, max, subtract,
- * square, summed over x, y, z in that order), so they are bit for bit the
- * scalar ones; then the references in order, as the scalar loop takes
- * them. Not inlined: the caller is not compiled for AVX2. */
+ * square, summed over x, y, z in that order); the references whose box is
+ * not farther than the bound go to the exact test four at a time. The
+ * answer is the least (distance, prim) over the tested references, so the
+ * order of the tests does not change it. Not inlined: the caller is not
+ * compiled for AVX2. */
 KD_AVX2 __attribute__((noinline)) static void
 test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count, const float p[3],
            cp_best *b) {
-    const f8 zero = f8_set1(0.0f);
+    const f8 zero = f8_set1(0.0f), inf = f8_set1(INFINITY);
+    int32_t pend[12];
+    int np = 0;
     for (uint32_t i = 0; i < count; i += 8) {
         const uint32_t m = count - i < 8 ? count - i : 8;
         const float *rows[8];
@@ -180,11 +304,21 @@ test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count, const float 
             const f8 e = f8_max(f8_max(f8_sub(lo, pk), f8_sub(pk, hi)), zero);
             d2 = f8_add(d2, f8_mul(e, e));
         }
-        _Alignas(32) float box[8];
-        f8_store(box, d2);
-        for (uint32_t j = 0; j < m; j++)
-            test_ref(s, (int32_t)ref[i + j], box[j], p, b);
+        /* culled: farther than the bound and finite (+inf on overflow) */
+        const f8 bound = f8_set1(cull_bound(b->d2));
+        unsigned keep = ~(unsigned)f8_bits(f8_and(f8_gt(d2, bound), f8_lt(d2, inf))) &
+                        ((1u << m) - 1);
+        while (keep) {
+            const int j = __builtin_ctz(keep);
+            keep &= keep - 1;
+            pend[np++] = (int32_t)ref[i + (uint32_t)j];
+            if (np == 4) {
+                test_refs4(s, pend, 4, p, b);
+                np = 0;
+            }
+        }
     }
+    if (np) test_refs4(s, pend, np, p, b);
 }
 
 static void test_leaf(const kdr_scene *s, const kd_node *n, const float p[3], int avx2,
