@@ -336,23 +336,44 @@ static void test_leaf(const kdr_scene *s, const kd_node *n, const float p[3], in
     }
 }
 
-/* A child's cell is as far from p as its parent's when p is on its side
- * of the split (the cell loses only the part beyond the split, away from
- * p), so the near child needs no test of its own; the far child's
- * distance is taken when it is pushed and compared again with the best
- * when it is popped. */
+/* Pending cells taken nearest first while fewer than this many wait; past
+ * it, last in first out (depth first) for the rest of the query, which
+ * adds at most one pending cell per level of the tree, so the stack below
+ * has room for all. */
+#define CP_NEAREST_MAX 64
+
+/* Cells are taken nearest first: of the pending cells the one whose box is
+ * nearest to p (the last pushed of equals), so the best distance shrinks
+ * as early as it can and the search stops at the first pending cell that
+ * is farther than it (all others are at least as far). From a taken cell
+ * the walk descends to the leaf on p's side: a child's cell is as far from
+ * p as its parent's when p is on its side of the split (the cell loses
+ * only the part beyond the split, away from p), so the near child needs no
+ * test of its own; each far child's distance is taken when it is pushed.
+ * The answer is the least (distance, prim) over the tested triangles and
+ * every cell that could hold a better one is searched, so the order
+ * changes the work, not the answer. */
 static void search(const kdr_scene *s, const float p[3], double slack, cp_best *b) {
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
-    cp_todo stack[KD_MAX_DEPTH + 1];
-    int sp = 0;
+    cp_todo stack[CP_NEAREST_MAX + 2 * (KD_MAX_DEPTH + 1)];
+    int sp = 0, nearest = 1;
     stack[sp].node = s->nodes;
     memcpy(stack[sp].lo, s->root.min, sizeof stack[sp].lo);
     memcpy(stack[sp].hi, s->root.max, sizeof stack[sp].hi);
     stack[sp].d2 = box_d2(p, stack[sp].lo, stack[sp].hi);
     sp++;
     while (sp > 0) {
-        cp_todo t = stack[--sp];
-        if (!worth(t.d2, b->d2, slack)) continue;
+        int sel = sp - 1;
+        if (nearest && sp >= CP_NEAREST_MAX) nearest = 0;
+        if (nearest)
+            for (int i = sp - 2; i >= 0; i--)
+                sel = stack[i].d2 < stack[sel].d2 ? i : sel;
+        cp_todo t = stack[sel];
+        stack[sel] = stack[--sp];
+        if (!worth(t.d2, b->d2, slack)) {
+            if (nearest) break;
+            continue;
+        }
         const kd_node *n = t.node;
         while (!kd_is_leaf(n)) {
             b->nodes++;
