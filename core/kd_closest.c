@@ -3,16 +3,17 @@
  * nearest-triangle search through the kd-tree, and the exact point-triangle
  * distance it rests on.
  *
- * Search. Depth-first from the root with the cell box of each node derived
- * from the splits on the way down (the root cell is the padded root box);
- * at an interior node the child on the point's side of the split is entered
- * first and the other is pushed with its squared distance to the point. A
- * subtree is skipped when its cell is farther than the best distance so far
- * plus a positional slack (kd_traverse.h's KD_SLACK_REL of the largest
- * coordinate magnitude): the build places a triangle in the cells its
- * surface meets up to rounding, so the cell holding a triangle's closest
- * point may miss it by a few ulps, and the slack makes sure a neighbouring
- * cell that holds it is still searched.
+ * Search. From the root with the cell box of each node derived from the
+ * splits on the way down (the root cell is the padded root box); pending
+ * cells are taken nearest first (search()), and from a taken cell the walk
+ * descends on the point's side of each split, pushing the other child with
+ * its squared distance to the point (in float, a lower bound: cell_d2). A
+ * cell is skipped when it is farther than the best distance so far plus a
+ * positional slack (kd_traverse.h's KD_SLACK_REL of the largest coordinate
+ * magnitude): the build places a triangle in the cells its surface meets
+ * up to rounding, so the cell holding a triangle's closest point may miss
+ * it by a few ulps, and the slack makes sure a neighbouring cell that
+ * holds it is still searched.
  *
  * Distance. Each triangle's closest point is found in double precision by
  * the Voronoi-region walk over the vertices, edges and face (Ericson,
@@ -93,9 +94,9 @@ void kdr_point_triangle(const float p[3], const float *tri, double out_q[3],
 }
 
 typedef struct cp_todo {
+    f4 lo, hi; /* the cell: x, y, z and a zero lane */
     const kd_node *node;
-    float lo[3], hi[3];
-    double d2; /* box_d2 of the cell, taken when it was pushed */
+    float d2; /* cell_d2 of the cell, taken when it was pushed */
 } cp_todo;
 
 typedef struct cp_best {
@@ -104,23 +105,34 @@ typedef struct cp_best {
     uint64_t nodes, tests;
 } cp_best;
 
-/* Squared distance from p to the box [lo, hi], in double. */
-static double box_d2(const float p[3], const float lo[3], const float hi[3]) {
-    double d2 = 0.0;
-    for (int k = 0; k < 3; k++) {
-        const double e = p[k] < lo[k]   ? (double)lo[k] - p[k]
-                         : p[k] > hi[k] ? (double)p[k] - hi[k]
-                                        : 0.0;
-        d2 += e * e;
-    }
-    return d2;
+/* Squared distance from p (x, y, z, 0) to the cell [lo, hi], in float:
+ * per axis max(lo - p, p - hi, 0), squared and summed (+inf on overflow
+ * becomes 0: such a cell is never skipped). Each operation rounds by at
+ * most 2^-24 relative, so the float sum is within 2^-21 of the exact
+ * distance (plus a few 2^-149 where squares fall below the normal range):
+ * worth() scales it down by more than that, so a cell is skipped only when
+ * the exact distance would skip it too. */
+static inline float cell_d2(f4 p, f4 lo, f4 hi) {
+    const f4 e = f4_max(f4_max(f4_sub(lo, p), f4_sub(p, hi)), f4_set1(0.0f));
+    _Alignas(16) float sq[4];
+    f4_store(sq, f4_mul(e, e));
+    const float d2 = (sq[0] + sq[1]) + sq[2];
+    return d2 < INFINITY ? d2 : 0.0f;
 }
 
-/* A cell is searched while its distance is at most the best plus the slack. */
-static int worth(double cell_d2, double best_d2, double slack) {
-    if (cell_d2 <= best_d2) return 1;
+/* All ones in lane axis, zeros elsewhere. */
+static inline f4 axis_mask(int axis) {
+    static const _Alignas(16) int32_t m[3][4] = {{-1, 0, 0, 0}, {0, -1, 0, 0}, {0, 0, -1, 0}};
+    return _mm_castsi128_ps(_mm_load_si128((const __m128i *)m[axis]));
+}
+
+/* A cell is searched while its distance (a lower bound of it) is at most
+ * the best plus the slack. */
+static int worth(float cell, double best_d2, double slack) {
+    const double c = (double)cell * (1.0 - 0x1p-20) - 0x1p-126;
+    if (c <= best_d2) return 1;
     const double r = sqrt(best_d2) + slack;
-    return cell_d2 <= r * r;
+    return c <= r * r;
 }
 
 /* Squared distance from p to the bounding box of tri, in float, without
@@ -357,10 +369,11 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     cp_todo stack[CP_NEAREST_MAX + 2 * (KD_MAX_DEPTH + 1)];
     int sp = 0, nearest = 1;
+    const f4 p4 = _mm_setr_ps(p[0], p[1], p[2], 0.0f);
     stack[sp].node = s->nodes;
-    memcpy(stack[sp].lo, s->root.min, sizeof stack[sp].lo);
-    memcpy(stack[sp].hi, s->root.max, sizeof stack[sp].hi);
-    stack[sp].d2 = box_d2(p, stack[sp].lo, stack[sp].hi);
+    stack[sp].lo = _mm_setr_ps(s->root.min[0], s->root.min[1], s->root.min[2], 0.0f);
+    stack[sp].hi = _mm_setr_ps(s->root.max[0], s->root.max[1], s->root.max[2], 0.0f);
+    stack[sp].d2 = cell_d2(p4, stack[sp].lo, stack[sp].hi);
     sp++;
     while (sp > 0) {
         int sel = sp - 1;
@@ -385,15 +398,16 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
                           *farc = p_above ? below : above;
             const int near_empty = p_above ? kd_above_empty(n) : kd_below_empty(n);
             const int far_empty = p_above ? kd_below_empty(n) : kd_above_empty(n);
+            /* the split as a cell bound on this axis only */
+            const f4 m = axis_mask(axis), sp4 = f4_set1(split);
+            const f4 hi_b = f4_sel(m, sp4, f4_set1(INFINITY));
+            const f4 lo_b = f4_sel(m, sp4, f4_set1(-INFINITY));
             if (!far_empty) {
                 cp_todo *far = &stack[sp];
-                *far = t;
                 far->node = farc;
-                if (p_above)
-                    far->hi[axis] = split < far->hi[axis] ? split : far->hi[axis];
-                else
-                    far->lo[axis] = split > far->lo[axis] ? split : far->lo[axis];
-                far->d2 = box_d2(p, far->lo, far->hi);
+                far->lo = p_above ? t.lo : f4_max(t.lo, lo_b);
+                far->hi = p_above ? f4_min(t.hi, hi_b) : t.hi;
+                far->d2 = cell_d2(p4, far->lo, far->hi);
                 sp += worth(far->d2, b->d2, slack);
             }
             if (near_empty) {
@@ -401,9 +415,9 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
                 break;
             }
             if (p_above)
-                t.lo[axis] = split > t.lo[axis] ? split : t.lo[axis];
+                t.lo = f4_max(t.lo, lo_b);
             else
-                t.hi[axis] = split < t.hi[axis] ? split : t.hi[axis];
+                t.hi = f4_min(t.hi, hi_b);
             n = nearc;
         }
         if (n) {
