@@ -39,6 +39,17 @@
  *            intervals, in the order the single sets trace them; Embree
  *            traces them with rtcIntersect1 / rtcOccluded1 as in the single
  *            sets
+ * Issue 15's queries (only when named with --set; no Embree here, its
+ * rivals are in kdray_bench --section queries):
+ *   all16    camera rays, kdr_intersect_all1 capped at 16 hits
+ *   all      random rays, kdr_intersect_all1 capped at 1024 (every hit)
+ *   count    random rays, kdr_count1
+ *   closest  kdr_closest_point1 without a distance limit; bench_queries'
+ *            points (alternately near a random triangle, offset up to
+ *            1e-3 of the diagonal, and uniform in the box)
+ *   For these, "diff" counts queries whose answer differs between A and B:
+ *   the number of hits and a hash of every hit's (t, prim, u, v) bits, or
+ *   the closest prim and distance bits.
  *
  *   kdray_ab [--dir DIR] [--only NAME]... [--rays N] [--rounds R]
  *            [--set NAME]...
@@ -75,7 +86,13 @@
                              kdr_hits *, kdr_trav_stats *);                     \
     size_t P##kdr_frustum_tile_count(const kdr_camera *, uint32_t);             \
     int P##kdr_shadow_trace(const kdr_scene *, const kdr_shadow_query *, size_t, \
-                            size_t, kdr_shadow_mode, float *, kdr_shadow_stats *);
+                            size_t, kdr_shadow_mode, float *, kdr_shadow_stats *); \
+    int P##kdr_intersect_all1(const kdr_scene *, const kdr_ray *, uint32_t,     \
+                              kdr_hit *, uint32_t *, kdr_trav_stats *);         \
+    int P##kdr_count1(const kdr_scene *, const kdr_ray *, uint32_t *,           \
+                      kdr_trav_stats *);                                        \
+    int P##kdr_closest_point1(const kdr_scene *, const float *, float,          \
+                              kdr_closest *, kdr_trav_stats *);
 AB_DECLARE(A_)
 AB_DECLARE(B_)
 
@@ -95,12 +112,18 @@ typedef struct core_api {
     size_t (*tiles)(const kdr_camera *, uint32_t);
     int (*shadow)(const kdr_scene *, const kdr_shadow_query *, size_t, size_t,
                   kdr_shadow_mode, float *, kdr_shadow_stats *);
+    int (*all1)(const kdr_scene *, const kdr_ray *, uint32_t, kdr_hit *, uint32_t *,
+                kdr_trav_stats *);
+    int (*count1)(const kdr_scene *, const kdr_ray *, uint32_t *, kdr_trav_stats *);
+    int (*closest1)(const kdr_scene *, const float *, float, kdr_closest *,
+                    kdr_trav_stats *);
 } core_api;
 
 #define AB_API(P)                                                               \
     {P##kdr_scene_build,  P##kdr_scene_free,    P##kdr_scene_tree_stats,        \
      P##kdr_intersect1,   P##kdr_occluded1,     P##kdr_trace_batch,             \
-     P##kdr_frustum_trace, P##kdr_frustum_tile_count, P##kdr_shadow_trace}
+     P##kdr_frustum_trace, P##kdr_frustum_tile_count, P##kdr_shadow_trace,     \
+     P##kdr_intersect_all1, P##kdr_count1, P##kdr_closest_point1}
 static const core_api cores[2] = {AB_API(A_), AB_API(B_)};
 
 /* ---- clocks ------------------------------------------------------------------ */
@@ -116,16 +139,20 @@ static double cpu_s(void) {
 enum {
     SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
     SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
-    SET_BSHADOW, SET_CONECAM, NSETS
+    SET_BSHADOW, SET_CONECAM, SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST, NSETS
 };
+/* The sets run when no --set is given (issue 15's only on request). */
+#define DEFAULT_SETS ((1 << SET_ALL16) - 1)
 static const char *const set_names[NSETS] = {"camera", "random",  "ao",
                                              "ao64",   "b8ao",    "b8cam",
                                              "frustum", "cone16", "cone64",
                                              "shadow", "brandom", "bao",
-                                             "baoc",   "bshadow", "conecam"};
+                                             "baoc",   "bshadow", "conecam",
+                                             "all16",  "all",     "count",
+                                             "closest"};
 /* Sets Embree traces too (per ray, rtcIntersect1 / rtcOccluded1). */
 static const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0,
-                                                1, 1, 1, 1, 1, 0};
+                                                1, 1, 1, 1, 1, 0, 0, 0, 0, 0};
 /* Rays per kdr_trace_batch call of the b* sets (the daemon's chunk). */
 #define AB_BATCH 4096
 
@@ -329,6 +356,29 @@ static void conecam_query(const scene_in *s, const kdr_scene *kd, size_t max, fl
                             .epsilon = 1e-4f};
 }
 
+/* bench_queries' closest-point workload: even points near a random
+ * triangle (a random point of it plus up to 1e-3 diagonal per axis), odd
+ * points uniform in the box. */
+static void closest_points(const scene_in *s, size_t n, float *pts) {
+    stress_rng r;
+    stress_rng_seed(&r, 7);
+    for (size_t i = 0; i < n; i++) {
+        float *p = pts + 3 * i;
+        if (i % 2) {
+            for (int k = 0; k < 3; k++)
+                p[k] = s->lo[k] + (s->hi[k] - s->lo[k]) * stress_rng_float(&r);
+            continue;
+        }
+        const float *t = s->tris + 9 * (stress_rng_next(&r) % s->ntris);
+        float a = stress_rng_float(&r), b = stress_rng_float(&r);
+        if (a + b > 1.0f)
+            a = 1.0f - a, b = 1.0f - b;
+        for (int k = 0; k < 3; k++)
+            p[k] = (1 - a - b) * t[k] + a * t[3 + k] + b * t[6 + k] +
+                   1e-3f * s->diag * (stress_rng_float(&r) - 0.5f);
+    }
+}
+
 /* ---- one ray set, traced by A, B and Embree -------------------------------- */
 
 typedef struct job {
@@ -349,8 +399,47 @@ typedef struct result {
     uint8_t *hit;
 } result;
 
+/* FNV-1a over the bits of n hits (the query sets' answer digest). */
+static uint32_t hits_hash(const kdr_hit *h, uint32_t n) {
+    uint32_t x = 2166136261u;
+    const unsigned char *b = (const unsigned char *)h;
+    for (size_t i = 0; i < n * sizeof *h; i++)
+        x = (x ^ b[i]) * 16777619u;
+    return x;
+}
+
+/* Issue 15's sets: per query, prim = number of hits (closest: the prim) and
+ * t = the hash of the hits (closest: the distance). */
+static void trace_query(const core_api *c, const kdr_scene *s, const job *j,
+                        result *o, kdr_trav_stats *st) {
+    static kdr_hit buf[KDR_MAX_HITS_LIMIT];
+    for (size_t i = 0; i < j->n; i++) {
+        uint32_t n = 0, h = 0;
+        if (j->set == SET_CLOSEST) {
+            kdr_closest r;
+            c->closest1(s, j->borg + 3 * i, INFINITY, &r, st);
+            o->prim[i] = r.prim;
+            o->t[i] = r.distance;
+            continue;
+        }
+        if (j->set == SET_COUNT) {
+            c->count1(s, &j->rays[i], &n, st);
+        } else {
+            c->all1(s, &j->rays[i], j->set == SET_ALL16 ? 16 : KDR_MAX_HITS_LIMIT, buf,
+                    &n, st);
+            h = hits_hash(buf, n);
+        }
+        o->prim[i] = (int32_t)n;
+        memcpy(&o->t[i], &h, 4);
+    }
+}
+
 static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
                      result *o, kdr_trav_stats *st) {
+    if (j->set >= SET_ALL16) {
+        trace_query(c, s, j, o, st);
+        return;
+    }
     if (j->sq) { /* visibility per point, as the t column */
         kdr_shadow_stats ss = {0, 0, 0};
         c->shadow(s, j->sq, 0, j->sq->n, KDR_SHADOW_CONE, o->t, &ss);
@@ -578,8 +667,15 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             break;
         case SET_RANDOM:
         case SET_BRANDOM:
+        case SET_ALL:
+        case SET_COUNT:
             random_rays(&si, n, rays);
             break;
+        case SET_ALL16:
+            j.n = camera_rays(&cam, 0, rays);
+            break;
+        case SET_CLOSEST:
+            break; /* points: below */
         case SET_AO:
         case SET_BAO:
             ao_rays(&si, n, 16, rays), j.q = KDR_ANY;
@@ -607,6 +703,8 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             conecam_query(&si, kd[0], n / 64, bdir, &li, &sq);
             j.sq = &sq;
             j.n = sq.n * 64;
+        } else if (set == SET_CLOSEST) {
+            closest_points(&si, n, borg);
         } else {
             for (size_t i = 0; i < j.n; i++) {
                 memcpy(bdir + 3 * i, rays[i].dir, 12);
@@ -658,7 +756,7 @@ static int parse(int argc, char **argv, opts *o) {
     if (argc % 2 == 0 || o->rays == 0 || o->rounds < 1 || !o->dir)
         return -1;
     if (!o->sets)
-        o->sets = (1 << NSETS) - 1;
+        o->sets = DEFAULT_SETS;
     return 0;
 }
 
@@ -668,7 +766,8 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &o) != 0) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
-                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam]...\n", argv[0]);
+                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam|all16|all|"
+                        "count|closest]...\n", argv[0]);
         return 2;
     }
     ladder_entry *v;

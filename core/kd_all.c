@@ -24,7 +24,7 @@
  *
  * "count" keeps every accepted prim (duplicates included) in a buffer that
  * starts on the stack and moves to the heap past KD_COUNT_STACK entries,
- * then sorts and counts distinct prims.
+ * then sorts (by insertion when few) and counts distinct prims.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -54,24 +54,21 @@ typedef struct all_sink {
 } all_sink;
 
 /* all: inserts (t, prim) unless it is already held or cannot be among the
- * first cap hits. */
+ * first cap hits. The walk goes front to back, so a new hit mostly
+ * belongs at or near the end: its place is found from the end. */
 static void keep_all(all_sink *s, float t, int32_t prim, float u, float v) {
     if (s->n == s->cap &&
         !kd_hit_better(t, prim, s->hits[s->n - 1].t, s->hits[s->n - 1].prim))
         return;
     /* first position whose (t, prim) is not better than the new one */
-    uint32_t lo = 0, hi = s->n;
-    while (lo < hi) {
-        const uint32_t mid = lo + (hi - lo) / 2;
-        if (kd_hit_better(s->hits[mid].t, s->hits[mid].prim, t, prim))
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
+    uint32_t lo = s->n;
+    while (lo > 0 && !kd_hit_better(s->hits[lo - 1].t, s->hits[lo - 1].prim, t, prim))
+        lo--;
     if (lo < s->n && s->hits[lo].prim == prim)
         return; /* the same triangle, found again in another leaf */
     const uint32_t keep = s->n < s->cap ? s->n : s->cap - 1;
-    memmove(s->hits + lo + 1, s->hits + lo, (keep - lo) * sizeof *s->hits);
+    for (uint32_t i = keep; i > lo; i--)
+        s->hits[i] = s->hits[i - 1];
     s->hits[lo] = (kdr_hit){t, u, v, prim};
     s->n = keep + 1;
     if (s->n == s->cap) s->bound = s->hits[s->n - 1].t;
@@ -271,6 +268,23 @@ static int cmp_u32(const void *a, const void *b) {
     return (x > y) - (x < y);
 }
 
+/* Sorts the prims of a ray: by insertion when there are few (the common
+ * case, where qsort's calls through a comparison pointer cost more than
+ * the walk's hit collection), else qsort. */
+static void sort_prims(uint32_t *p, size_t n) {
+    if (n > 32) {
+        qsort(p, n, sizeof *p, cmp_u32);
+        return;
+    }
+    for (size_t i = 1; i < n; i++) {
+        const uint32_t x = p[i];
+        size_t j = i;
+        for (; j > 0 && p[j - 1] > x; j--)
+            p[j] = p[j - 1];
+        p[j] = x;
+    }
+}
+
 int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
                kdr_trav_stats *stats) {
     if (count) *count = 0;
@@ -279,7 +293,7 @@ int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
     all_sink s = {.prims = local, .pcap = KD_COUNT_STACK, .bound = ray->tmax};
     walk(scene, ray, &s);
     add_stats(stats, &s);
-    if (!s.oom && s.np > 1) qsort(s.prims, s.np, sizeof *s.prims, cmp_u32);
+    if (!s.oom) sort_prims(s.prims, s.np);
     uint32_t distinct = 0;
     for (size_t i = 0; i < s.np; i++)
         distinct += i == 0 || s.prims[i] != s.prims[i - 1];

@@ -3,16 +3,17 @@
  * nearest-triangle search through the kd-tree, and the exact point-triangle
  * distance it rests on.
  *
- * Search. Depth-first from the root with the cell box of each node derived
- * from the splits on the way down (the root cell is the padded root box);
- * at an interior node the child on the point's side of the split is entered
- * first and the other is pushed with its squared distance to the point. A
- * subtree is skipped when its cell is farther than the best distance so far
- * plus a positional slack (kd_traverse.h's KD_SLACK_REL of the largest
- * coordinate magnitude): the build places a triangle in the cells its
- * surface meets up to rounding, so the cell holding a triangle's closest
- * point may miss it by a few ulps, and the slack makes sure a neighbouring
- * cell that holds it is still searched.
+ * Search. From the root with the cell box of each node derived from the
+ * splits on the way down (the root cell is the padded root box); pending
+ * cells are taken nearest first (search()), and from a taken cell the walk
+ * descends on the point's side of each split, pushing the other child with
+ * its squared distance to the point (in float, a lower bound: cell_d2). A
+ * cell is skipped when it is farther than the best distance so far plus a
+ * positional slack (kd_traverse.h's KD_SLACK_REL of the largest coordinate
+ * magnitude): the build places a triangle in the cells its surface meets
+ * up to rounding, so the cell holding a triangle's closest point may miss
+ * it by a few ulps, and the slack makes sure a neighbouring cell that
+ * holds it is still searched.
  *
  * Distance. Each triangle's closest point is found in double precision by
  * the Voronoi-region walk over the vertices, edges and face (Ericson,
@@ -20,13 +21,19 @@
  * squared distance is the double distance to that point, so the kd search
  * and a brute-force loop over every triangle give the same number bit for
  * bit. Ties (equal squared distance) go to the smaller prim. Zero-area
- * triangles are never found (they are not in the tree).
+ * triangles are never found (they are not in the tree). Before the exact
+ * test a reference is culled by its triangle's bounding-box distance, in
+ * float with a relative margin. On AVX2 CPUs a leaf's boxes are measured
+ * eight at a time and the exact tests run four at a time in double lanes
+ * that repeat the scalar operations (point_triangle4), so the answer is
+ * the same bit for bit.
  */
 #include <math.h>
 #include <string.h>
 
 #include "kd_internal.h"
 #include "kd_traverse.h"
+#include "kd_tri_ntri.h"
 
 void kdr_point_triangle(const float p[3], const float *tri, double out_q[3],
                         double *out_u, double *out_v, double *out_d2) {
@@ -87,8 +94,9 @@ void kdr_point_triangle(const float p[3], const float *tri, double out_q[3],
 }
 
 typedef struct cp_todo {
+    f4 lo, hi; /* the cell: x, y, z and a zero lane */
     const kd_node *node;
-    float lo[3], hi[3];
+    float d2; /* cell_d2 of the cell, taken when it was pushed */
 } cp_todo;
 
 typedef struct cp_best {
@@ -97,23 +105,34 @@ typedef struct cp_best {
     uint64_t nodes, tests;
 } cp_best;
 
-/* Squared distance from p to the box [lo, hi], in double. */
-static double box_d2(const float p[3], const float lo[3], const float hi[3]) {
-    double d2 = 0.0;
-    for (int k = 0; k < 3; k++) {
-        const double e = p[k] < lo[k]   ? (double)lo[k] - p[k]
-                         : p[k] > hi[k] ? (double)p[k] - hi[k]
-                                        : 0.0;
-        d2 += e * e;
-    }
-    return d2;
+/* Squared distance from p (x, y, z, 0) to the cell [lo, hi], in float:
+ * per axis max(lo - p, p - hi, 0), squared and summed (+inf on overflow
+ * becomes 0: such a cell is never skipped). Each operation rounds by at
+ * most 2^-24 relative, so the float sum is within 2^-21 of the exact
+ * distance (plus a few 2^-149 where squares fall below the normal range):
+ * worth() scales it down by more than that, so a cell is skipped only when
+ * the exact distance would skip it too. */
+static inline float cell_d2(f4 p, f4 lo, f4 hi) {
+    const f4 e = f4_max(f4_max(f4_sub(lo, p), f4_sub(p, hi)), f4_set1(0.0f));
+    _Alignas(16) float sq[4];
+    f4_store(sq, f4_mul(e, e));
+    const float d2 = (sq[0] + sq[1]) + sq[2];
+    return d2 < INFINITY ? d2 : 0.0f;
 }
 
-/* A cell is searched while its distance is at most the best plus the slack. */
-static int worth(double cell_d2, double best_d2, double slack) {
-    if (cell_d2 <= best_d2) return 1;
+/* All ones in lane axis, zeros elsewhere. */
+static inline f4 axis_mask(int axis) {
+    static const _Alignas(16) int32_t m[3][4] = {{-1, 0, 0, 0}, {0, -1, 0, 0}, {0, 0, -1, 0}};
+    return _mm_castsi128_ps(_mm_load_si128((const __m128i *)m[axis]));
+}
+
+/* A cell is searched while its distance (a lower bound of it) is at most
+ * the best plus the slack. */
+static int worth(float cell, double best_d2, double slack) {
+    const double c = (double)cell * (1.0 - 0x1p-20) - 0x1p-126;
+    if (c <= best_d2) return 1;
     const double r = sqrt(best_d2) + slack;
-    return cell_d2 <= r * r;
+    return c <= r * r;
 }
 
 /* Squared distance from p to the bounding box of tri, in float, without
@@ -135,38 +154,239 @@ static inline float tri_box_d2(const float p[3], const float *tri) {
     return d2;
 }
 
-static void test_leaf(const kdr_scene *s, const kd_node *n, const float p[3],
-                      cp_best *b) {
-    const uint32_t *ref = s->refs + n->u.first;
-    const uint32_t count = kd_count(n);
-    for (uint32_t i = 0; i < count; i++) {
-        const int32_t prim = (int32_t)ref[i];
-        const float *tri = s->tris + 9 * (size_t)prim;
-        const float box = tri_box_d2(p, tri); /* +inf on overflow: never culls */
-        if (box < INFINITY && (double)box > b->d2 * (1.0 + 0x1p-16)) continue;
-        b->tests++;
-        double q[3], u, v, d2;
-        kdr_point_triangle(p, tri, q, &u, &v, &d2);
-        if (d2 < b->d2 || (d2 == b->d2 && (uint32_t)prim < (uint32_t)b->prim)) {
+/* The exact test of one reference whose box distance (tri_box_d2) is box:
+ * skipped when the box is farther than the best by the margin above. */
+static inline void test_ref(const kdr_scene *s, int32_t prim, float box, const float p[3],
+                            cp_best *b) {
+    if (box < INFINITY && (double)box > b->d2 * (1.0 + 0x1p-16)) return;
+    b->tests++;
+    double q[3], u, v, d2;
+    kdr_point_triangle(p, s->tris + 9 * (size_t)prim, q, &u, &v, &d2);
+    if (d2 < b->d2 || (d2 == b->d2 && (uint32_t)prim < (uint32_t)b->prim)) {
+        b->d2 = d2;
+        b->prim = prim;
+        b->u = u;
+        b->v = v;
+        memcpy(b->q, q, sizeof q);
+    }
+}
+
+/* ---- AVX2: four exact tests at once, in double ------------------------------
+ * kdr_point_triangle for the rows r[0..3], one per lane, by the same double
+ * operations in the same order (the build has -ffp-contract=off: no FMA),
+ * so each lane's distance, weights and point are bit for bit the scalar
+ * ones. The scalar test branches over the Voronoi regions; here every
+ * region's weights are computed in every lane and the first region whose
+ * condition holds (in the scalar order) is selected: a lane's divisions by
+ * zero in a region it does not select are discarded. */
+
+typedef __m256d d4;
+
+KD_AVX2 static inline d4 d4_dot(const d4 x[3], const d4 y[3]) {
+    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x[0], y[0]), _mm256_mul_pd(x[1], y[1])),
+                         _mm256_mul_pd(x[2], y[2]));
+}
+KD_AVX2 static inline d4 d4_le(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_LE_OQ); }
+KD_AVX2 static inline d4 d4_ge(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_GE_OQ); }
+KD_AVX2 static inline d4 d4_and(d4 a, d4 b) { return _mm256_and_pd(a, b); }
+/* lanes of m: a, others b */
+KD_AVX2 static inline d4 d4_sel(d4 m, d4 a, d4 b) { return _mm256_blendv_pd(b, a, m); }
+
+typedef struct cp_lanes {
+    _Alignas(32) double d2[4], u[4], v[4], q[3][4];
+} cp_lanes;
+
+KD_AVX2 static void point_triangle4(const float p[3], const float *const r[4],
+                                    cp_lanes *out) {
+    f4 A4[3], B4[3], C4[3];
+    kd_ntri_load4(r, A4, B4, C4);
+    d4 a[3], ab[3], ac[3], ap[3], bp[3], cp[3], pk[3];
+    for (int k = 0; k < 3; k++) {
+        pk[k] = _mm256_set1_pd((double)p[k]);
+        a[k] = _mm256_cvtps_pd(A4[k]);
+        const d4 b = _mm256_cvtps_pd(B4[k]), c = _mm256_cvtps_pd(C4[k]);
+        ab[k] = _mm256_sub_pd(b, a[k]);
+        ac[k] = _mm256_sub_pd(c, a[k]);
+        ap[k] = _mm256_sub_pd(pk[k], a[k]);
+        bp[k] = _mm256_sub_pd(pk[k], b);
+        cp[k] = _mm256_sub_pd(pk[k], c);
+    }
+    const d4 d1 = d4_dot(ab, ap), d2 = d4_dot(ac, ap);
+    const d4 d3 = d4_dot(ab, bp), d4v = d4_dot(ac, bp);
+    const d4 d5 = d4_dot(ab, cp), d6 = d4_dot(ac, cp);
+    const d4 vc = _mm256_sub_pd(_mm256_mul_pd(d1, d4v), _mm256_mul_pd(d3, d2));
+    const d4 vb = _mm256_sub_pd(_mm256_mul_pd(d5, d2), _mm256_mul_pd(d1, d6));
+    const d4 va = _mm256_sub_pd(_mm256_mul_pd(d3, d6), _mm256_mul_pd(d5, d4v));
+    const d4 zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
+    /* the face, then each region of higher priority over it */
+    const d4 den = _mm256_div_pd(one, _mm256_add_pd(_mm256_add_pd(va, vb), vc));
+    d4 u = _mm256_mul_pd(vb, den), v = _mm256_mul_pd(vc, den);
+    const d4 e43 = _mm256_sub_pd(d4v, d3), e56 = _mm256_sub_pd(d5, d6);
+    const d4 m_bc = d4_and(d4_le(va, zero), d4_and(d4_ge(e43, zero), d4_ge(e56, zero)));
+    const d4 v_bc = _mm256_div_pd(e43, _mm256_add_pd(e43, e56));
+    u = d4_sel(m_bc, _mm256_sub_pd(one, v_bc), u);
+    v = d4_sel(m_bc, v_bc, v);
+    const d4 m_ac = d4_and(d4_le(vb, zero), d4_and(d4_ge(d2, zero), d4_le(d6, zero)));
+    u = d4_sel(m_ac, zero, u);
+    v = d4_sel(m_ac, _mm256_div_pd(d2, _mm256_sub_pd(d2, d6)), v);
+    const d4 m_c = d4_and(d4_ge(d6, zero), d4_le(d5, d6));
+    u = d4_sel(m_c, zero, u);
+    v = d4_sel(m_c, one, v);
+    const d4 m_ab = d4_and(d4_le(vc, zero), d4_and(d4_ge(d1, zero), d4_le(d3, zero)));
+    u = d4_sel(m_ab, _mm256_div_pd(d1, _mm256_sub_pd(d1, d3)), u);
+    v = d4_sel(m_ab, zero, v);
+    const d4 m_b = d4_and(d4_ge(d3, zero), d4_le(d4v, d3));
+    u = d4_sel(m_b, one, u);
+    v = d4_sel(m_b, zero, v);
+    const d4 m_a = d4_and(d4_le(d1, zero), d4_le(d2, zero));
+    u = d4_sel(m_a, zero, u);
+    v = d4_sel(m_a, zero, v);
+    d4 sum = zero;
+    for (int k = 0; k < 3; k++) {
+        const d4 q = _mm256_add_pd(_mm256_add_pd(a[k], _mm256_mul_pd(u, ab[k])),
+                                   _mm256_mul_pd(v, ac[k]));
+        const d4 e = _mm256_sub_pd(pk[k], q);
+        _mm256_store_pd(out->q[k], q);
+        sum = _mm256_add_pd(sum, _mm256_mul_pd(e, e));
+    }
+    _mm256_store_pd(out->d2, sum);
+    _mm256_store_pd(out->u, u);
+    _mm256_store_pd(out->v, v);
+}
+
+/* The exact tests of n (1..4) references, four lanes at once (the last
+ * lanes repeat the last reference: a triangle measured twice changes
+ * nothing), taken into the best in reference order. */
+KD_AVX2 static void test_refs4(const kdr_scene *s, const int32_t *prim, int n,
+                               const float p[3], cp_best *b) {
+    const float *rows[4];
+    for (int j = 0; j < 4; j++)
+        rows[j] = s->tris + 9 * (size_t)prim[j < n ? j : n - 1];
+    cp_lanes l;
+    point_triangle4(p, rows, &l);
+    b->tests += (uint64_t)n;
+    for (int j = 0; j < n; j++) {
+        const double d2 = l.d2[j];
+        if (d2 < b->d2 || (d2 == b->d2 && (uint32_t)prim[j] < (uint32_t)b->prim)) {
             b->d2 = d2;
-            b->prim = prim;
-            b->u = u;
-            b->v = v;
-            memcpy(b->q, q, sizeof q);
+            b->prim = prim[j];
+            b->u = l.u[j];
+            b->v = l.v[j];
+            for (int k = 0; k < 3; k++)
+                b->q[k] = l.q[k][j];
         }
     }
 }
 
+/* The float bound a box distance must exceed to be culled: at least the
+ * scalar test's b->d2 (1 + 2^-16), rounded up to a float, so a box culled
+ * here would be culled there too. */
+static inline float cull_bound(double d2) {
+    const double t = d2 * (1.0 + 0x1p-16);
+    float f = (float)t;
+    if ((double)f < t) f = nextafterf(f, INFINITY);
+    return f;
+}
+
+/* A leaf's references eight at a time (AVX2): the box distances of a
+ * group by the same float operations as tri_box_d2 (min, max, subtract,
+ * square, summed over x, y, z in that order); the references whose box is
+ * not farther than the bound go to the exact test four at a time. The
+ * answer is the least (distance, prim) over the tested references, so the
+ * order of the tests does not change it. Not inlined: the caller is not
+ * compiled for AVX2. */
+KD_AVX2 __attribute__((noinline)) static void
+test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count, const float p[3],
+           cp_best *b) {
+    const f8 zero = f8_set1(0.0f), inf = f8_set1(INFINITY);
+    int32_t pend[12];
+    int np = 0;
+    for (uint32_t i = 0; i < count; i += 8) {
+        const uint32_t m = count - i < 8 ? count - i : 8;
+        const float *rows[8];
+        for (uint32_t j = 0; j < 8; j++)
+            rows[j] = s->tris + 9 * (size_t)ref[i + (j < m ? j : m - 1)];
+        f8 A[3], B[3], C[3];
+        kd_ntri_load8(rows, A, B, C);
+        f8 d2 = zero;
+        for (int k = 0; k < 3; k++) {
+            const f8 pk = f8_set1(p[k]);
+            const f8 lo = f8_min(f8_min(A[k], B[k]), C[k]);
+            const f8 hi = f8_max(f8_max(A[k], B[k]), C[k]);
+            const f8 e = f8_max(f8_max(f8_sub(lo, pk), f8_sub(pk, hi)), zero);
+            d2 = f8_add(d2, f8_mul(e, e));
+        }
+        /* culled: farther than the bound and finite (+inf on overflow) */
+        const f8 bound = f8_set1(cull_bound(b->d2));
+        unsigned keep = ~(unsigned)f8_bits(f8_and(f8_gt(d2, bound), f8_lt(d2, inf))) &
+                        ((1u << m) - 1);
+        while (keep) {
+            const int j = __builtin_ctz(keep);
+            keep &= keep - 1;
+            pend[np++] = (int32_t)ref[i + (uint32_t)j];
+            if (np == 4) {
+                test_refs4(s, pend, 4, p, b);
+                np = 0;
+            }
+        }
+    }
+    if (np) test_refs4(s, pend, np, p, b);
+}
+
+static void test_leaf(const kdr_scene *s, const kd_node *n, const float p[3], int avx2,
+                      cp_best *b) {
+    const uint32_t *ref = s->refs + n->u.first;
+    const uint32_t count = kd_count(n);
+    if (avx2 && count >= 4) {
+        test_leaf8(s, ref, count, p, b);
+        return;
+    }
+    for (uint32_t i = 0; i < count; i++) {
+        const int32_t prim = (int32_t)ref[i];
+        /* +inf on overflow: never culls */
+        test_ref(s, prim, tri_box_d2(p, s->tris + 9 * (size_t)prim), p, b);
+    }
+}
+
+/* Pending cells taken nearest first while fewer than this many wait; past
+ * it, last in first out (depth first) for the rest of the query, which
+ * adds at most one pending cell per level of the tree, so the stack below
+ * has room for all. */
+#define CP_NEAREST_MAX 64
+
+/* Cells are taken nearest first: of the pending cells the one whose box is
+ * nearest to p (the last pushed of equals), so the best distance shrinks
+ * as early as it can and the search stops at the first pending cell that
+ * is farther than it (all others are at least as far). From a taken cell
+ * the walk descends to the leaf on p's side: a child's cell is as far from
+ * p as its parent's when p is on its side of the split (the cell loses
+ * only the part beyond the split, away from p), so the near child needs no
+ * test of its own; each far child's distance is taken when it is pushed.
+ * The answer is the least (distance, prim) over the tested triangles and
+ * every cell that could hold a better one is searched, so the order
+ * changes the work, not the answer. */
 static void search(const kdr_scene *s, const float p[3], double slack, cp_best *b) {
-    cp_todo stack[KD_MAX_DEPTH + 1];
-    int sp = 0;
+    const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
+    cp_todo stack[CP_NEAREST_MAX + 2 * (KD_MAX_DEPTH + 1)];
+    int sp = 0, nearest = 1;
+    const f4 p4 = _mm_setr_ps(p[0], p[1], p[2], 0.0f);
     stack[sp].node = s->nodes;
-    memcpy(stack[sp].lo, s->root.min, sizeof stack[sp].lo);
-    memcpy(stack[sp].hi, s->root.max, sizeof stack[sp].hi);
+    stack[sp].lo = _mm_setr_ps(s->root.min[0], s->root.min[1], s->root.min[2], 0.0f);
+    stack[sp].hi = _mm_setr_ps(s->root.max[0], s->root.max[1], s->root.max[2], 0.0f);
+    stack[sp].d2 = cell_d2(p4, stack[sp].lo, stack[sp].hi);
     sp++;
     while (sp > 0) {
-        cp_todo t = stack[--sp];
-        if (!worth(box_d2(p, t.lo, t.hi), b->d2, slack)) continue;
+        int sel = sp - 1;
+        if (nearest && sp >= CP_NEAREST_MAX) nearest = 0;
+        if (nearest)
+            for (int i = sp - 2; i >= 0; i--)
+                sel = stack[i].d2 < stack[sel].d2 ? i : sel;
+        cp_todo t = stack[sel];
+        stack[sel] = stack[--sp];
+        if (!worth(t.d2, b->d2, slack)) {
+            if (nearest) break;
+            continue;
+        }
         const kd_node *n = t.node;
         while (!kd_is_leaf(n)) {
             b->nodes++;
@@ -178,26 +398,31 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
                           *farc = p_above ? below : above;
             const int near_empty = p_above ? kd_above_empty(n) : kd_below_empty(n);
             const int far_empty = p_above ? kd_below_empty(n) : kd_above_empty(n);
-            cp_todo far = t;
-            far.node = farc;
-            if (p_above) {
-                far.hi[axis] = split < far.hi[axis] ? split : far.hi[axis];
-                t.lo[axis] = split > t.lo[axis] ? split : t.lo[axis];
-            } else {
-                far.lo[axis] = split > far.lo[axis] ? split : far.lo[axis];
-                t.hi[axis] = split < t.hi[axis] ? split : t.hi[axis];
+            /* the split as a cell bound on this axis only */
+            const f4 m = axis_mask(axis), sp4 = f4_set1(split);
+            const f4 hi_b = f4_sel(m, sp4, f4_set1(INFINITY));
+            const f4 lo_b = f4_sel(m, sp4, f4_set1(-INFINITY));
+            if (!far_empty) {
+                cp_todo *far = &stack[sp];
+                far->node = farc;
+                far->lo = p_above ? t.lo : f4_max(t.lo, lo_b);
+                far->hi = p_above ? f4_min(t.hi, hi_b) : t.hi;
+                far->d2 = cell_d2(p4, far->lo, far->hi);
+                sp += worth(far->d2, b->d2, slack);
             }
-            if (!far_empty && worth(box_d2(p, far.lo, far.hi), b->d2, slack))
-                stack[sp++] = far;
-            if (near_empty || !worth(box_d2(p, t.lo, t.hi), b->d2, slack)) {
+            if (near_empty) {
                 n = NULL;
                 break;
             }
+            if (p_above)
+                t.lo = f4_max(t.lo, lo_b);
+            else
+                t.hi = f4_min(t.hi, hi_b);
             n = nearc;
         }
         if (n) {
             b->nodes++;
-            test_leaf(s, n, p, b);
+            test_leaf(s, n, p, avx2, b);
         }
     }
 }

@@ -14,7 +14,9 @@
  *  - capped lists (1, 2, 3, 16) are the uncapped list's prefix, bit for bit;
  *    cap 1 is kdr_intersect1's hit; kdr_count1 is the uncapped length;
  *  - Embree (robust, a context filter that collects every hit): every prim
- *    on one list and not the other must be a proven rounding case.
+ *    on one list and not the other must be a proven rounding case;
+ *  - 300 stacked squares across one ray (many_hits): 300 hits in t order
+ *    uncapped and counted, the first 16 when capped.
  * Exit 1 on any unexplained difference.
  */
 #include <math.h>
@@ -274,9 +276,49 @@ static int shared_edge(void) {
     return !ok;
 }
 
+/* 300 stacked squares (two triangles each) across one ray: 300 hits, more
+ * than count's insertion sort takes (32, then qsort), arriving within a
+ * leaf in reference order rather than t order (the hit list's insertion
+ * from its end must place them), uncapped and capped at 16. */
+static int many_hits(void) {
+    enum { N = 300 };
+    float *tris = malloc(2 * N * 9 * sizeof *tris);
+    /* squares in a shuffled order, so prim order is not t order */
+    for (int i = 0; i < N; i++) {
+        const float z = (float)((i * 7) % N);
+        const float t[18] = {-1, -1, z, 1, -1, z, 1, 1, z, -1, -1, z, 1, 1, z, -1, 1, z};
+        memcpy(tris + 18 * i, t, sizeof t);
+    }
+    kdr_scene *sc = NULL;
+    if (kdr_scene_build(tris, 2 * N, NULL, NULL, NULL, &sc) != KDR_OK) {
+        free(tris);
+        return 1;
+    }
+    kdr_ray r = {{0.3f, 0.2f, -1}, {0, 0, 1}, 0, INFINITY}; /* below each diagonal */
+    kdr_hit *h = malloc(KDR_MAX_HITS_LIMIT * sizeof *h);
+    uint32_t n = 0, c = 0, n16 = 0;
+    kdr_intersect_all1(sc, &r, KDR_MAX_HITS_LIMIT, h, &n, NULL);
+    kdr_count1(sc, &r, &c, NULL);
+    int bad = n != N || c != N;
+    /* the k-th hit is on the square at z = k (t = k + 1 up to the
+     * watertight test's rounding), its first triangle (an even prim) */
+    for (uint32_t k = 0; !bad && k < n; k++)
+        bad = fabsf(h[k].t - ((float)k + 1.0f)) > 1e-4f * ((float)k + 1.0f) ||
+              (k > 0 && !(h[k].t > h[k - 1].t)) || (h[k].prim & 1) ||
+              tris[9 * (size_t)h[k].prim + 2] != (float)k;
+    kdr_hit h16[16];
+    kdr_intersect_all1(sc, &r, 16, h16, &n16, NULL);
+    bad |= n16 != 16 || (n == N && memcmp(h16, h, sizeof h16) != 0);
+    if (bad) fprintf(stderr, "many_hits: n %u count %u capped %u\n", n, c, n16);
+    free(h);
+    free(tris);
+    kdr_scene_free(sc);
+    return bad;
+}
+
 int main(int argc, char **argv) {
     const size_t nrays = argc > 1 ? (size_t)atol(argv[1]) : 1500;
-    int fails = api_errors() + shared_edge();
+    int fails = api_errors() + shared_edge() + many_hits();
     tally total = {0};
     kdr_ray *rays = malloc((nrays + 400) * sizeof *rays);
     for (int k = 0; k < STRESS_NSCENES; k++) {

@@ -13,7 +13,12 @@
  *    surfaces, near them (offsets 1e-7 .. 1e-1 of the diagonal), inside
  *    the closed meshes and far outside; with max_distance too;
  *  - against Embree's rtcPointQuery with a closest-triangle callback:
- *    the same distance bit for bit, the same prim unless a tie.
+ *    the same distance bit for bit, the same prim unless a tie;
+ *  - a tessellated sphere queried at and near its centre, where every
+ *    triangle is about equally far: the search visits most of the tree and
+ *    holds far more pending cells than its nearest-first limit
+ *    (CP_NEAREST_MAX in kd_closest.c), so its depth-first fallback runs;
+ *    answers against brute force as above.
  * Exit 1 on any failure.
  */
 #include <math.h>
@@ -268,6 +273,59 @@ static void run(const char *label, const float *tris, size_t ntris, size_t npts,
     kdr_scene_free(sc);
 }
 
+/* A UV sphere of radius 1 around c with nlat x nlon quads (two triangles
+ * each), queried at c and at points a little off it. */
+static void sphere_centre(void) {
+    const int nlat = 60, nlon = 120;
+    const double pi = 3.14159265358979323846;
+    const float c[3] = {0.25f, -0.5f, 2.0f};
+    const size_t ntris = (size_t)2 * nlat * nlon;
+    float *tris = malloc(9 * ntris * sizeof *tris);
+    size_t t = 0;
+    for (int i = 0; i < nlat; i++)
+        for (int j = 0; j < nlon; j++) {
+            float v[4][3];
+            for (int k = 0; k < 4; k++) {
+                const double th = pi * (i + (k >> 1)) / nlat,
+                             ph = 2 * pi * (j + (k & 1)) / nlon;
+                v[k][0] = c[0] + (float)(sin(th) * cos(ph));
+                v[k][1] = c[1] + (float)(sin(th) * sin(ph));
+                v[k][2] = c[2] + (float)cos(th);
+            }
+            static const int q[2][3] = {{0, 2, 1}, {1, 2, 3}};
+            for (int h = 0; h < 2; h++, t++)
+                for (int k = 0; k < 3; k++)
+                    memcpy(tris + 9 * t + 3 * k, v[q[h][k]], sizeof v[0]);
+        }
+    kdr_scene *sc = NULL;
+    if (kdr_scene_build(tris, ntris, NULL, NULL, NULL, &sc) != KDR_OK) {
+        FAIL("sphere: build failed\n");
+        free(tris);
+        return;
+    }
+    static const float off[][3] = {{0, 0, 0}, {1e-3f, 0, 0}, {0, -2e-2f, 1e-2f},
+                                   {0.1f, 0.1f, -0.1f}};
+    kdr_trav_stats st = {0};
+    for (size_t i = 0; i < sizeof off / sizeof *off; i++) {
+        const float p[3] = {c[0] + off[i][0], c[1] + off[i][1], c[2] + off[i][2]};
+        kdr_closest kd, bf;
+        kdr_closest_point1(sc, p, INFINITY, &kd, i == 0 ? &st : NULL);
+        brute(tris, ntris, p, INFINITY, &bf);
+        if (!same(&kd, &bf))
+            FAIL("sphere: point %zu: kd prim %d d %a, brute prim %d d %a\n", i, kd.prim,
+                 kd.distance, bf.prim, bf.distance);
+    }
+    /* at the centre the search must visit well over the nearest-first
+     * limit of pending cells (64), or this case tests nothing */
+    if (st.nodes_visited < 1000)
+        FAIL("sphere: only %llu nodes visited from the centre\n",
+             (unsigned long long)st.nodes_visited);
+    printf("sphere centre  %zu triangles, nodes visited from the centre %llu\n", ntris,
+           (unsigned long long)st.nodes_visited);
+    kdr_scene_free(sc);
+    free(tris);
+}
+
 static void api(void) {
     const float tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
     kdr_scene *sc = NULL;
@@ -293,6 +351,7 @@ int main(int argc, char **argv) {
     const size_t npts = argc > 1 ? (size_t)atol(argv[1]) : 2000;
     api();
     test_distance();
+    sphere_centre();
     for (int k = 0; k < STRESS_NSCENES; k++) {
         stress_scene s;
         if (stress_scene_make((stress_scene_kind)k, SEED, &s) != 0) return 1;
