@@ -260,11 +260,12 @@ class Dropper:
         self.sock.close()
 
 
-def cpu_seconds(pid):
-    """User + system CPU time of a process so far (from /proc)."""
+def cpu_split(pid):
+    """(user, system) CPU seconds of a process so far (from /proc)."""
     with open("/proc/%d/stat" % pid) as f:
         fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    tick = os.sysconf("SC_CLK_TCK")
+    return int(fields[11]) / tick, int(fields[12]) / tick
 
 
 def wrk(url, body_path, seconds, conns, threads=1, timeout_s=30):
