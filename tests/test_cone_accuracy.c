@@ -35,24 +35,13 @@
 
 #include "kdray.h"
 #include "oracle.h"
+#include "check.h"
 
 #define REF_SAMPLES 4096 /* 64 x 64 strata of (cos theta, phi) */
 #define KD_SAMPLES 256
 #define MAX_RMSE 0.02
 #define MAX_OFF_EXACT 0.1
 #define FAR 1e5f
-
-static int failures;
-
-#define CHECK(cond, ...)                                                     \
-    do {                                                                     \
-        if (!(cond)) {                                                       \
-            failures++;                                                      \
-            fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                    \
-            fputc('\n', stderr);                                             \
-        }                                                                    \
-    } while (0)
 
 /* ---- the scene ------------------------------------------------------------- */
 
