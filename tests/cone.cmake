@@ -19,6 +19,7 @@ add_test(NAME cone_proofs COMMAND test_cone_proofs)
 # Cone-shadow visibility on a scene with parts 1e5 away, against robust
 # Embree at 4096 samples from starts just off the surfaces (API v1.1:
 # "auto" offsets, normals as given); also checks that v1's starts fail.
+# Shares test_cone_util.h (triangle buffer, generator, basis) with test_cone*.
 add_executable(test_cone_accuracy ${CMAKE_CURRENT_SOURCE_DIR}/test_cone_accuracy.c)
 target_link_libraries(test_cone_accuracy PRIVATE kdray_testsupport kdray_core m)
 add_test(NAME cone_accuracy COMMAND test_cone_accuracy)

@@ -7,19 +7,6 @@
 
 static double rnd_log(double lo, double hi) { return lo * pow(hi / lo, rnd()); }
 
-static void unit_basis(const double a[3], double b1[3], double b2[3]) {
-    const double t[3] = {fabs(a[0]) < 0.6 ? 1.0 : 0.0, fabs(a[0]) < 0.6 ? 0.0 : 1.0, 0.0};
-    b1[0] = a[1] * t[2] - a[2] * t[1];
-    b1[1] = a[2] * t[0] - a[0] * t[2];
-    b1[2] = a[0] * t[1] - a[1] * t[0];
-    const double l = sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2]);
-    for (int k = 0; k < 3; k++)
-        b1[k] /= l;
-    b2[0] = a[1] * b1[2] - a[2] * b1[1];
-    b2[1] = a[2] * b1[0] - a[0] * b1[2];
-    b2[2] = a[0] * b1[1] - a[1] * b1[0];
-}
-
 static void rnd_unit(double d[3]) {
     double l;
     do {

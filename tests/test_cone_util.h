@@ -187,4 +187,18 @@ static inline size_t tree_splits(const kdr_scene *s, int *axis, float *pos, size
     return n;
 }
 
+/* Any orthonormal basis (b1, b2) of the plane normal to the unit vector a. */
+static inline void unit_basis(const double a[3], double b1[3], double b2[3]) {
+    const double t[3] = {fabs(a[0]) < 0.6 ? 1.0 : 0.0, fabs(a[0]) < 0.6 ? 0.0 : 1.0, 0.0};
+    b1[0] = a[1] * t[2] - a[2] * t[1];
+    b1[1] = a[2] * t[0] - a[0] * t[2];
+    b1[2] = a[0] * t[1] - a[1] * t[0];
+    const double l = sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2]);
+    for (int k = 0; k < 3; k++)
+        b1[k] /= l;
+    b2[0] = a[1] * b1[2] - a[2] * b1[1];
+    b2[1] = a[2] * b1[0] - a[0] * b1[2];
+    b2[2] = a[0] * b1[1] - a[1] * b1[0];
+}
+
 #endif
