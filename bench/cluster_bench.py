@@ -13,6 +13,11 @@ Prints, with 64K-ray bundles sent and answered in base64 (wrk, 1 thread,
   lb 1x2   the same replica through HAProxy (balancer overhead = 1 -
            lb 1x2 / direct; the issue's target: <= 10%)
   lb 2x1   2 replicas x 1 worker thread through HAProxy (the same 2 cores)
+Each line also gives the CPU (user + system, from /proc and wrk's rusage)
+that kdrayd, HAProxy and wrk spent per 200 answer and the cores each used:
+the client's cost is the same in both modes, so the difference in the
+replicas' cores is what the balancer took. Throughput counts 200 answers
+only.
 then an overload run (2 replicas, --max-queue 0, 32 connections of
 cone-shadow queries through HAProxy: the 503s that reach the client and
 how many carry Retry-After; replica RSS sampled every 0.5 s, first and
@@ -25,6 +30,7 @@ import json
 import os
 import random
 import re
+import resource
 import socket
 import sys
 import tempfile
@@ -84,17 +90,37 @@ def throughput(kdrayd, scene, seconds, tmp):
         r.wait_ready()
     path = "/v1/scenes/default/bundle"
     runs = {"direct 1x2": [], "lb 1x2": [], "lb 2x1": []}
-    # CPU seconds per request: (kdrayd, haproxy), summed over the runs
-    cpu = {k: [0.0, 0.0, 0] for k in runs}
+    # CPU seconds (user, system) of kdrayd, haproxy and wrk, the wall
+    # seconds and the 200 answers, summed over the runs
+    cpu = {k: {"kdrayd": [0.0, 0.0], "haproxy": [0.0, 0.0], "wrk": [0.0, 0.0],
+               "wall": 0.0, "ok": 0} for k in runs}
 
     def measure(kind, url, reps, lb):
-        before = [cl.cpu_seconds(r.proc.pid) for r in reps]
-        lb_before = cl.cpu_seconds(lb.proc.pid) if lb else 0.0
+        before = [cl.cpu_split(r.proc.pid) for r in reps]
+        lb_before = cl.cpu_split(lb.proc.pid) if lb else (0.0, 0.0)
+        # wrk is this script's only child that ends during the run, so the
+        # children's rusage grows by wrk's CPU alone
+        ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.time()
         rps, codes, _, err, _ = cl.wrk(url + path, body, seconds, 4)
-        cpu[kind][0] += sum(cl.cpu_seconds(r.proc.pid) - b for r, b in zip(reps, before))
-        cpu[kind][1] += (cl.cpu_seconds(lb.proc.pid) - lb_before) if lb else 0.0
-        cpu[kind][2] += sum(codes.values())
-        runs[kind].append((rps, codes, err))
+        wall = time.time() - t0
+        ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        c = cpu[kind]
+        for r, b in zip(reps, before):
+            a = cl.cpu_split(r.proc.pid)
+            c["kdrayd"][0] += a[0] - b[0]
+            c["kdrayd"][1] += a[1] - b[1]
+        if lb:
+            a = cl.cpu_split(lb.proc.pid)
+            c["haproxy"][0] += a[0] - lb_before[0]
+            c["haproxy"][1] += a[1] - lb_before[1]
+        c["wrk"][0] += ch1.ru_utime - ch.ru_utime
+        c["wrk"][1] += ch1.ru_stime - ch.ru_stime
+        c["wall"] += wall
+        c["ok"] += codes.get(200, 0)
+        # throughput counts answers to the query only: a 503 is not one
+        ok_rps = rps * codes.get(200, 0) / max(sum(codes.values()), 1)
+        runs[kind].append((ok_rps, codes, err))
 
     try:
         for _ in range(2):
@@ -115,14 +141,19 @@ def throughput(kdrayd, scene, seconds, tmp):
     mean = {}
     for k, v in runs.items():
         mean[k] = sum(x[0] for x in v) / len(v)
-        n = max(cpu[k][2], 1)
-        print("%-11s %7.2f requests/s = %5.2f Mrays/s (runs: %s; statuses %s%s); CPU per "
-              "request: kdrayd %.1f ms, haproxy %.1f ms" %
+        c = cpu[k]
+        n = max(c["ok"], 1)
+        print("%-11s %7.2f requests/s = %5.2f Mrays/s (runs: %s; statuses %s%s)" %
               (k, mean[k], mean[k] * 65536 / 1e6, ", ".join("%.2f" % x[0] for x in v),
-               [x[1] for x in v], "; " + v[0][2] if v[0][2] else "",
-               1e3 * cpu[k][0] / n, 1e3 * cpu[k][1] / n))
+               [x[1] for x in v], "; " + v[0][2] if v[0][2] else ""))
+        print("            CPU per 200 answer (user + system ms) and cores used: " +
+              ", ".join("%s %.2f + %.2f = %.2f ms, %.2f cores" %
+                        (p, 1e3 * c[p][0] / n, 1e3 * c[p][1] / n,
+                         1e3 * sum(c[p]) / n, sum(c[p]) / max(c["wall"], 1e-9))
+                        for p in ("kdrayd", "haproxy", "wrk")))
     over = 1 - mean["lb 1x2"] / mean["direct 1x2"]
-    share = cpu["lb 1x2"][1] / max(cpu["lb 1x2"][0] + cpu["lb 1x2"][1], 1e-9)
+    share = sum(cpu["lb 1x2"]["haproxy"]) / max(sum(cpu["lb 1x2"]["kdrayd"]) +
+                                                sum(cpu["lb 1x2"]["haproxy"]), 1e-9)
     print("balancer overhead (1 - lb 1x2 / direct 1x2): %.1f%% of throughput (target "
           "<= 10%%: %s); HAProxy's share of the CPU spent per request: %.1f%%" %
           (100 * over, "met" if over <= 0.10 else "NOT met", 100 * share))

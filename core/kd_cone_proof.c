@@ -61,7 +61,7 @@
  *    (1 + 8u), bounded over the cone for every axis that can be dominant
  *    (|d_kz| >= 1/sqrt(3)) and compared with tmax_lo;
  *  - otherwise UNKNOWN (the samples are traced).
- * tests/test_cone.c (test_proofs) fires millions of float rays at
+ * tests/test_cone_proofs.c (test_proofs) fires millions of float rays at
  * adversarial configurations and checks every verdict ray by ray.
  */
 #include <math.h>

@@ -1,7 +1,8 @@
 # Omni-directional ray bundles (owner: bundle): every bundle answer equals
 # the single-ray answer bit for bit, 4- and 8-wide, on generated scenes and
 # (with the scenes_fetch fixture) on the real-scene ladder.
-add_executable(test_bundle ${CMAKE_CURRENT_SOURCE_DIR}/test_bundle.c)
+add_executable(test_bundle ${CMAKE_CURRENT_SOURCE_DIR}/test_bundle.c
+                           ${CMAKE_CURRENT_SOURCE_DIR}/test_bundle_sets.c)
 target_link_libraries(test_bundle PRIVATE kdray_testsupport kdray_core m)
 add_test(NAME bundle COMMAND test_bundle)
 add_test(NAME bundle_ladder COMMAND test_bundle ${KDRAY_SCENE_DIR})

@@ -22,6 +22,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 CFG = os.path.join(ROOT, "deploy", "haproxy", "kdray.cfg")
 SCENE_MAP = os.path.join(ROOT, "deploy", "haproxy", "kdray-scenes.map")
+# HAProxy's command line beyond -f: -dMglobal, its process-wide pool of
+# freed buffers, as deploy/haproxy/kdray.cfg asks (see its header).
+HAPROXY_OPTS = ["-dMglobal"]
 
 # wrk: POSTs KDRAY_BODY to the URL; counts statuses and 503s that carry
 # Retry-After; prints them as one "statuses ..." line at the end.
@@ -162,7 +165,7 @@ class Balancer:
                    KDRAY_MAIN_1=main[0], KDRAY_MAIN_2=main[1], KDRAY_MAIN_3=main[2],
                    KDRAY_BIG_1=big[0], KDRAY_SCENE_MAP=SCENE_MAP)
         self.log = tempfile.TemporaryFile(mode="w+")
-        self.proc = subprocess.Popen([haproxy, "-db", "-f", CFG], env=env,
+        self.proc = subprocess.Popen([haproxy, "-db"] + HAPROXY_OPTS + ["-f", CFG], env=env,
                                      stdout=self.log, stderr=self.log)
 
     def servers(self):
@@ -205,11 +208,64 @@ class Balancer:
         return self.log.read()[-4000:]
 
 
-def cpu_seconds(pid):
-    """User + system CPU time of a process so far (from /proc)."""
+class Dropper:
+    """A fake replica on loopback: answers GET (the balancer's /v1/ready and
+    /v1/health checks) with 200, but reads each POST's whole body and closes
+    the connection without a byte of answer, as a replica killed mid-query
+    would. posts counts the bodies it dropped (and their sizes)."""
+
+    def __init__(self):
+        self.sock = socket.socket()
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(64)
+        self.port = self.sock.getsockname()[1]
+        self.addr = "127.0.0.1:%d" % self.port
+        self.posts = []
+        self.stopped = False
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self):
+        while not self.stopped:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(conn,), daemon=True).start()
+
+    def _serve(self, conn):
+        with conn:
+            data = b""
+            while b"\r\n\r\n" not in data:
+                chunk = conn.recv(65536)
+                if not chunk:
+                    return
+                data += chunk
+            head, _, rest = data.partition(b"\r\n\r\n")
+            if head.startswith(b"GET "):
+                conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Length: 0\r\n"
+                             b"Connection: close\r\n\r\n")
+                return
+            m = re.search(rb"(?im)^content-length:\s*(\d+)", head)
+            want = int(m.group(1)) if m else 0
+            while len(rest) < want:
+                chunk = conn.recv(1 << 20)
+                if not chunk:
+                    break
+                rest += chunk
+            self.posts.append(len(rest))
+
+    def stop(self):
+        self.stopped = True
+        self.sock.close()
+
+
+def cpu_split(pid):
+    """(user, system) CPU seconds of a process so far (from /proc)."""
     with open("/proc/%d/stat" % pid) as f:
         fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    tick = os.sysconf("SC_CLK_TCK")
+    return int(fields[11]) / tick, int(fields[12]) / tick
 
 
 def wrk(url, body_path, seconds, conns, threads=1, timeout_s=30):

@@ -41,10 +41,12 @@ if(NOT KDRAY_SANITIZE)
       OUTPUT ${KDRAY_TSAN_BIN}
       COMMAND ${KDRAY_CLANG} -std=c11 -g -O1 -fsanitize=thread -ffp-contract=off
               -fno-strict-aliasing -I${CMAKE_SOURCE_DIR}/core
+              -I${CMAKE_CURRENT_SOURCE_DIR}/support
               ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c ${KDRAY_TSAN_CORE}
               -lm -lpthread -o ${KDRAY_TSAN_BIN}
       DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c
-              ${CMAKE_CURRENT_SOURCE_DIR}/test_core_util.h ${KDRAY_TSAN_CORE}
+              ${CMAKE_CURRENT_SOURCE_DIR}/test_core_util.h
+              ${CMAKE_CURRENT_SOURCE_DIR}/support/check.h ${KDRAY_TSAN_CORE}
       COMMENT "Building test_core_build with clang -fsanitize=thread"
       VERBATIM)
     add_custom_target(test_core_build_tsan ALL DEPENDS ${KDRAY_TSAN_BIN})

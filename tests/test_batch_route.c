@@ -23,10 +23,10 @@
 #include "kd_traverse_bundle.h"
 #include "kd_tune.h"
 #include "kdray.h"
+#include "check.h"
 
 #define PI 3.14159265358979323846
 
-static int g_failures;
 static uint64_t g_rng = 0x2545F4914F6CDD1Dull;
 
 static float rnd01(void) {
@@ -108,7 +108,7 @@ static void check_route(const char *scene, const kdr_scene *s, const char *what,
         fprintf(stderr, "FAIL %s/%s: route %s, want %s (rc %d, rays %llu)\n", scene, what,
                 scattered ? "walk" : "bundles", want_walk ? "walk" : "bundles", rc,
                 (unsigned long long)st.rays);
-        g_failures++;
+        failures++;
     }
     free(c);
 }
@@ -118,7 +118,7 @@ static kdr_scene *build(size_t ntris) {
     kdr_scene *s = NULL;
     if (kdr_scene_build(tris, ntris, NULL, NULL, NULL, &s) != KDR_OK) {
         fprintf(stderr, "FAIL: building a soup of %zu triangles\n", ntris);
-        g_failures++;
+        failures++;
     }
     free(tris);
     return s;
@@ -134,7 +134,7 @@ int main(void) {
     if (big->stats.bytes < KD_STREAM_RUNS_MIN_BYTES ||
         small->stats.bytes >= KD_STREAM_RUNS_MIN_BYTES) {
         fprintf(stderr, "FAIL: scene sizes do not bracket KD_STREAM_RUNS_MIN_BYTES\n");
-        g_failures++;
+        failures++;
     }
     check_route("big", big, "one origin, stride 3", KB_CHUNK, 0, 0);
     check_route("big", big, "one origin, stride 0", KB_CHUNK, 1, 0);
@@ -145,6 +145,6 @@ int main(void) {
     check_route("small", small, "an origin per ray", 1, 0, 1);
     kdr_scene_free(big);
     kdr_scene_free(small);
-    printf("%s: %d failures\n", g_failures ? "FAILED" : "passed", g_failures);
-    return g_failures ? 1 : 0;
+    printf("%s: %d failures\n", failures ? "FAILED" : "passed", failures);
+    return failures ? 1 : 0;
 }

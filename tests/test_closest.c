@@ -30,17 +30,13 @@
 #include "kdray.h"
 #include "oracle.h"
 #include "stress.h"
+#define CHECK_PRINT_MAX 10
+#include "check.h"
 #ifdef KDRAY_HAVE_GLTF
 #include "kdr_gltf.h"
 #endif
 
 #define SEED 20261201u
-
-static int g_fail;
-#define FAIL(...)                                                                        \
-    do {                                                                                 \
-        if (g_fail++ < 10) fprintf(stderr, __VA_ARGS__);                                 \
-    } while (0)
 
 /* Squared distance from p to segment [a, b]. */
 static double seg_d2(const double p[3], const double a[3], const double b[3]) {
@@ -375,8 +371,8 @@ int main(int argc, char **argv) {
         kdr_gltf_free(&g);
     }
 #endif
-    if (g_fail) {
-        printf("FAIL: %d failures\n", g_fail);
+    if (failures) {
+        printf("FAIL: %d failures\n", failures);
         return 1;
     }
     printf("ok\n");

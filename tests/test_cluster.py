@@ -14,14 +14,18 @@ were on the killed replica are retried once on another (HAProxy's retry
 counters must show it). The restarted replica is back in rotation before
 the load ends. A client that hangs up mid-query through the balancer has
 its query cancelled (the replica's worker comes free, its cancellation
-counter grows). With no replica of a group alive, HAProxy's own answer
-is a 503 problem+json with Retry-After.
+counter grows). A replica that takes a 64K-ray base64 query (about
+1 MiB) and closes without answering has it retried on the other replica
+(the whole body must fit HAProxy's buffer). With no replica of a group
+alive, HAProxy's own answer is a 503 problem+json with Retry-After.
 """
 
+import base64
 import json
 import os
 import re
 import socket
+import struct
 import sys
 import tempfile
 import time
@@ -46,6 +50,18 @@ def bundle_body(n):
     for i in range(n):
         dirs += [(i % 17 - 8) * 0.05, -0.4 + (i % 13) * 0.03, -1.0]
     return json.dumps({"origins": [0.2, 4.0, 8.0], "directions": dirs,
+                       "encoding": "base64"}).encode()
+
+
+def bundle_64k_b64():
+    """The benchmark's request (bench/cluster_bench.py): 65536 directions
+    from one origin, base64 float32, 1,048,665 bytes."""
+    dirs = []
+    for i in range(65536):
+        dirs += [(i % 17 - 8) * 0.05, -0.4 + (i % 13) * 0.03, -1.0]
+    def b64(v):
+        return {"f32": base64.b64encode(struct.pack("<%df" % len(v), *v)).decode()}
+    return json.dumps({"origins": b64([0.2, 4.0, 8.0]), "directions": b64(dirs),
                        "encoding": "base64"}).encode()
 
 
@@ -151,6 +167,36 @@ def main():
                   freed)
         finally:
             lb2.stop()
+
+        # a 64K-ray base64 query (about 1 MiB) whose replica dies without
+        # answering is retried on the other one: HAProxy still holds all of
+        # it only if tune.bufsize (KDRAY_LB_BUFSIZE) fits it
+        rep = main_reps[0]
+        drop = cl.Dropper()
+        lb3 = cl.Balancer(HAPROXY, [drop.addr, rep.addr], [])
+        try:
+            check(lb3.wait_status({("kdray_main", "main1"): "UP",
+                                   ("kdray_main", "main2"): "UP",
+                                   ("kdray_main", "main3"): "DOWN"}),
+                  "dropping replica and real replica UP")
+            big_body = bundle_64k_b64()
+            codes = []
+            for _ in range(8):  # leastconn alternates between the two idle ones
+                codes.append(cl.post(lb3.url + "/v1/scenes/default/bundle", big_body)[0])
+                if len(drop.posts) >= 2:
+                    break
+            retr = lb3.backend_retries("kdray_main")
+            print("     %d-byte bodies: statuses %r; the dropper took %d; HAProxy "
+                  "retries %d, redispatches %d" % (len(big_body), codes, len(drop.posts),
+                                                  retr[0], retr[1]), flush=True)
+            check(len(drop.posts) >= 1 and all(n == len(big_body) for n in drop.posts),
+                  "the dropping replica received whole 64K-ray bodies")
+            check(codes and all(c == 200 for c in codes),
+                  "every 64K-ray query answered 200 though one replica dropped it: "
+                  "retried on the other")
+        finally:
+            lb3.stop()
+            drop.stop()
 
         # no replica of a group alive: HAProxy's own 503, problem+json with
         # Retry-After like the replicas'

@@ -23,17 +23,8 @@
 
 #include "kdr_protocol.h"
 #include "old_codecs.h"
-
-static int failures;
-
-#define CHECK(cond, ...)                                                             \
-    do {                                                                             \
-        if (!(cond) && ++failures <= 30) {                                           \
-            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                            \
-            fputc('\n', stderr);                                                     \
-        }                                                                            \
-    } while (0)
+#define CHECK_PRINT_MAX 30
+#include "check.h"
 
 static uint64_t rng_state = 0x3c6ef372fe94f82bull;
 static uint64_t rng(void) {

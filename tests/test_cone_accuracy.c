@@ -35,6 +35,7 @@
 
 #include "kdray.h"
 #include "oracle.h"
+#include "test_cone_util.h"
 
 #define REF_SAMPLES 4096 /* 64 x 64 strata of (cos theta, phi) */
 #define KD_SAMPLES 256
@@ -42,34 +43,11 @@
 #define MAX_OFF_EXACT 0.1
 #define FAR 1e5f
 
-static int failures;
-
-#define CHECK(cond, ...)                                                     \
-    do {                                                                     \
-        if (!(cond)) {                                                       \
-            failures++;                                                      \
-            fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                    \
-            fputc('\n', stderr);                                             \
-        }                                                                    \
-    } while (0)
-
 /* ---- the scene ------------------------------------------------------------- */
 
-typedef struct tri_buf {
-    float *v;
-    size_t n, cap;
-} tri_buf;
-
 static void add_tri(tri_buf *b, const float p[3], const float q[3], const float r[3]) {
-    if (b->n == b->cap) {
-        b->cap = b->cap ? 2 * b->cap : 64;
-        b->v = realloc(b->v, b->cap * 9 * sizeof(float));
-        if (!b->v)
-            abort();
-    }
-    float *t = b->v + 9 * b->n++;
-    memcpy(t, p, 12), memcpy(t + 3, q, 12), memcpy(t + 6, r, 12);
+    const float t[9] = {p[0], p[1], p[2], q[0], q[1], q[2], r[0], r[1], r[2]};
+    tb_add(b, t);
 }
 
 /* Quad p0 p1 p2 p3 (counter-clockwise seen from its front). */
@@ -210,12 +188,6 @@ static const kdr_sphere_light lights[2] = {{{1.0f, 6.0f, 0.5f}, 0.6f},
 
 /* ---- the reference ---------------------------------------------------------- */
 
-static uint64_t rng_state = 0x1234567;
-static double rnd(void) {
-    rng_state = rng_state * 6364136223846793005ull + 1442695040888963407ull;
-    return (double)(rng_state >> 11) * 0x1p-53;
-}
-
 /* The reference start: one float step off the face along the normal (the
  * faces are axis-aligned and the points lie exactly on them), or for a
  * tilted face 1e-6 of the point's size along the normal in double, each
@@ -256,17 +228,7 @@ static double reference_visibility(const oracle *em, const float o[3],
     const double r = li->radius, sin_a = r / D;
     const double one_minus_cos = sin_a * sin_a / (1.0 + sqrt(1.0 - sin_a * sin_a));
     double b1[3], b2[3]; /* any orthonormal basis around the axis */
-    const double t[3] = {fabs(axis[0]) < 0.6 ? 1.0 : 0.0, fabs(axis[0]) < 0.6 ? 0.0 : 1.0,
-                         0.0};
-    b1[0] = axis[1] * t[2] - axis[2] * t[1];
-    b1[1] = axis[2] * t[0] - axis[0] * t[2];
-    b1[2] = axis[0] * t[1] - axis[1] * t[0];
-    const double bl = sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2]);
-    for (int k = 0; k < 3; k++)
-        b1[k] /= bl;
-    b2[0] = axis[1] * b1[2] - axis[2] * b1[1];
-    b2[1] = axis[2] * b1[0] - axis[0] * b1[2];
-    b2[2] = axis[0] * b1[1] - axis[1] * b1[0];
+    unit_basis(axis, b1, b2);
     int lit = 0;
     for (int a = 0; a < 64; a++)
         for (int c = 0; c < 64; c++) {
@@ -371,6 +333,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "usage: test_cone_accuracy\n");
         return 2;
     }
+    rng_state = 0x1234567; /* the reference's strata jitter */
     tri_buf b = {0};
     static point_set ps;
     build_scene(&b, &ps);

@@ -62,31 +62,31 @@ static void soup_cube(soup *s, float x, float y, float z) {
 
 static size_t check_node(const kdr_scene *s, uint32_t idx, kdr_bounds box,
                          int depth, uint8_t *seen) {
-    CHECK(idx < s->nnodes);
-    CHECK(depth <= KD_MAX_DEPTH);
+    EXPECT(idx < s->nnodes);
+    EXPECT(depth <= KD_MAX_DEPTH);
     if (idx >= s->nnodes || depth > KD_MAX_DEPTH)
         return 0;
     const kd_node *n = &s->nodes[idx];
     if (kd_is_leaf(n)) {
-        CHECK((size_t)n->u.first + kd_count(n) <= s->nrefs);
+        EXPECT((size_t)n->u.first + kd_count(n) <= s->nrefs);
         for (uint32_t i = 0; i < kd_count(n) && n->u.first + i < s->nrefs; i++) {
             uint32_t p = s->refs[n->u.first + i];
-            CHECK(p < s->ntris);
+            EXPECT(p < s->ntris);
             if (p < s->ntris) {
-                CHECK(!kd_tri_degenerate(s->tris + 9 * p));
+                EXPECT(!kd_tri_degenerate(s->tris + 9 * p));
                 seen[p] = 1;
             }
         }
         return 1;
     }
     const int k = kd_axis(n);
-    CHECK(n->u.split > box.min[k] && n->u.split < box.max[k]);
-    CHECK(kd_above(n) > idx + 1);
+    EXPECT(n->u.split > box.min[k] && n->u.split < box.max[k]);
+    EXPECT(kd_above(n) > idx + 1);
     /* kd_layout's empty-child flags, which walks trust without looking */
     if (kd_above(n) < s->nnodes) {
         const kd_node *b = n + 1, *a = &s->nodes[kd_above(n)];
-        CHECK(kd_below_empty(n) == (kd_is_leaf(b) && kd_count(b) == 0));
-        CHECK(kd_above_empty(n) == (kd_is_leaf(a) && kd_count(a) == 0));
+        EXPECT(kd_below_empty(n) == (kd_is_leaf(b) && kd_count(b) == 0));
+        EXPECT(kd_above_empty(n) == (kd_is_leaf(a) && kd_count(a) == 0));
     }
     kdr_bounds lb = box, rb = box;
     lb.max[k] = rb.min[k] = n->u.split;
@@ -97,17 +97,17 @@ static size_t check_node(const kdr_scene *s, uint32_t idx, kdr_bounds box,
 static void check_tree(const kdr_scene *s) {
     kdr_tree_stats st;
     kdr_scene_tree_stats(s, &st);
-    CHECK(st.nodes == s->nnodes);
-    CHECK(st.refs == s->nrefs);
+    EXPECT(st.nodes == s->nnodes);
+    EXPECT(st.refs == s->nrefs);
     if (!s->nodes)
         return;
     uint8_t *seen = calloc(s->ntris + 1, 1);
-    CHECK(check_node(s, 0, s->bounds, 0, seen) == s->nnodes);
+    EXPECT(check_node(s, 0, s->bounds, 0, seen) == s->nnodes);
     for (size_t i = 0; i < s->ntris; i++)
-        CHECK(seen[i] || kd_tri_degenerate(s->tris + 9 * i));
+        EXPECT(seen[i] || kd_tri_degenerate(s->tris + 9 * i));
     free(seen);
-    CHECK(st.leaves >= st.empty_leaves);
-    CHECK(st.max_depth <= KD_MAX_DEPTH);
+    EXPECT(st.leaves >= st.empty_leaves);
+    EXPECT(st.max_depth <= KD_MAX_DEPTH);
 }
 
 /* ---- rays ------------------------------------------------------------------------ */
@@ -199,7 +199,7 @@ static kdr_scene *build_or_die(const soup *sp) {
         o.exact_max = g_exact_max;
     o.threads = g_threads;
     int err = kdr_scene_build(sp->t, sp->n, &o, NULL, NULL, &s);
-    CHECK(err == KDR_OK);
+    EXPECT(err == KDR_OK);
     if (err != KDR_OK) {
         fprintf(stderr, "build failed: %s\n", kdr_strerror(err));
         exit(1);
@@ -221,7 +221,7 @@ static void test_random_soups(void) {
         size_t bad = compare_many(&sp, s, 4000, -0.5f, 1.5f, cases[c].quantum);
         if (bad)
             fprintf(stderr, "random soup %zu: %zu mismatches\n", c, bad);
-        CHECK(bad == 0);
+        EXPECT(bad == 0);
         kdr_scene_free(s);
         free(sp.t);
     }
@@ -251,7 +251,7 @@ static void test_box_grid(void) {
     }
     if (bad)
         fprintf(stderr, "box grid: %zu mismatches\n", bad);
-    CHECK(bad == 0);
+    EXPECT(bad == 0);
     kdr_scene_free(s);
     free(sp.t);
 }
@@ -272,7 +272,7 @@ static void test_huge_offsets(void) {
             random_ray(&r, 1e5f - 5.0f, 1e5f + 15.0f, 0.0f);
         bad += !compare_ray(s, &r);
     }
-    CHECK(bad == 0);
+    EXPECT(bad == 0);
     kdr_scene_free(s);
     free(sp.t);
 }
@@ -320,7 +320,7 @@ static void test_extreme_rays(void) {
     }
     if (bad)
         fprintf(stderr, "extreme rays: %zu mismatches\n", bad);
-    CHECK(bad == 0);
+    EXPECT(bad == 0);
     kdr_scene_free(s);
     free(sp.t);
 }
@@ -347,35 +347,35 @@ static void test_flat_scene(void) {
         }
         bad += !compare_ray(s, &r);
     }
-    CHECK(bad == 0);
+    EXPECT(bad == 0);
     kdr_scene_free(s);
     free(sp.t);
 }
 
 static void expect_miss(const kdr_scene *s, const kdr_ray *r) {
     kdr_hit h;
-    CHECK(kdr_intersect1(s, r, &h, NULL) == 0);
-    CHECK(h.prim == -1 && h.t == -1.0f && h.u == 0.0f && h.v == 0.0f);
-    CHECK(kdr_occluded1(s, r, NULL) == 0);
+    EXPECT(kdr_intersect1(s, r, &h, NULL) == 0);
+    EXPECT(h.prim == -1 && h.t == -1.0f && h.u == 0.0f && h.v == 0.0f);
+    EXPECT(kdr_occluded1(s, r, NULL) == 0);
 }
 
 static void test_small_scenes(void) {
     kdr_scene *s = NULL;
     kdr_ray r = {{0.2f, 0.2f, -1}, {0, 0, 1}, 0, INFINITY};
-    CHECK(kdr_scene_build(NULL, 0, NULL, NULL, NULL, &s) == KDR_OK);
-    CHECK(s && kdr_scene_triangle_count(s) == 0 && kdr_scene_diagonal(s) == 0);
+    EXPECT(kdr_scene_build(NULL, 0, NULL, NULL, NULL, &s) == KDR_OK);
+    EXPECT(s && kdr_scene_triangle_count(s) == 0 && kdr_scene_diagonal(s) == 0);
     expect_miss(s, &r);
     kdr_scene_free(s);
 
     const float one[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
-    CHECK(kdr_scene_build(one, 1, NULL, NULL, NULL, &s) == KDR_OK);
+    EXPECT(kdr_scene_build(one, 1, NULL, NULL, NULL, &s) == KDR_OK);
     kdr_hit h;
-    CHECK(kdr_intersect1(s, &r, &h, NULL) == 1);
-    CHECK(h.prim == 0 && h.t == 1.0f && fabsf(h.u - 0.2f) < 1e-6f &&
+    EXPECT(kdr_intersect1(s, &r, &h, NULL) == 1);
+    EXPECT(h.prim == 0 && h.t == 1.0f && fabsf(h.u - 0.2f) < 1e-6f &&
           fabsf(h.v - 0.2f) < 1e-6f);
-    CHECK(kdr_occluded1(s, &r, NULL) == 1);
-    CHECK(kdr_scene_triangle(s, 0) && kdr_scene_triangle(s, 0)[3] == 1.0f);
-    CHECK(kdr_scene_triangle(s, 1) == NULL);
+    EXPECT(kdr_occluded1(s, &r, NULL) == 1);
+    EXPECT(kdr_scene_triangle(s, 0) && kdr_scene_triangle(s, 0)[3] == 1.0f);
+    EXPECT(kdr_scene_triangle(s, 1) == NULL);
     kdr_ray bad = r;
     bad.tmax = -1; /* tmax < tmin */
     expect_miss(s, &bad);
@@ -393,14 +393,14 @@ static void test_small_scenes(void) {
     expect_miss(s, &bad);
     bad = r;
     bad.tmin = bad.tmax = 1.0f; /* closed interval: t == 1 hits */
-    CHECK(kdr_occluded1(s, &bad, NULL) == 1);
+    EXPECT(kdr_occluded1(s, &bad, NULL) == 1);
     kdr_scene_free(s);
 
     /* degenerate only: repeated vertex, collinear, all equal */
     const float degen[27] = {0, 0, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0, 1, 1, 1, 2, 2, 2,
                              3, 3, 3, 3, 3, 3, 3, 3, 3};
-    CHECK(kdr_scene_build(degen, 3, NULL, NULL, NULL, &s) == KDR_OK);
-    CHECK(kdr_scene_triangle_count(s) == 3);
+    EXPECT(kdr_scene_build(degen, 3, NULL, NULL, NULL, &s) == KDR_OK);
+    EXPECT(kdr_scene_triangle_count(s) == 3);
     kdr_ray d = {{0.5f, 0.5f, 0.5f}, {1, -1, 0.3f}, -INFINITY, INFINITY};
     expect_miss(s, &d);
     kdr_scene_free(s);
@@ -409,30 +409,30 @@ static void test_small_scenes(void) {
 static void test_build_errors(void) {
     kdr_scene *s = (kdr_scene *)1;
     float t[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
-    CHECK(kdr_scene_build(t, 1, NULL, NULL, NULL, NULL) == KDR_EINVAL);
-    CHECK(kdr_scene_build(NULL, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
+    EXPECT(kdr_scene_build(t, 1, NULL, NULL, NULL, NULL) == KDR_EINVAL);
+    EXPECT(kdr_scene_build(NULL, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
     t[4] = NAN;
-    CHECK(kdr_scene_build(t, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
+    EXPECT(kdr_scene_build(t, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
     t[4] = INFINITY;
-    CHECK(kdr_scene_build(t, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
-    CHECK(kdr_scene_build(t, ((size_t)1 << 30) + 1, NULL, NULL, NULL, &s) ==
+    EXPECT(kdr_scene_build(t, 1, NULL, NULL, NULL, &s) == KDR_EINVAL && !s);
+    EXPECT(kdr_scene_build(t, ((size_t)1 << 30) + 1, NULL, NULL, NULL, &s) ==
           KDR_ERANGE);
     t[4] = 1;
     kdr_build_opts o;
     kdr_build_opts_default(&o);
     o.empty_bonus = 1.0f;
-    CHECK(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
+    EXPECT(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
     kdr_build_opts_default(&o);
     o.threads = -1;
-    CHECK(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
+    EXPECT(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
     kdr_build_opts_default(&o);
     o.exact_max = -1;
-    CHECK(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
-    CHECK(strcmp(kdr_strerror(KDR_ENOMEM), kdr_strerror(KDR_OK)) != 0);
+    EXPECT(kdr_scene_build(t, 1, &o, NULL, NULL, &s) == KDR_EINVAL);
+    EXPECT(strcmp(kdr_strerror(KDR_ENOMEM), kdr_strerror(KDR_OK)) != 0);
 }
 
 static void count_log(void *user, const char *msg) {
-    CHECK(msg && strncmp(msg, "kd build:", 9) == 0);
+    EXPECT(msg && strncmp(msg, "kd build:", 9) == 0);
     ++*(int *)user;
 }
 
@@ -442,18 +442,18 @@ static void test_log_and_stats(void) {
     soup_random(&sp, 500, 0.1f, 0);
     int lines = 0;
     kdr_scene *s = NULL;
-    CHECK(kdr_scene_build(sp.t, sp.n, NULL, count_log, &lines, &s) == KDR_OK);
-    CHECK(lines >= 2);
+    EXPECT(kdr_scene_build(sp.t, sp.n, NULL, count_log, &lines, &s) == KDR_OK);
+    EXPECT(lines >= 2);
     kdr_tree_stats st;
     kdr_scene_tree_stats(s, &st);
-    CHECK(st.nodes == 2 * st.leaves - 1);
-    CHECK(st.refs >= 500 && st.sah_cost > 0 && st.build_ms >= 0);
-    CHECK(st.bytes >= st.nodes * 8 + st.refs * 4);
-    CHECK(fabs(st.refs_per_leaf * (double)(st.leaves - st.empty_leaves) -
+    EXPECT(st.nodes == 2 * st.leaves - 1);
+    EXPECT(st.refs >= 500 && st.sah_cost > 0 && st.build_ms >= 0);
+    EXPECT(st.bytes >= st.nodes * 8 + st.refs * 4);
+    EXPECT(fabs(st.refs_per_leaf * (double)(st.leaves - st.empty_leaves) -
                (double)st.refs) < 1e-6 * (double)st.refs);
     kdr_bounds b;
     kdr_scene_bounds(s, &b);
-    CHECK(b.min[0] <= b.max[0] && kdr_scene_diagonal(s) > 0);
+    EXPECT(b.min[0] <= b.max[0] && kdr_scene_diagonal(s) > 0);
     kdr_scene_free(s);
     free(sp.t);
 }
@@ -468,12 +468,12 @@ static void test_build_options(void) {
     o.leaf_size = 4;
     o.isect_cost = 5.0f;
     kdr_scene *s = NULL;
-    CHECK(kdr_scene_build(sp.t, sp.n, &o, NULL, NULL, &s) == KDR_OK);
+    EXPECT(kdr_scene_build(sp.t, sp.n, &o, NULL, NULL, &s) == KDR_OK);
     check_tree(s);
     kdr_tree_stats st;
     kdr_scene_tree_stats(s, &st);
-    CHECK(st.max_depth <= 3);
-    CHECK(compare_many(&sp, s, 2000, -0.5f, 1.5f, 0.125f) == 0);
+    EXPECT(st.max_depth <= 3);
+    EXPECT(compare_many(&sp, s, 2000, -0.5f, 1.5f, 0.125f) == 0);
     kdr_scene_free(s);
     free(sp.t);
 }
@@ -498,9 +498,9 @@ int main(void) {
         test_extreme_rays();
         test_flat_scene();
     }
-    if (g_failures)
-        fprintf(stderr, "test_core: %d failures\n", g_failures);
+    if (failures)
+        fprintf(stderr, "test_core: %d failures\n", failures);
     else
         printf("test_core: ok\n");
-    return g_failures != 0;
+    return failures != 0;
 }

@@ -16,17 +16,8 @@
 #include "kd_traverse.h"
 #include "kd_tri.h"
 #include "kdray.h"
-
-static int g_failures;
-
-#define CHECK(cond)                                                          \
-    do {                                                                     \
-        if (!(cond)) {                                                       \
-            if (g_failures++ < 20)                                           \
-                fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__,       \
-                        __LINE__, #cond);                                    \
-        }                                                                    \
-    } while (0)
+#define CHECK_PRINT_MAX 20
+#include "check.h"
 
 static uint64_t g_rng = 0x9e3779b97f4a7c15ull;
 
@@ -87,7 +78,7 @@ static inline int compare_ray(const kdr_scene *s, const kdr_ray *r) {
     int bf = brute_intersect(s->tris, s->ntris, r, &bh);
     int ka = kdr_occluded1(s, r, NULL);
     int ok = kf == bf && ka == bf && same_hit(&kh, &bh);
-    if (!ok && g_failures < 20)
+    if (!ok && failures < CHECK_PRINT_MAX)
         fprintf(stderr,
                 "mismatch: org %a %a %a dir %a %a %a [%a, %a]\n"
                 "  kd    %d prim %d t %a u %a v %a (any %d)\n"

@@ -34,16 +34,11 @@
 #include "ladder.h"
 #include "oracle.h"
 #include "stress.h"
+#define CHECK_PRINT_MAX 20
+#include "check.h"
 
-static int g_failures;
 static long g_pixels;
 static stress_rng g_rng;
-
-#define FAIL(...)                                                              \
-    do {                                                                       \
-        if (g_failures++ < 20)                                                 \
-            fprintf(stderr, __VA_ARGS__);                                      \
-    } while (0)
 
 static float rnd01(void) { return stress_rng_float(&g_rng); }
 static float rnd_in(float a, float b) { return a + (b - a) * rnd01(); }
@@ -275,7 +270,7 @@ static void check_scene(const char *name, const float *tris, size_t ntris,
         return;
     }
     kdr_scene_bounds(s, &b);
-    const int failures0 = g_failures;
+    const int failures0 = failures;
     for (int k = 0; k < ncams; k++) {
         kdr_camera cam;
         snprintf(what, sizeof what, "%s cam %d", name, k);
@@ -302,7 +297,7 @@ static void check_scene(const char *name, const float *tris, size_t ntris,
         check_camera(what, s, &cam);
     }
     printf("%-24s %7zu tris, %2d cameras: %s\n", name, ntris, ncams,
-           g_failures == failures0 ? "ok" : "MISMATCH");
+           failures == failures0 ? "ok" : "MISMATCH");
     kdr_scene_free(s);
 }
 
@@ -501,6 +496,6 @@ int main(int argc, char **argv) {
         }
         check_scene("empty", NULL, 0, 4);
     }
-    printf("%ld pixels compared; %d failures\n", g_pixels, g_failures);
-    return g_failures ? 1 : 0;
+    printf("%ld pixels compared; %d failures\n", g_pixels, failures);
+    return failures ? 1 : 0;
 }

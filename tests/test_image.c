@@ -78,17 +78,17 @@ static void answer(const kdr_scene *s, answers *a) {
     const kdr_trav_mode modes[3] = {KDR_TRAV_SINGLE, KDR_TRAV_BUNDLE4, KDR_TRAV_BUNDLE8};
     for (int m = 0; m < 3; m++) {
         kdr_hits h = {a->t[m], a->prim[m], a->u[m], a->v[m], NULL};
-        CHECK(kdr_trace_batch(s, &b, 0, NRAYS, KDR_CLOSEST, modes[m], &h, NULL) ==
+        EXPECT(kdr_trace_batch(s, &b, 0, NRAYS, KDR_CLOSEST, modes[m], &h, NULL) ==
               KDR_OK);
         kdr_hits o = {NULL, NULL, NULL, NULL, a->any[m]};
-        CHECK(kdr_trace_batch(s, &b, 0, NRAYS, KDR_ANY, modes[m], &o, NULL) == KDR_OK);
+        EXPECT(kdr_trace_batch(s, &b, 0, NRAYS, KDR_ANY, modes[m], &o, NULL) == KDR_OK);
     }
     kdr_sphere_light lights[2] = {{{0.3f, 3.0f, 0.2f}, 0.4f},
                                   {{-3.0f, 0.5f, 1.0f}, 0.2f}};
     kdr_shadow_query q = {NPOINTS, g_pts, NULL, lights, 2, 16, 7, KDR_OFFSET_DIAGONAL, 1e-4f};
-    CHECK(kdr_shadow_trace(s, &q, 0, NPOINTS, KDR_SHADOW_CONE, a->vis[0], NULL) ==
+    EXPECT(kdr_shadow_trace(s, &q, 0, NPOINTS, KDR_SHADOW_CONE, a->vis[0], NULL) ==
           KDR_OK);
-    CHECK(kdr_shadow_trace(s, &q, 0, NPOINTS, KDR_SHADOW_RAYS, a->vis[1], NULL) ==
+    EXPECT(kdr_shadow_trace(s, &q, 0, NPOINTS, KDR_SHADOW_RAYS, a->vis[1], NULL) ==
           KDR_OK);
     kdr_camera cam = {{0.2f, 0.4f, 3.5f}, {0, 0, 0}, {0, 1, 0}, 50.0f, IMG_W, IMG_H};
     const kdr_frustum_mode fm[3] = {KDR_FRUSTUM_MULTI4, KDR_FRUSTUM_SINGLE,
@@ -96,10 +96,10 @@ static void answer(const kdr_scene *s, answers *a) {
     for (int m = 0; m < 3; m++) {
         size_t tiles = kdr_frustum_tile_count(&cam, 4);
         kdr_hits h = {a->ft[m], a->fprim[m], a->fu[m], a->fv[m], NULL};
-        CHECK(kdr_frustum_trace(s, &cam, 4, 0, tiles, KDR_CLOSEST, fm[m], &h, NULL) ==
+        EXPECT(kdr_frustum_trace(s, &cam, 4, 0, tiles, KDR_CLOSEST, fm[m], &h, NULL) ==
               KDR_OK);
         kdr_hits o = {NULL, NULL, NULL, NULL, a->fany[m]};
-        CHECK(kdr_frustum_trace(s, &cam, 4, 0, tiles, KDR_ANY, fm[m], &o, NULL) ==
+        EXPECT(kdr_frustum_trace(s, &cam, 4, 0, tiles, KDR_ANY, fm[m], &o, NULL) ==
               KDR_OK);
     }
     kdr_scene_tree_stats(s, &a->stats);
@@ -120,7 +120,7 @@ static unsigned char *image_of(const kdr_scene *s, const kdr_build_opts *o, size
     *len = kdr_scene_image_size(s);
     unsigned char *buf = NULL;
     if (posix_memalign((void **)&buf, 64, *len) != 0) abort();
-    CHECK(kdr_scene_image_write(s, o, buf, *len) == KDR_OK);
+    EXPECT(kdr_scene_image_write(s, o, buf, *len) == KDR_OK);
     return buf;
 }
 
@@ -129,7 +129,7 @@ static unsigned char *image_of(const kdr_scene *s, const kdr_build_opts *o, size
 static void round_trip(const char *what, const float *tris, size_t n,
                        const kdr_build_opts *o) {
     kdr_scene *s = NULL, *m = NULL;
-    CHECK(kdr_scene_build(tris, n, o, NULL, NULL, &s) == KDR_OK);
+    EXPECT(kdr_scene_build(tris, n, o, NULL, NULL, &s) == KDR_OK);
     if (!s) return;
     size_t len;
     unsigned char *img = image_of(s, o, &len);
@@ -137,7 +137,7 @@ static void round_trip(const char *what, const float *tris, size_t n,
     int rc = kdr_scene_image_open(img, len, o, &m, &why);
     if (rc != KDR_OK) {
         fprintf(stderr, "%s: image refused: %s\n", what, why ? why : "?");
-        CHECK(rc == KDR_OK);
+        EXPECT(rc == KDR_OK);
         kdr_scene_free(s);
         free(img);
         return;
@@ -147,13 +147,13 @@ static void round_trip(const char *what, const float *tris, size_t n,
     answer(m, &b);
     if (memcmp(&a, &b, sizeof a) != 0) {
         fprintf(stderr, "%s: answers differ after the round trip\n", what);
-        CHECK(0);
+        EXPECT(0);
     }
     /* the scene from the image writes the very same bytes */
     size_t len2;
     unsigned char *img2 = image_of(m, o, &len2);
-    CHECK(len2 == len && memcmp(img, img2, len) == 0);
-    CHECK(m->root_mag == s->root_mag && m->prefetch_leaves == s->prefetch_leaves);
+    EXPECT(len2 == len && memcmp(img, img2, len) == 0);
+    EXPECT(m->root_mag == s->root_mag && m->prefetch_leaves == s->prefetch_leaves);
     kdr_scene_free(m); /* borrowed arrays: frees only the record */
     kdr_scene_free(s);
     free(img);
@@ -183,7 +183,7 @@ static void reseal(unsigned char *img, size_t len) {
 
 static void damage(const float *tris, size_t n, const kdr_build_opts *o) {
     kdr_scene *s = NULL;
-    CHECK(kdr_scene_build(tris, n, o, NULL, NULL, &s) == KDR_OK);
+    EXPECT(kdr_scene_build(tris, n, o, NULL, NULL, &s) == KDR_OK);
     size_t len;
     unsigned char *img = image_of(s, o, &len);
     unsigned char *c = copy_exact(img, len);
@@ -213,39 +213,39 @@ static void damage(const float *tris, size_t n, const kdr_build_opts *o) {
         c[off] = img[off];
     }
     memcpy(c, img, len);
-    CHECK(bad_trunc == 0);
-    CHECK(bad_flip == 0);
+    EXPECT(bad_trunc == 0);
+    EXPECT(bad_flip == 0);
     fprintf(stderr,
             "damage (%zu triangles, %zu-byte image): %zu truncations and %zu one-byte "
             "changes refused; forged: %zu refused, %zu accepted and walked safely\n",
             n, len, len - bad_trunc, len - bad_flip, forged_no, forged_ok);
-    CHECK(forged_no > 0);
+    EXPECT(forged_no > 0);
     /* another format version (the head is outside the checksum) */
     c[8] ^= 1;
-    CHECK(refused(c, len, o));
+    EXPECT(refused(c, len, o));
     c[8] = img[8];
     /* other build options */
     kdr_build_opts other = *o;
     other.leaf_size += 1;
-    CHECK(refused(img, len, &other));
+    EXPECT(refused(img, len, &other));
     other = *o;
     other.empty_bonus = nextafterf(other.empty_bonus, 1.0f);
-    CHECK(refused(img, len, &other));
+    EXPECT(refused(img, len, &other));
     other = *o; /* binned and exact builds give different trees */
     other.exact_max = o->exact_max == 0 ? 1 : 0;
-    CHECK(refused(img, len, &other));
+    EXPECT(refused(img, len, &other));
     other = *o; /* the tree is the same on any thread count */
     other.threads = o->threads + 3;
-    CHECK(!refused(img, len, &other));
+    EXPECT(!refused(img, len, &other));
     /* trailing bytes are not part of the image; a misaligned buffer */
     unsigned char *big = NULL;
     if (posix_memalign((void **)&big, 64, len + 64) != 0) abort();
     memcpy(big, img, len);
     memset(big + len, 0, 64);
     kdr_scene *m = NULL;
-    CHECK(kdr_scene_image_open(big, len + 64, o, &m, NULL) == KDR_EIMAGE && !m);
+    EXPECT(kdr_scene_image_open(big, len + 64, o, &m, NULL) == KDR_EIMAGE && !m);
     memmove(big + 8, big, len);
-    CHECK(kdr_scene_image_open(big + 8, len, o, &m, NULL) == KDR_EINVAL && !m);
+    EXPECT(kdr_scene_image_open(big + 8, len, o, &m, NULL) == KDR_EINVAL && !m);
     free(big);
     free(c);
     free(img);
@@ -255,7 +255,7 @@ static void damage(const float *tris, size_t n, const kdr_build_opts *o) {
 /* Targeted forgeries, each must be refused for its own reason. */
 static void forged_structure(const float *tris, size_t n, const kdr_build_opts *o) {
     kdr_scene *s = NULL;
-    CHECK(kdr_scene_build(tris, n, o, NULL, NULL, &s) == KDR_OK);
+    EXPECT(kdr_scene_build(tris, n, o, NULL, NULL, &s) == KDR_OK);
     size_t len;
     unsigned char *img = image_of(s, o, &len);
     const size_t tris_off = 256;
@@ -267,7 +267,7 @@ static void forged_structure(const float *tris, size_t n, const kdr_build_opts *
             leaf = i;
         else if (!kd_is_leaf(&s->nodes[i]) && !interior)
             interior = i + 1; /* +1: 0 means none */
-    CHECK(interior == 1);     /* the root */
+    EXPECT(interior == 1);     /* the root */
     struct {
         const char *what;
         size_t off;
@@ -292,14 +292,14 @@ static void forged_structure(const float *tris, size_t n, const kdr_build_opts *
         const char *why = NULL;
         int rc = kdr_scene_image_open(c, len, o, &m, &why);
         if (rc != KDR_EIMAGE) fprintf(stderr, "forged '%s' not refused\n", cases[k].what);
-        CHECK(rc == KDR_EIMAGE && !m);
+        EXPECT(rc == KDR_EIMAGE && !m);
         free(c);
     }
     /* sanity: the unchanged, resealed image still opens */
     unsigned char *c = copy_exact(img, len);
     reseal(c, len);
     kdr_scene *m = NULL;
-    CHECK(kdr_scene_image_open(c, len, o, &m, NULL) == KDR_OK);
+    EXPECT(kdr_scene_image_open(c, len, o, &m, NULL) == KDR_OK);
     kdr_scene_free(m);
     free(c);
     free(img);
@@ -307,7 +307,7 @@ static void forged_structure(const float *tris, size_t n, const kdr_build_opts *
 }
 
 int main(void) {
-    CHECK(sizeof(struct kdr_scene) == KD_SCENE_STRUCT_SIZE);
+    EXPECT(sizeof(struct kdr_scene) == KD_SCENE_STRUCT_SIZE);
     make_rays();
     kdr_build_opts def, tight;
     kdr_build_opts_default(&def);
@@ -333,25 +333,25 @@ int main(void) {
     /* a NULL options pointer means the defaults on both sides */
     {
         kdr_scene *s = NULL, *m = NULL;
-        CHECK(kdr_scene_build(small, 60, NULL, NULL, NULL, &s) == KDR_OK);
+        EXPECT(kdr_scene_build(small, 60, NULL, NULL, NULL, &s) == KDR_OK);
         size_t len;
         unsigned char *img = image_of(s, NULL, &len);
-        CHECK(kdr_scene_image_open(img, len, &def, &m, NULL) == KDR_OK);
+        EXPECT(kdr_scene_image_open(img, len, &def, &m, NULL) == KDR_OK);
         kdr_scene_free(m);
-        CHECK(kdr_scene_image_open(img, len, &tight, &m, NULL) == KDR_EIMAGE);
+        EXPECT(kdr_scene_image_open(img, len, &tight, &m, NULL) == KDR_EIMAGE);
         free(img);
         kdr_scene_free(s);
     }
-    CHECK(kdr_scene_image_open(NULL, 0, NULL, NULL, NULL) == KDR_EINVAL);
-    CHECK(strcmp(kdr_strerror(KDR_EIMAGE), "invalid tree image") == 0);
+    EXPECT(kdr_scene_image_open(NULL, 0, NULL, NULL, NULL) == KDR_EINVAL);
+    EXPECT(strcmp(kdr_strerror(KDR_EIMAGE), "invalid tree image") == 0);
 
     free(big);
     free(one);
     free(flat);
     free(large);
     free(small);
-    if (g_failures) {
-        fprintf(stderr, "test_image: %d failures\n", g_failures);
+    if (failures) {
+        fprintf(stderr, "test_image: %d failures\n", failures);
         return 1;
     }
     fprintf(stderr, "test_image: ok\n");

@@ -28,14 +28,13 @@
 #include "kd_traverse.h"
 #include "kdray.h"
 #include "stress.h"
+#include "check.h"
 #ifdef KDRAY_HAVE_GLTF
 #include "kdr_gltf.h"
 #endif
 
 #define SEED 20261201u
 #define BAND 1e-4
-
-static int g_fail;
 
 /* Signed solid angle of triangle (a, b, c) seen from p. */
 static double solid_angle(const float p[3], const float *t) {
@@ -74,7 +73,7 @@ static void run(const char *label, const float *tris, size_t ntris, const float 
                 size_t nextra, size_t npts, int must_be_closed) {
     kdr_scene *sc = NULL;
     if (kdr_scene_build(tris, ntris, NULL, NULL, NULL, &sc) != KDR_OK) {
-        g_fail++;
+        failures++;
         return;
     }
     kdr_bounds bb;
@@ -115,7 +114,7 @@ static void run(const char *label, const float *tris, size_t ntris, const float 
     if (nextra) /* memcpy from NULL is undefined even for 0 bytes */
         memcpy(pts + 3 * npts, extra, 3 * nextra * sizeof *pts);
     uint8_t *batch = malloc(n);
-    if (kdr_occupancy_batch(sc, pts, 0, n, batch, NULL) != KDR_OK) g_fail++;
+    if (kdr_occupancy_batch(sc, pts, 0, n, batch, NULL) != KDR_OK) failures++;
     occ_tally t = {0};
     int printed = 0;
     for (size_t i = 0; i < n; i++) {
@@ -127,7 +126,7 @@ static void run(const char *label, const float *tris, size_t ntris, const float 
         const int truth = (int)(labs(wi) & 1);
         uint8_t in = 0, votes = 0;
         kdr_occupancy1(sc, p, &in, &votes, NULL);
-        if (in != batch[i]) g_fail++;
+        if (in != batch[i]) failures++;
         if (c.prim >= 0 && c.distance <= BAND * diag) {
             t.band++;
             t.band_agree += in == truth;
@@ -159,7 +158,7 @@ static void run(const char *label, const float *tris, size_t ntris, const float 
            "%lu (agree %lu) | not integral W %lu\n",
            label, closed ? "closed" : "OPEN  ", n, t.judged, t.wrong, t.single_wrong,
            t.band, t.band_agree, t.open_points);
-    if (t.wrong || (must_be_closed && !closed)) g_fail++;
+    if (t.wrong || (must_be_closed && !closed)) failures++;
     free(pts);
     free(batch);
     kdr_scene_free(sc);
@@ -188,7 +187,7 @@ int main(int argc, char **argv) {
             kdr_occupancy1(sc, out, &b, NULL, NULL) != KDR_OK || b != 0 ||
             kdr_occupancy1(sc, nanp, &a, NULL, NULL) != KDR_EINVAL) {
             fprintf(stderr, "cube: inside %d (votes %d), outside %d\n", a, votes, b);
-            g_fail++;
+            failures++;
         }
         kdr_scene_free(sc);
     }
@@ -224,8 +223,8 @@ int main(int argc, char **argv) {
         kdr_gltf_free(&g);
     }
 #endif
-    if (g_fail) {
-        printf("FAIL: %d failures\n", g_fail);
+    if (failures) {
+        printf("FAIL: %d failures\n", failures);
         return 1;
     }
     printf("ok\n");

@@ -14,17 +14,7 @@
 #include <cjson/cJSON.h>
 
 #include "kdr_protocol.h"
-
-static int failures;
-
-#define CHECK(cond, ...)                                                             \
-    do {                                                                             \
-        if (!(cond) && ++failures <= 50) {                                           \
-            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                            \
-            fputc('\n', stderr);                                                     \
-        }                                                                            \
-    } while (0)
+#include "check.h"
 
 static uint64_t rng_state = 0x243f6a8885a308d3ull;
 static uint64_t rng(void) {

@@ -16,17 +16,7 @@
 
 #include "kdr_exec.h"
 #include "kdr_render.h"
-
-static int failures;
-#define CHECK(cond, ...)                                                                 \
-    do {                                                                                 \
-        if (!(cond)) {                                                                   \
-            failures++;                                                                  \
-            fprintf(stderr, "%s:%d: check failed: %s: ", __FILE__, __LINE__, #cond);     \
-            fprintf(stderr, __VA_ARGS__);                                                \
-            fputc('\n', stderr);                                                         \
-        }                                                                                \
-    } while (0)
+#include "check.h"
 
 /* A floor, a box on it and a floating slab: shadows and penumbrae. */
 static kdr_scene *make_scene(void) {

@@ -21,19 +21,9 @@
 #include <unistd.h>
 
 #include "kdr_gltf.h"
+#include "check.h"
 
-static int failures;
 static char tmpdir[64];
-
-#define CHECK(cond, ...)                                                                 \
-    do {                                                                                 \
-        if (!(cond)) {                                                                   \
-            failures++;                                                                  \
-            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond);     \
-            fprintf(stderr, __VA_ARGS__);                                                \
-            fputc('\n', stderr);                                                         \
-        }                                                                                \
-    } while (0)
 
 /* ---- writing glTF files ------------------------------------------------- */
 

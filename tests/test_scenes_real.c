@@ -22,20 +22,9 @@
 #include <sys/stat.h>
 
 #include "kdr_gltf.h"
+#include "check.h"
 
 #define SKIP 77
-
-static int failures;
-
-#define CHECK(cond, ...)                                                                 \
-    do {                                                                                 \
-        if (!(cond)) {                                                                   \
-            failures++;                                                                  \
-            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond);     \
-            fprintf(stderr, __VA_ARGS__);                                                \
-            fputc('\n', stderr);                                                         \
-        }                                                                                \
-    } while (0)
 
 /* Checks that hold for every successfully loaded scene. */
 static void check_invariants(const char *path, const kdr_gltf_scene *s) {

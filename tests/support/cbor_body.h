@@ -15,17 +15,8 @@
 #include <string.h>
 
 #include "kdr_protocol.h"
-
-static int failures; /* per test program */
-
-#define CHECK(cond, ...)                                                             \
-    do {                                                                             \
-        if (!(cond) && ++failures <= 40) {                                           \
-            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond); \
-            fprintf(stderr, __VA_ARGS__);                                            \
-            fputc('\n', stderr);                                                     \
-        }                                                                            \
-    } while (0)
+#define CHECK_PRINT_MAX 40
+#include "check.h"
 
 static uint64_t rng_state = 0x510e527fade682d1ull;
 static inline uint64_t rng(void) {
