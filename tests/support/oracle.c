@@ -206,6 +206,8 @@ typedef struct all_ctx {
     kdr_hit *hits;
     size_t n, cap;
     int oom;
+    int fixed;    /* hits is the caller's buffer: never grown */
+    size_t extra; /* fixed: hits past cap, counted, not stored or deduplicated */
 } all_ctx;
 
 /* rtcIntersect1 calls filters with N == 1: ray and hit are then an RTCRay
@@ -220,6 +222,10 @@ static void record_hit(const struct RTCFilterFunctionNArguments *args) {
     for (size_t i = 0; i < c->n; i++)
         if (c->hits[i].prim == (int32_t)hit->primID)
             return;
+    if (c->n == c->cap && c->fixed) {
+        c->extra++;
+        return;
+    }
     if (c->n == c->cap) {
         const size_t cap = c->cap ? 2 * c->cap : 64;
         kdr_hit *h = realloc(c->hits, cap * sizeof *h);
@@ -258,6 +264,24 @@ size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size
         out[i] = c.hits[i];
     free(c.hits);
     return c.oom ? 0 : c.n;
+}
+
+size_t oracle_all_filter_into(const oracle *o, const kdr_ray *ray, kdr_hit *buf,
+                              size_t cap, int sort) {
+    if (!ray_is_valid(ray))
+        return 0;
+    all_ctx c = {.hits = buf, .cap = cap, .fixed = 1};
+    rtcInitIntersectContext(&c.ctx);
+    c.ctx.filter = record_hit;
+    struct RTCRayHit rh;
+    to_rtc_ray(ray, &rh.ray);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(o->scene, &c.ctx, &rh);
+    if (sort && c.n > 1)
+        qsort(c.hits, c.n, sizeof *c.hits, hit_order);
+    return c.n + c.extra;
 }
 
 size_t oracle_all_requery(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap) {

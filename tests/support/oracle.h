@@ -77,6 +77,13 @@ int oracle_occluded1(const oracle *o, const kdr_ray *ray);
  * Writes the hits sorted by (t, prim) into out[0..cap) and returns how many
  * there are in all (may exceed cap: only the first cap are written). */
 size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap);
+/* The same filter as a benchmark rival would write it: hits go straight into
+ * the caller's buf[0..cap) (no allocation per ray), deduplicated there;
+ * hits past cap are only counted (not deduplicated, so a prim reported twice
+ * past cap counts twice); sorted by (t, prim) only when sort != 0 (a count
+ * or a parity needs no order). Returns the hits found. */
+size_t oracle_all_filter_into(const oracle *o, const kdr_ray *ray, kdr_hit *buf,
+                              size_t cap, int sort);
 /* The re-query loop: closest hit, then again from just past it (tnear =
  * the next float after t) until a miss or cap hits. Hits sharing a t with
  * an earlier one (shared edges) are lost, as they are for users of this
