@@ -105,9 +105,28 @@ static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
     }
 }
 
-/* Sorts the few new events of straddling triangles (keys are unique). */
+/* Sorts up to RANK_MAX events by rank: each one's place is the number of
+ * smaller keys (keys are unique, so the ranks are a permutation). n * n
+ * compares, but without a branch on the data: the lists of straddlers'
+ * events are mostly 8-256 long, where a comparison sort's branches
+ * mispredict about every other compare. */
+#define RANK_MAX 32
+static void rank_sort(kd_event *a, size_t n) {
+    kd_event tmp[RANK_MAX];
+    memcpy(tmp, a, n * sizeof *a);
+    for (size_t i = 0; i < n; i++) {
+        const kd_event x = tmp[i];
+        size_t r = 0;
+        for (size_t j = 0; j < n; j++)
+            r += tmp[j] < x;
+        a[r] = x;
+    }
+}
+
+/* Sorts the few new events of straddling triangles (keys are unique):
+ * quicksort down to pieces of RANK_MAX, then rank_sort. */
 void kd_sort_events(kd_event *a, size_t n) {
-    while (n > 16) {
+    while (n > RANK_MAX) {
         kd_event x = a[0], y = a[n / 2], z = a[n - 1];
         kd_event p = x < y ? (y < z ? y : (x < z ? z : x)) : (x < z ? x : (y < z ? z : y));
         size_t i = 0, j = n - 1;
@@ -126,13 +145,7 @@ void kd_sort_events(kd_event *a, size_t n) {
         a += j + 1;
         n -= j + 1;
     }
-    for (size_t i = 1; i < n; i++) {
-        kd_event v = a[i];
-        size_t j = i;
-        for (; j > 0 && a[j - 1] > v; j--)
-            a[j] = a[j - 1];
-        a[j] = v;
-    }
+    rank_sort(a, n);
 }
 
 /* Partitions the node's events into the two children (kept in order,
