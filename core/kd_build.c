@@ -223,7 +223,7 @@ static void binned_to_exact(builder *b, const kdr_bounds *box, kd_prims *p,
     int err = kd_prims_to_events(p, &ev, &block);
     free(p->p);
     p->p = NULL;
-    if (err == KDR_OK && !b->side && !(b->side = malloc(b->ntris)))
+    if (err == KDR_OK && !b->side && !(b->side = calloc(b->ntris, 1)))
         err = KDR_ENOMEM;
     if (err == KDR_OK)
         build_exact(b, box, &ev, depth, bad);
@@ -309,7 +309,7 @@ void kd_run_task(builder *b, kd_task *t) {
         break;
     case KD_TASK_EXACT:
         b->frag = t->frag;
-        if (!b->side && !(b->side = malloc(b->ntris)))
+        if (!b->side && !(b->side = calloc(b->ntris, 1)))
             b->err = KDR_ENOMEM;
         else
             build_exact(b, &t->box, &t->ev, t->depth, t->bad);
