@@ -119,6 +119,13 @@ static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
     }
 }
 
+/* Sorts up to RANK_MAX events by rank: each one's place is the number of
+ * smaller keys (keys are unique, so the ranks are a permutation). n * n
+ * compares, but without a branch on the data: the lists of straddlers'
+ * events are mostly 8-256 long, where a comparison sort's branches
+ * mispredict about every other compare. (Padding the inner loop to a
+ * fixed 8, 16 or 32 keys, so that its exit is predicted, was slower on an
+ * engine build's captured lists: 23 against 19 ms.) */
 #define RANK_MAX 32
 static void rank_sort(kd_event *a, size_t n) {
     kd_event tmp[RANK_MAX];
