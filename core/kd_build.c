@@ -207,7 +207,8 @@ static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
         make_interior(b, box, ev, &s, depth, bad);
         return;
     }
-    make_leaf(b, ev);
+    if (!b->err) /* kd_find_split may have run out of memory */
+        make_leaf(b, ev);
 }
 
 /* ---- the binned top (prim arrays) ------------------------------------------------ */
