@@ -207,7 +207,8 @@ static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
         make_interior(b, box, ev, &s, depth, bad);
         return;
     }
-    make_leaf(b, ev);
+    if (!b->err) /* kd_find_split may have run out of memory */
+        make_leaf(b, ev);
 }
 
 /* ---- the binned top (prim arrays) ------------------------------------------------ */
@@ -223,7 +224,7 @@ static void binned_to_exact(builder *b, const kdr_bounds *box, kd_prims *p,
     int err = kd_prims_to_events(p, &ev, &block);
     free(p->p);
     p->p = NULL;
-    if (err == KDR_OK && !b->side && !(b->side = malloc(b->ntris)))
+    if (err == KDR_OK && !b->side && !(b->side = calloc(b->ntris, 1)))
         err = KDR_ENOMEM;
     if (err == KDR_OK)
         build_exact(b, box, &ev, depth, bad);
@@ -309,7 +310,7 @@ void kd_run_task(builder *b, kd_task *t) {
         break;
     case KD_TASK_EXACT:
         b->frag = t->frag;
-        if (!b->side && !(b->side = malloc(b->ntris)))
+        if (!b->side && !(b->side = calloc(b->ntris, 1)))
             b->err = KDR_ENOMEM;
         else
             build_exact(b, &t->box, &t->ev, t->depth, t->bad);

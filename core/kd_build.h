@@ -102,6 +102,8 @@ typedef struct builder {
     size_t both_cap;
     kd_event *add; /* their new events */
     size_t add_cap;
+    struct kd_group *groups; /* the split search's event groups */
+    size_t groups_cap;
     kd_frag *frag;
     int err;
     double cpu_ms; /* this worker's thread CPU time in the build */
@@ -190,8 +192,9 @@ void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
 
 /* ---- kd_build_sah.c -------------------------------------------------------------- */
 
-/* The cheapest split of the node over all three axes; 0 if none. */
-int kd_find_split(const builder *b, const kdr_bounds *box, const ev_list *ev,
+/* The cheapest split of the node over all three axes; 0 if none, or
+ * without memory (then b->err is set). */
+int kd_find_split(builder *b, const kdr_bounds *box, const ev_list *ev,
                   kd_split *best);
 
 /* The cheapest split of a binned node (n > exact_max): SAH at the

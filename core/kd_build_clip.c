@@ -18,26 +18,30 @@ typedef struct cvert {
     unsigned exact; /* bit k: p[k] is exactly a float of the input */
 } cvert;
 
+/* The point where edge a-b crosses the plane p[k] = c at t (clip_plane's
+ * arithmetic). */
+static inline void cross_point(const cvert *a, const cvert *b, double t, int k,
+                               float c, cvert *v) {
+    v->exact = 1u << k;
+    for (int j = 0; j < 3; j++) {
+        v->p[j] = a->p[j] + t * (b->p[j] - a->p[j]);
+        if (j != k && a->p[j] == b->p[j])
+            v->exact |= a->exact & b->exact & (1u << j);
+    }
+    v->p[k] = c;
+}
+
 /* Sutherland-Hodgman step: keeps the part where sign * (p[k] - c) >= 0. */
 static int clip_plane(const cvert *in, int n, cvert *out, int k, float c,
                       double sign) {
     int m = 0;
     for (int i = 0; i < n; i++) {
-        const cvert *a = &in[i], *b = &in[(i + 1) % n];
+        const cvert *a = &in[i], *b = &in[i + 1 < n ? i + 1 : 0];
         double da = sign * (a->p[k] - c), db = sign * (b->p[k] - c);
         if (da >= 0.0)
             out[m++] = *a;
-        if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0)) {
-            cvert *v = &out[m++];
-            double t = da / (da - db);
-            v->exact = 1u << k;
-            for (int j = 0; j < 3; j++) {
-                v->p[j] = a->p[j] + t * (b->p[j] - a->p[j]);
-                if (j != k && a->p[j] == b->p[j])
-                    v->exact |= a->exact & b->exact & (1u << j);
-            }
-            v->p[k] = c;
-        }
+        if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0))
+            cross_point(a, b, da / (da - db), k, c, &out[m++]);
     }
     return m;
 }
@@ -118,18 +122,44 @@ static int tri_bounds_in_box(const float *tri, const kdr_bounds *box,
     return 1;
 }
 
+/* clip_plane for both sides at once: out[0] keeps p[k] <= c, out[1] keeps
+ * p[k] >= c, each in the order clip_plane gives. A crossing edge's point
+ * is computed once: with the sign flipped, da, db and da - db only change
+ * sign (IEEE negation and subtraction are exact under it), so t and the
+ * point are the same bits for either side. */
+static void clip_plane_both(const cvert *in, int n, cvert *out[2], int m[2], int k,
+                            float c) {
+    m[0] = m[1] = 0;
+    for (int i = 0; i < n; i++) {
+        const cvert *a = &in[i], *b = &in[i + 1 < n ? i + 1 : 0];
+        const double da = a->p[k] - c, db = b->p[k] - c;
+        if (da <= 0.0)
+            out[0][m[0]++] = *a;
+        if (da >= 0.0)
+            out[1][m[1]++] = *a;
+        if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0)) {
+            cvert *v = &out[0][m[0]++];
+            cross_point(a, b, da / (da - db), k, c, v);
+            out[1][m[1]++] = *v;
+        }
+    }
+}
+
 /* The bounds of the parts of tri inside cbox[0] and cbox[1], the halves of
  * box split at pos on axis; bit s of the result is set when side s keeps
  * something. The triangle is clipped to the node's box once, then that
  * polygon to either side of the plane. */
 unsigned kd_clip_tri(const float *tri, const kdr_bounds *box, int axis, float pos,
                      const kdr_bounds cbox[2], kdr_bounds bb[2]) {
-    cvert poly[16], half[16];
+    cvert poly[16], half[2][16];
+    cvert *out[2] = {half[0], half[1]};
+    int m[2] = {0, 0};
     const int n = clip_to_box(tri, box, poly);
+    if (n)
+        clip_plane_both(poly, n, out, m, axis, pos);
     unsigned sides = 0;
     for (int side = 0; side < 2; side++) {
-        const int m = n ? clip_plane(poly, n, half, axis, pos, side ? 1.0 : -1.0) : 0;
-        if (poly_bounds(half, m, &cbox[side], &bb[side]) ||
+        if (poly_bounds(half[side], m[side], &cbox[side], &bb[side]) ||
             tri_bounds_in_box(tri, &cbox[side], &bb[side]))
             sides |= 1u << side;
     }

@@ -175,6 +175,7 @@ static void free_scratch(builder *b) {
         free(b->lvl[d]);
     free(b->both);
     free(b->add);
+    free(b->groups);
 }
 
 int kd_build_run(const builder *proto, int threads, kd_task *sort, int nsort,

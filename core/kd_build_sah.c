@@ -6,6 +6,7 @@
  * plane go to the cheaper side (left on ties).
  */
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "kd_build.h"
@@ -57,39 +58,89 @@ static int sah_init(const builder *b, const kdr_bounds *box, int k, sah_ctx *c) 
     return 1;
 }
 
-static void sweep_axis(const builder *b, const kdr_bounds *box,
-                       const ev_list *ev, int k, kd_split *best) {
+/* The events at one position: its key, the counts of end (low 32 bits)
+ * and planar events (high 32) there, and the index after its last event
+ * (the start events are the rest). Counts and indices fit 32 bits: a node
+ * has fewer than 2^30 triangles and at most two events per triangle and
+ * axis. */
+struct kd_group {
+    uint64_t count;
+    uint32_t key, end;
+};
+
+/* What one event adds to a group's count, by type. */
+static const uint64_t type_count[4] = {1u, (uint64_t)1 << 32, 0u, 0u};
+
+/* The SAH at the group's position, if it lies strictly inside the node. */
+static inline void sweep_group(const sah_ctx *c, int k, uint32_t key, size_t pe,
+                               size_t pp, size_t ps, size_t *nl, size_t *nr,
+                               kd_split *best) {
+    const float p = key_float(key);
+    *nr -= pp + pe;
+    if (p > c->min && p < c->max)
+        sah_try(c, k, p, *nl, pp, *nr, best);
+    *nl += ps + pp;
+}
+
+/* One sweep in two passes. The first folds the events into groups without
+ * a branch on the data (whether the next event shares the position is
+ * random: a loop that stopped at each group's end mispredicted there about
+ * once a group); every event writes the current group's record and moves
+ * on to a new one when the next key differs. The second evaluates the
+ * groups in order, with the same arithmetic as before. */
+static void sweep_axis(const kdr_bounds *box, const builder *b, const ev_list *ev,
+                       int k, struct kd_group *g, kd_split *best) {
     sah_ctx c;
     if (!sah_init(b, box, k, &c))
         return;
     const kd_event *e = ev->e[k];
     const size_t n = ev->n[k];
-    size_t nl = 0, nr = ev->ntri;
-    for (size_t i = 0; i < n;) {
+    size_t ng = 0;
+    uint64_t acc = 0;
+    for (size_t i = 0; i < n; i++) {
         const uint32_t key = ev_key(e[i]);
-        size_t pe = 0, pp = 0, ps = 0;
-        do { /* one group: the events at this position */
-            const unsigned type = ev_type(e[i]);
-            pe += type == EV_END;
-            pp += type == EV_PLANAR;
-            ps += type == EV_START;
-        } while (++i < n && ev_key(e[i]) == key);
-        const float p = key_float(key);
-        nr -= pp + pe;
-        if (p > c.min && p < c.max)
-            sah_try(&c, k, p, nl, pp, nr, best);
-        nl += ps + pp;
+        acc += type_count[ev_type(e[i])];
+        g[ng].key = key;
+        g[ng].count = acc;
+        g[ng].end = (uint32_t)(i + 1);
+        const size_t next = i + 1 < n ? i + 1 : i;
+        const uint64_t last = (next == i) | (ev_key(e[next]) != key);
+        ng += last;
+        acc &= last - 1; /* a new group starts from zero */
+    }
+    size_t nl = 0, nr = ev->ntri, begin = 0;
+    for (size_t j = 0; j < ng; j++) {
+        const size_t pe = (size_t)(g[j].count & UINT32_MAX);
+        const size_t pp = (size_t)(g[j].count >> 32);
+        const size_t ps = g[j].end - begin - pe - pp;
+        begin = g[j].end;
+        sweep_group(&c, k, g[j].key, pe, pp, ps, &nl, &nr, best);
     }
 }
 
-int kd_find_split(const builder *b, const kdr_bounds *box, const ev_list *ev,
+int kd_find_split(builder *b, const kdr_bounds *box, const ev_list *ev,
                   kd_split *best) {
     best->axis = -1;
     best->pos = 0.0f;
     best->planar_left = 1;
     best->cost = INFINITY;
+    size_t need = ev->n[0];
+    need = ev->n[1] > need ? ev->n[1] : need;
+    need = ev->n[2] > need ? ev->n[2] : need;
+    if (need > b->groups_cap) {
+        size_t cap = b->groups_cap ? b->groups_cap : 4096;
+        while (cap < need)
+            cap *= 2;
+        free(b->groups);
+        b->groups = malloc(cap * sizeof *b->groups);
+        b->groups_cap = b->groups ? cap : 0;
+        if (!b->groups) {
+            b->err = KDR_ENOMEM;
+            return 0;
+        }
+    }
     for (int k = 0; k < 3; k++)
-        sweep_axis(b, box, ev, k, best);
+        sweep_axis(box, b, ev, k, b->groups, best);
     return best->axis >= 0;
 }
 
