@@ -23,48 +23,20 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "compare.h"
-#include "kd_cone.h"
-#include "kd_internal.h"
-#include "kd_tri.h"
-#include "kdray.h"
+#include "test_cone_util.h"
 
 #define KPI 3.14159265358979323846
 
-static int failures;
-
-#define CHECK(cond, ...)                                                                 \
-    do {                                                                                 \
-        if (!(cond)) {                                                                   \
-            failures++;                                                                  \
-            fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);            \
-            fprintf(stderr, __VA_ARGS__);                                                \
-            fputc('\n', stderr);                                                         \
-        }                                                                                \
-    } while (0)
-
 /* ---- scenes ---------------------------------------------------------------- */
 
-typedef struct tri_buf {
-    float *v;
-    size_t n, cap;
-} tri_buf;
-
-static void tb_add(tri_buf *b, const float t[9]) {
-    if (b->n == b->cap) {
-        b->cap = b->cap ? 2 * b->cap : 256;
-        b->v = realloc(b->v, b->cap * 9 * sizeof *b->v);
-        if (!b->v) exit(1);
-    }
-    memcpy(b->v + 9 * b->n++, t, 9 * sizeof *t);
-}
-
-static uint64_t rng_state = 0x2545F4914F6CDD1Dull;
-static double rnd(void) {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 7;
-    rng_state ^= rng_state << 17;
-    return (double)(rng_state >> 11) * 0x1p-53;
+/* This file's own generator (xorshift; its cases were drawn with it), not
+ * test_cone_util.h's rnd. */
+static uint64_t xs_state = 0x2545F4914F6CDD1Dull;
+static double xrnd(void) {
+    xs_state ^= xs_state << 13;
+    xs_state ^= xs_state >> 7;
+    xs_state ^= xs_state << 17;
+    return (double)(xs_state >> 11) * 0x1p-53;
 }
 
 /* A floor y = 0 over [-1, 1]^2 in cells x cells quads, slightly bumpy (each
@@ -92,9 +64,9 @@ static void soup(tri_buf *b, size_t n, const float lo[3], const float hi[3], flo
     for (size_t i = 0; i < n; i++) {
         float c[3], t[9];
         for (int k = 0; k < 3; k++)
-            c[k] = lo[k] + (hi[k] - lo[k]) * (float)rnd();
+            c[k] = lo[k] + (hi[k] - lo[k]) * (float)xrnd();
         for (int v = 0; v < 9; v++)
-            t[v] = c[v % 3] + size * (float)(rnd() - 0.5);
+            t[v] = c[v % 3] + size * (float)(xrnd() - 0.5);
         tb_add(b, t);
     }
 }
@@ -118,17 +90,6 @@ static void sphere(tri_buf *b, const float c[3], float r, int rings, int segs) {
             tb_add(b, t1);
             tb_add(b, t2);
         }
-}
-
-static kdr_scene *build(const tri_buf *b) {
-    kdr_build_opts o;
-    kdr_scene *s = NULL;
-    kdr_build_opts_default(&o);
-    if (kdr_scene_build(b->v, b->n, &o, NULL, NULL, &s) != KDR_OK || !s) {
-        fprintf(stderr, "scene build failed\n");
-        exit(1);
-    }
-    return s;
 }
 
 /* Points on the floor: a res x res grid in scan order (consecutive points
@@ -192,18 +153,18 @@ static void test_containment(void) {
     for (int trial = 0; trial < 300; trial++) {
         enum { N = 16 };
         float pts[3 * N], nrm[3 * N];
-        const float spread = (float)pow(10.0, -3.0 + 3.0 * rnd());
-        float base[3] = {(float)(rnd() - 0.5), (float)(0.5 * rnd()),
-                         (float)(rnd() - 0.5)};
+        const float spread = (float)pow(10.0, -3.0 + 3.0 * xrnd());
+        float base[3] = {(float)(xrnd() - 0.5), (float)(0.5 * xrnd()),
+                         (float)(xrnd() - 0.5)};
         for (int i = 0; i < N; i++)
             for (int k = 0; k < 3; k++) {
-                pts[3 * i + k] = base[k] + spread * (float)(rnd() - 0.5);
-                nrm[3 * i + k] = (float)(rnd() - 0.5);
+                pts[3 * i + k] = base[k] + spread * (float)(xrnd() - 0.5);
+                nrm[3 * i + k] = (float)(xrnd() - 0.5);
             }
-        const double dist = 0.5 + 4.0 * rnd();
-        kdr_sphere_light light = {{(float)(dist * (rnd() - 0.5)), (float)(0.6 + dist),
-                                   (float)(dist * (rnd() - 0.5))},
-                                  (float)(pow(10.0, -2.0 + 2.0 * rnd()) * dist)};
+        const double dist = 0.5 + 4.0 * xrnd();
+        kdr_sphere_light light = {{(float)(dist * (xrnd() - 0.5)), (float)(0.6 + dist),
+                                   (float)(dist * (xrnd() - 0.5))},
+                                  (float)(pow(10.0, -2.0 + 2.0 * xrnd()) * dist)};
         kdr_shadow_query q = {.n = N,
                               .points = pts,
                               .normals = nrm,
@@ -255,19 +216,6 @@ static void test_containment(void) {
 
 /* ---- the cheap edge test --------------------------------------------------------- */
 
-static void basis(const double a[3], double b1[3], double b2[3]) {
-    const double t[3] = {fabs(a[0]) < 0.6 ? 1.0 : 0.0, fabs(a[0]) < 0.6 ? 0.0 : 1.0, 0.0};
-    b1[0] = a[1] * t[2] - a[2] * t[1];
-    b1[1] = a[2] * t[0] - a[0] * t[2];
-    b1[2] = a[0] * t[1] - a[1] * t[0];
-    const double l = sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2]);
-    for (int k = 0; k < 3; k++)
-        b1[k] /= l;
-    b2[0] = a[1] * b1[2] - a[2] * b1[1];
-    b2[1] = a[2] * b1[0] - a[0] * b1[2];
-    b2[2] = a[0] * b1[1] - a[1] * b1[0];
-}
-
 /* kd_tri_edges_miss decides only what the full view decides as MISSES, and
  * no float ray of the cone (rim included, and the ray through an edge point
  * the cone touches) hits the triangle. Cones are aimed beside a triangle,
@@ -276,28 +224,28 @@ static void test_edges_miss(void) {
     long said = 0, rays = 0;
     int wrong = 0;
     for (int trial = 0; trial < 30000 && wrong < 5; trial++) {
-        const double L = pow(10.0, -2.0 + 7.0 * rnd());
+        const double L = pow(10.0, -2.0 + 7.0 * xrnd());
         float apex[3], tri[9];
         double c[3], dir[3], b1[3], b2[3], axis[3];
         for (int k = 0; k < 3; k++) {
-            apex[k] = (float)((2.0 * rnd() - 1.0) * L);
-            dir[k] = rnd() - 0.5;
+            apex[k] = (float)((2.0 * xrnd() - 1.0) * L);
+            dir[k] = xrnd() - 0.5;
         }
         const double dl = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
-        const double M = L * pow(10.0, -3.0 + 3.0 * rnd()),
-                     dist = M * pow(10.0, 2.0 * rnd());
-        double nrm[3] = {rnd() - 0.5, rnd() - 0.5, rnd() - 0.5};
-        basis(nrm[0] || nrm[1] || nrm[2] ? nrm : dir, b1, b2);
+        const double M = L * pow(10.0, -3.0 + 3.0 * xrnd()),
+                     dist = M * pow(10.0, 2.0 * xrnd());
+        double nrm[3] = {xrnd() - 0.5, xrnd() - 0.5, xrnd() - 0.5};
+        unit_basis(nrm[0] || nrm[1] || nrm[2] ? nrm : dir, b1, b2);
         for (int k = 0; k < 3; k++)
             c[k] = apex[k] + dist * dir[k] / dl;
         for (int i = 0; i < 3; i++) {
-            const double an = 2.0944 * i + 0.7 * (rnd() - 0.5), r = M * (0.3 + rnd());
+            const double an = 2.0944 * i + 0.7 * (xrnd() - 0.5), r = M * (0.3 + xrnd());
             for (int k = 0; k < 3; k++)
                 tri[3 * i + k] = (float)(c[k] + r * (cos(an) * b1[k] + sin(an) * b2[k]));
         }
         /* the cone's axis through a point just outside edge e */
         const int e = trial % 3, j = (e + 1) % 3, o = (e + 2) % 3;
-        const double f = 0.1 + 0.8 * rnd(), out = pow(10.0, -6.0 + 6.0 * rnd());
+        const double f = 0.1 + 0.8 * xrnd(), out = pow(10.0, -6.0 + 6.0 * xrnd());
         double m[3], ml = 0.0;
         for (int k = 0; k < 3; k++) {
             const double pe = (1 - f) * tri[3 * e + k] + f * tri[3 * j + k];
@@ -307,7 +255,7 @@ static void test_edges_miss(void) {
         ml = sqrt(ml);
         for (int k = 0; k < 3; k++)
             axis[k] = m[k] / ml;
-        const double bgeo = pow(10.0, -6.0 + 5.5 * rnd()), b = bgeo + 2e-7;
+        const double bgeo = pow(10.0, -6.0 + 5.5 * xrnd()), b = bgeo + 2e-7;
         kd_dir_cone dc;
         kd_dir_cone_set(&dc, axis, cos(b), sin(b), 1e30);
         if (!kd_tri_edges_miss(tri, apex, &dc)) continue;
@@ -320,10 +268,10 @@ static void test_edges_miss(void) {
                   (int)kd_tri_view_classify(&v, &dc));
         }
         double a1[3], a2[3];
-        basis(axis, a1, a2);
+        unit_basis(axis, a1, a2);
         for (int r = 0; r < 64; r++) {
-            const double th = r < 32 ? bgeo : bgeo * sqrt(rnd()),
-                         ph = 6.283185307 * rnd();
+            const double th = r < 32 ? bgeo : bgeo * sqrt(xrnd()),
+                         ph = 6.283185307 * xrnd();
             float d[3], t, u, w;
             for (int k = 0; k < 3; k++)
                 d[k] = (float)(cos(th) * axis[k] +

@@ -246,18 +246,23 @@ static int hit_order(const void *a, const void *b) {
     return (x->prim > y->prim) - (x->prim < y->prim);
 }
 
-size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap) {
-    if (!ray_is_valid(ray))
-        return 0;
-    all_ctx c = {.hits = NULL};
-    rtcInitIntersectContext(&c.ctx);
-    c.ctx.filter = record_hit;
+/* One rtcIntersect1 with record_hit as the context filter: c collects. */
+static void collect(const oracle *o, const kdr_ray *ray, all_ctx *c) {
+    rtcInitIntersectContext(&c->ctx);
+    c->ctx.filter = record_hit;
     struct RTCRayHit rh;
     to_rtc_ray(ray, &rh.ray);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(o->scene, &c.ctx, &rh);
+    rtcIntersect1(o->scene, &c->ctx, &rh);
+}
+
+size_t oracle_all_filter(const oracle *o, const kdr_ray *ray, kdr_hit *out, size_t cap) {
+    if (!ray_is_valid(ray))
+        return 0;
+    all_ctx c = {.hits = NULL};
+    collect(o, ray, &c);
     if (c.n > 1)
         qsort(c.hits, c.n, sizeof *c.hits, hit_order);
     for (size_t i = 0; i < c.n && i < cap; i++)
@@ -271,14 +276,7 @@ size_t oracle_all_filter_into(const oracle *o, const kdr_ray *ray, kdr_hit *buf,
     if (!ray_is_valid(ray))
         return 0;
     all_ctx c = {.hits = buf, .cap = cap, .fixed = 1};
-    rtcInitIntersectContext(&c.ctx);
-    c.ctx.filter = record_hit;
-    struct RTCRayHit rh;
-    to_rtc_ray(ray, &rh.ray);
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(o->scene, &c.ctx, &rh);
+    collect(o, ray, &c);
     if (sort && c.n > 1)
         qsort(c.hits, c.n, sizeof *c.hits, hit_order);
     return c.n + c.extra;
