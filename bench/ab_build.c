@@ -27,6 +27,7 @@
 
 #include "kd_internal.h"
 #include "ladder.h"
+#include "tree_hash.h"
 
 #define MAX_ONLY 16
 #define MAX_THREADS_SET 8
@@ -51,22 +52,6 @@ typedef struct core_api {
 static const core_api cores[2] = {
     {A_kdr_scene_build, A_kdr_scene_free, A_kdr_build_opts_default},
     {B_kdr_scene_build, B_kdr_scene_free, B_kdr_build_opts_default}};
-
-static double clock_ms(clockid_t id) {
-    struct timespec ts;
-    clock_gettime(id, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static uint64_t fnv1a(const void *p, size_t n) {
-    const unsigned char *b = p;
-    uint64_t h = 1469598103934665603ull;
-    for (size_t i = 0; i < n; i++) {
-        h ^= b[i];
-        h *= 1099511628211ull;
-    }
-    return h;
-}
 
 static int cmp_double(const void *a, const void *b) {
     const double x = *(const double *)a, y = *(const double *)b;
@@ -101,14 +86,13 @@ static int build_one(int c, const float *tris, size_t ntris, int threads,
     cores[c].defaults(&o);
     o.threads = threads;
     kdr_scene *s = NULL;
-    const double c0 = clock_ms(CLOCK_PROCESS_CPUTIME_ID), w0 = clock_ms(CLOCK_MONOTONIC);
+    const double c0 = th_clock_ms(CLOCK_PROCESS_CPUTIME_ID), w0 = th_clock_ms(CLOCK_MONOTONIC);
     const int err = cores[c].build(tris, ntris, &o, NULL, NULL, &s);
-    *wall = clock_ms(CLOCK_MONOTONIC) - w0;
-    *cpu = clock_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
+    *wall = th_clock_ms(CLOCK_MONOTONIC) - w0;
+    *cpu = th_clock_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
     if (err != KDR_OK)
         return err;
-    dig[0] = fnv1a(s->nodes, s->nnodes * sizeof *s->nodes);
-    dig[1] = fnv1a(s->refs, s->nrefs * sizeof *s->refs);
+    th_tree_digest(s, dig);
     cores[c].release(s);
     return KDR_OK;
 }

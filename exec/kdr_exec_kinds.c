@@ -147,19 +147,26 @@ static int encode_hits(kdr_exec_job *j, const kdr_hits *h, size_t n, kdr_query q
     return encoded(j, rc, enc);
 }
 
+/* The view of h's arrays from ray `at` on: hit for any-hit queries,
+ * t, prim, u, v for closest ones (the others stay NULL). */
+static kdr_hits hits_from(const kdr_hits *h, size_t at, kdr_query query) {
+    kdr_hits s = {0};
+    if (query == KDR_ANY) {
+        s.hit = h->hit + at;
+    } else {
+        s.t = h->t + at;
+        s.prim = h->prim + at;
+        s.u = h->u + at;
+        s.v = h->v + at;
+    }
+    return s;
+}
+
 /* One streamed item's slice of hits [first, first + count): its one-shot
  * CBOR answer, attributes included (kdr_exec_stream.c puts "first" in). */
 int kdr_exec_hits_slice(const kdr_exec_query *q, const kdr_hits *h, size_t first,
                         size_t count, kdr_query query, unsigned fields, kdr_buf *out) {
-    kdr_hits s = {0};
-    if (query == KDR_ANY) {
-        s.hit = h->hit + first;
-    } else {
-        s.t = h->t + first;
-        s.prim = h->prim + first;
-        s.u = h->u + first;
-        s.v = h->v + first;
-    }
+    kdr_hits s = hits_from(h, first, query);
     float *normal = NULL;
     int32_t *mesh = NULL;
     int rc = 0;
@@ -262,15 +269,7 @@ static void bundle_chunk(kdr_exec_job *j, size_t c) {
                                     b->tmax_stride};
         const kdr_hits *h = &j->k.bundle.hits;
         const size_t at = (c % j->window) * KDR_EXEC_CHUNK_RAYS;
-        kdr_hits slot = {0};
-        if (r->query == KDR_ANY) {
-            slot.hit = h->hit + at;
-        } else {
-            slot.t = h->t + at;
-            slot.prim = h->prim + at;
-            slot.u = h->u + at;
-            slot.v = h->v + at;
-        }
+        kdr_hits slot = hits_from(h, at, r->query);
         kdr_exec_note_rc(j, kdr_trace_batch(j->q->scene, &view, 0, count, r->query, mode,
                                             &slot, NULL));
         return;

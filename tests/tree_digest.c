@@ -28,24 +28,9 @@
 
 #include "kd_internal.h"
 #include "ladder.h"
+#include "tree_hash.h"
 
 #define MAX_ONLY 16
-
-static double clock_ms(clockid_t id) {
-    struct timespec ts;
-    clock_gettime(id, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static uint64_t fnv1a(const void *p, size_t n) {
-    const unsigned char *b = p;
-    uint64_t h = 1469598103934665603ull;
-    for (size_t i = 0; i < n; i++) {
-        h ^= b[i];
-        h *= 1099511628211ull;
-    }
-    return h;
-}
 
 typedef struct args {
     const char *dir;
@@ -117,11 +102,11 @@ static int run(const args *a, const ladder_entry *e) {
     for (int r = 0; r < a->repeat; r++) {
         kdr_scene_free(s);
         double busy[2] = {0, 0};
-        const double w0 = clock_ms(CLOCK_MONOTONIC);
-        const double c0 = clock_ms(CLOCK_PROCESS_CPUTIME_ID);
+        const double w0 = th_clock_ms(CLOCK_MONOTONIC);
+        const double c0 = th_clock_ms(CLOCK_PROCESS_CPUTIME_ID);
         const int rc = kdr_scene_build(tris, ntris, &o, log_busiest, busy, &s);
-        const double w = clock_ms(CLOCK_MONOTONIC) - w0;
-        const double c = clock_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
+        const double w = th_clock_ms(CLOCK_MONOTONIC) - w0;
+        const double c = th_clock_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
         if (rc != KDR_OK) {
             fprintf(stderr, "%s: %s\n", e->name, kdr_strerror(rc));
             free(tris);
@@ -138,11 +123,12 @@ static int run(const args *a, const ladder_entry *e) {
             bound = b;
     }
     free(tris);
+    uint64_t dig[2];
+    th_tree_digest(s, dig);
     printf("%-10s %8zu %8zu %8zu %5llu %9.2f %8.1f %8.1f %8.1f  %016llx %016llx\n",
            e->name, ntris, s->nnodes, s->nrefs,
            (unsigned long long)s->stats.max_depth, s->stats.sah_cost, wall, cpu, bound,
-           (unsigned long long)fnv1a(s->nodes, s->nnodes * sizeof *s->nodes),
-           (unsigned long long)fnv1a(s->refs, s->nrefs * sizeof *s->refs));
+           (unsigned long long)dig[0], (unsigned long long)dig[1]);
     fflush(stdout);
     kdr_scene_free(s);
     return 0;
