@@ -107,17 +107,8 @@ void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids)
 #define KB_FALLBACK 1 /* incoherent stretches go through kd_stream_trace */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 #define KB_LIVE 4     /* answer rays that cannot hit first (kd_batch_live) */
-
-/* Tuning: rays are incoherent when the average lane occupancy (active
- * lanes per node step / lanes that entered the tree) of a chunk's first
- * KB_PROBE or more bundles falls under KB_OCC_MIN; the rest of the chunk
- * and the next KB_FALLBACK_CHUNKS chunks of the batch then go through the
- * interleaved walk (kd_stream_trace), in the caller's order (no
- * regrouping), after which the next chunk probes again. Chunks that
- * kd_batch_scattered calls scattered go there without a probe. */
-#define KB_OCC_MIN 0.3
-#define KB_PROBE 4
-#define KB_FALLBACK_CHUNKS 4
+/* The incoherence probe's knobs (KB_OCC_MIN, KB_PROBE, KB_FALLBACK_CHUNKS)
+ * are in kd_tune.h with KB_CHUNK. */
 
 #endif /* KD_TRAVERSE_BUNDLE_DECL */
 
