@@ -85,21 +85,8 @@ void ao_rays(const scene_in *s, size_t n, size_t per_point, kdr_ray *out) {
     stress_rng_seed(&r, 7);
     float p[3] = {0, 0, 0}, nrm[3] = {0, 1, 0};
     for (size_t i = 0; i < n; i++) {
-        if (i % per_point == 0) {
-            const float *t = s->tris + 9 * (stress_rng_next(&r) % s->ntris);
-            float a = stress_rng_float(&r), c = stress_rng_float(&r);
-            if (a + c > 1.0f)
-                a = 1.0f - a, c = 1.0f - c;
-            float e1[3], e2[3];
-            for (int k = 0; k < 3; k++) {
-                e1[k] = t[3 + k] - t[k];
-                e2[k] = t[6 + k] - t[k];
-                p[k] = t[k] + a * e1[k] + c * e2[k];
-            }
-            nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
-            nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
-            nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
-        }
+        if (i % per_point == 0)
+            stress_tri_point(&r, s->tris + 9 * (stress_rng_next(&r) % s->ntris), p, nrm);
         float d[3];
         stress_rng_dir(&r, d);
         const float dot = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2];

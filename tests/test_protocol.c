@@ -569,9 +569,5 @@ int main(void) {
     test_both_forms(50000);
     test_shadow_ok();
     test_frustum_ok();
-    if (failures)
-        fprintf(stderr, "test_protocol: %d check(s) failed\n", failures);
-    else
-        printf("test_protocol: all checks passed\n");
-    return failures ? 1 : 0;
+    return check_exit("test_protocol");
 }

@@ -328,9 +328,5 @@ int main(void) {
     test_hits_response(40001, KDR_ENCODING_BASE64);
     test_shadow_response();
     test_scene_and_errors();
-    if (failures)
-        fprintf(stderr, "test_protocol_encode: %d check(s) failed\n", failures);
-    else
-        printf("test_protocol_encode: all checks passed\n");
-    return failures ? 1 : 0;
+    return check_exit("test_protocol_encode");
 }

@@ -302,9 +302,5 @@ int main(void) {
     test_stride_offsets();
     test_empty_and_free();
     remove_tmpdir();
-    if (failures)
-        fprintf(stderr, "test_scenes: %d failure(s)\n", failures);
-    else
-        printf("test_scenes: all passed\n");
-    return failures ? 1 : 0;
+    return check_exit("test_scenes");
 }

@@ -273,9 +273,5 @@ int main(void) {
     test_truncation_garbage();
     test_mutations();
     remove_tmpdir();
-    if (failures)
-        fprintf(stderr, "test_scenes_errors: %d failure(s)\n", failures);
-    else
-        printf("test_scenes_errors: all passed\n");
-    return failures ? 1 : 0;
+    return check_exit("test_scenes_errors");
 }
