@@ -15,41 +15,8 @@
  * Embree, nodes and triangle tests per ray, and how many answers differ
  * between A and B (they must not: every change keeps answers bit for bit).
  *
- * Ray sets (the issue's benchmark, same generators as kdray_bench):
- *   camera   closest, a square image of bench_camera_rays' view, per ray
- *   random   closest, origins in the bounds, uniform directions, per ray
- *   ao       any hit, 16 hemisphere rays per surface point, per ray
- *   ao64     any hit, 64 rays per point, per ray (the bundles' baseline)
- *   b8ao     ao64 through kdr_trace_batch(AUTO): 8-wide bundles per point
- *   b8cam    camera rays in 4x2 pixel blocks through kdr_trace_batch(AUTO)
- *   frustum  the camera through kdr_frustum_trace(MULTI4, tile 8)
- *   cone16   kdr_shadow_trace(CONE), 16 samples per point toward a small
- *            light (bench_cone's, r = 0.03 diagonal), points and normals
- *            of ao's surface points (rays / 16 points)
- *   cone64   the same with bench_cone's large light (r = 0.25) at 64 spp
- *   conecam  the small light at 64 spp from the camera's hit points in scan
- *            order, normals toward the eye, 1e-4 x diagonal offsets (what
- *            a render asks: coherent runs of points; rays / 64 pixels)
- *   shadow   any hit, one ray per surface point (ao's points) toward a
- *            random point of bench_cone's small light, tmax 1, per ray
- *   brandom, bao, baoc, bshadow
- *            random (closest), ao (any hit), ao with closest hit and shadow
- *            rays through kdr_trace_batch(AUTO) in calls of 4096 rays
- *            (KDR_CHUNK_RAYS, the daemon's chunk) with per-ray origins and
- *            intervals, in the order the single sets trace them; Embree
- *            traces them with rtcIntersect1 / rtcOccluded1 as in the single
- *            sets
- * Issue 15's queries (only when named with --set; no Embree here, its
- * rivals are in kdray_bench --section queries):
- *   all16    camera rays, kdr_intersect_all1 capped at 16 hits
- *   all      random rays, kdr_intersect_all1 capped at 1024 (every hit)
- *   count    random rays, kdr_count1
- *   closest  kdr_closest_point1 without a distance limit; bench_queries'
- *            points (alternately near a random triangle, offset up to
- *            1e-3 of the diagonal, and uniform in the box)
- *   For these, "diff" counts queries whose answer differs between A and B:
- *   the number of hits and a hash of every hit's (t, prim, u, v) bits, or
- *   the closest prim and distance bits.
+ * The ray sets and their generators are ab_sets.c's (listed in ab_sets.h);
+ * this file holds the two cores' tables, the timing rounds and the driver.
  *
  *   kdray_ab [--dir DIR] [--only NAME]... [--rays N] [--rounds R]
  *            [--set NAME]...
@@ -63,10 +30,10 @@
 #include <time.h>
 #include <xmmintrin.h>
 
+#include "ab_sets.h"
 #include "kdray.h"
 #include "ladder.h"
 #include "oracle.h"
-#include "stress.h"
 
 /* ---- the two cores ----------------------------------------------------------- */
 
@@ -132,251 +99,6 @@ static double cpu_s(void) {
     struct timespec ts;
     clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-/* ---- ray sets ------------------------------------------------------------------ */
-
-enum {
-    SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
-    SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
-    SET_BSHADOW, SET_CONECAM, SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST, NSETS
-};
-/* The sets run when no --set is given (issue 15's only on request). */
-#define DEFAULT_SETS ((1 << SET_ALL16) - 1)
-static const char *const set_names[NSETS] = {"camera", "random",  "ao",
-                                             "ao64",   "b8ao",    "b8cam",
-                                             "frustum", "cone16", "cone64",
-                                             "shadow", "brandom", "bao",
-                                             "baoc",   "bshadow", "conecam",
-                                             "all16",  "all",     "count",
-                                             "closest"};
-/* Sets Embree traces too (per ray, rtcIntersect1 / rtcOccluded1). */
-static const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0,
-                                                1, 1, 1, 1, 1, 0, 0, 0, 0, 0};
-/* Rays per kdr_trace_batch call of the b* sets (the daemon's chunk). */
-#define AB_BATCH 4096
-
-typedef struct scene_in {
-    const float *tris;
-    size_t ntris;
-    float lo[3], hi[3], diag;
-} scene_in;
-
-static void scene_bounds(scene_in *s) {
-    for (int k = 0; k < 3; k++)
-        s->lo[k] = INFINITY, s->hi[k] = -INFINITY;
-    for (size_t i = 0; i < 3 * s->ntris; i++) {
-        const float *p = s->tris + 3 * i;
-        for (int k = 0; k < 3; k++) {
-            s->lo[k] = p[k] < s->lo[k] ? p[k] : s->lo[k];
-            s->hi[k] = p[k] > s->hi[k] ? p[k] : s->hi[k];
-        }
-    }
-    double d = 0;
-    for (int k = 0; k < 3; k++)
-        d += (double)(s->hi[k] - s->lo[k]) * (s->hi[k] - s->lo[k]);
-    s->diag = (float)sqrt(d);
-}
-
-/* bench_camera_rays' camera: outside the box, looking at its centre. */
-static void camera_of(const scene_in *s, size_t n, kdr_camera *cam) {
-    static const float view[3] = {0.55f, 0.35f, 0.75f};
-    uint32_t side = (uint32_t)sqrt((double)n);
-    memset(cam, 0, sizeof *cam);
-    cam->up[1] = 1.0f;
-    cam->fov_y_deg = 45.0f;
-    cam->width = cam->height = side ? side : 1;
-    for (int k = 0; k < 3; k++) {
-        cam->target[k] = 0.5f * (s->lo[k] + s->hi[k]);
-        cam->eye[k] = cam->target[k] + 1.1f * s->diag * view[k];
-    }
-}
-
-/* Camera rays, row-major (tiled != 0: in 4x2 pixel blocks). */
-static size_t camera_rays(const kdr_camera *cam, int tiled, kdr_ray *out) {
-    size_t i = 0;
-    if (!tiled) {
-        for (uint32_t y = 0; y < cam->height; y++)
-            for (uint32_t x = 0; x < cam->width; x++)
-                kdr_camera_ray(cam, x, y, &out[i++]);
-        return i;
-    }
-    for (uint32_t ty = 0; ty < cam->height; ty += 2)
-        for (uint32_t tx = 0; tx < cam->width; tx += 4)
-            for (uint32_t k = 0; k < 8; k++) {
-                const uint32_t px = tx + (k & 1) + 2 * (k >> 2);
-                const uint32_t py = ty + ((k >> 1) & 1);
-                if (px < cam->width && py < cam->height)
-                    kdr_camera_ray(cam, px, py, &out[i++]);
-            }
-    return i;
-}
-
-static void random_rays(const scene_in *s, size_t n, kdr_ray *out) {
-    stress_rng r;
-    stress_rng_seed(&r, 7);
-    for (size_t i = 0; i < n; i++) {
-        for (int k = 0; k < 3; k++)
-            out[i].org[k] = s->lo[k] + (s->hi[k] - s->lo[k]) * stress_rng_float(&r);
-        stress_rng_dir(&r, out[i].dir);
-        out[i].tmin = 0.0f;
-        out[i].tmax = INFINITY;
-    }
-}
-
-/* bench_ao_rays: per_point hemisphere rays around a random triangle's
- * geometric normal, [1e-4, 1] * 0.1 diagonal. */
-static void ao_rays(const scene_in *s, size_t n, size_t per_point, kdr_ray *out) {
-    const float reach = 0.1f * s->diag;
-    stress_rng r;
-    stress_rng_seed(&r, 7);
-    float p[3] = {0, 0, 0}, nrm[3] = {0, 1, 0};
-    for (size_t i = 0; i < n; i++) {
-        if (i % per_point == 0) {
-            const float *t = s->tris + 9 * (stress_rng_next(&r) % s->ntris);
-            float a = stress_rng_float(&r), c = stress_rng_float(&r);
-            if (a + c > 1.0f)
-                a = 1.0f - a, c = 1.0f - c;
-            float e1[3], e2[3];
-            for (int k = 0; k < 3; k++) {
-                e1[k] = t[3 + k] - t[k];
-                e2[k] = t[6 + k] - t[k];
-                p[k] = t[k] + a * e1[k] + c * e2[k];
-            }
-            nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
-            nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
-            nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
-        }
-        float d[3];
-        stress_rng_dir(&r, d);
-        const float dot = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2];
-        for (int k = 0; k < 3; k++) {
-            out[i].org[k] = p[k];
-            out[i].dir[k] = dot < 0 ? -d[k] : d[k];
-        }
-        out[i].tmin = 1e-4f * reach;
-        out[i].tmax = reach;
-    }
-}
-
-/* bench_cone's lights: small (r = 0.03 diagonal) or large (0.25). */
-static void light_of(const scene_in *s, int large, kdr_sphere_light *li) {
-    static const float dir[3] = {-0.35f, 0.85f, 0.40f};
-    const float dist = large ? 0.55f : 0.9f;
-    for (int k = 0; k < 3; k++)
-        li->center[k] = 0.5f * (s->lo[k] + s->hi[k]) + dist * s->diag * dir[k];
-    li->radius = (large ? 0.25f : 0.03f) * s->diag;
-}
-
-/* One shadow ray per surface point (ao_rays' points) toward a random point
- * of the sphere light li: dir = target - point, t in [1e-4, 1]. */
-static void shadow_rays(const scene_in *s, size_t n, const kdr_sphere_light *li,
-                        kdr_ray *out) {
-    ao_rays(s, n, 1, out);
-    stress_rng r;
-    stress_rng_seed(&r, 11);
-    for (size_t i = 0; i < n; i++) {
-        float d[3];
-        stress_rng_dir(&r, d);
-        const float u = stress_rng_float(&r);
-        for (int k = 0; k < 3; k++)
-            out[i].dir[k] = li->center[k] + u * li->radius * d[k] - out[i].org[k];
-        out[i].tmin = 1e-4f;
-        out[i].tmax = 1.0f;
-    }
-}
-
-/* Points on random triangles (ao_rays' points) outside bench_cone's light,
- * each with a direction on its normal's side as the "normal" (the query
- * only uses it to offset the point toward the light), written to pts
- * (3 floats per point, then 3 per normal). */
-static void cone_query(const scene_in *s, size_t npts, int large, uint32_t spp,
-                       kdr_ray *scratch, float *pts, kdr_sphere_light *li,
-                       kdr_shadow_query *q) {
-    light_of(s, large, li);
-    float *nrm = pts + 3 * npts;
-    ao_rays(s, npts, 1, scratch);
-    size_t m = 0;
-    for (size_t i = 0; i < npts; i++) {
-        double d2 = 0;
-        for (int k = 0; k < 3; k++) {
-            const double d = scratch[i].org[k] - li->center[k];
-            d2 += d * d;
-        }
-        if (d2 <= 1.01 * li->radius * li->radius)
-            continue;
-        for (int k = 0; k < 3; k++) {
-            pts[3 * m + k] = scratch[i].org[k];
-            nrm[3 * m + k] = scratch[i].dir[k]; /* the hemisphere side */
-        }
-        m++;
-    }
-    memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
-    *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
-                            .lights = li, .nlights = 1, .samples = spp,
-                            .seed = 7, .offset = KDR_OFFSET_DIAGONAL,
-                            .epsilon = 1e-4f};
-}
-
-/* conecam's query: the hit points of a side x side camera (side^2 <= max
- * pixels, traced by core A), row by row, normals toward the eye. */
-static void conecam_query(const scene_in *s, const kdr_scene *kd, size_t max, float *pts,
-                          kdr_sphere_light *li, kdr_shadow_query *q) {
-    kdr_camera cam;
-    camera_of(s, max, &cam);
-    light_of(s, 0, li);
-    float *nrm = pts + 3 * max;
-    size_t m = 0;
-    for (uint32_t y = 0; y < cam.height; y++)
-        for (uint32_t x = 0; x < cam.width; x++) {
-            kdr_ray r;
-            kdr_hit h;
-            kdr_camera_ray(&cam, x, y, &r);
-            if (!cores[0].intersect1(kd, &r, &h, NULL))
-                continue;
-            const float *t = s->tris + 9 * (size_t)h.prim;
-            float e1[3], e2[3], n[3], dot = 0.0f;
-            for (int k = 0; k < 3; k++) {
-                pts[3 * m + k] = r.org[k] + h.t * r.dir[k];
-                e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
-            }
-            n[0] = e1[1] * e2[2] - e1[2] * e2[1];
-            n[1] = e1[2] * e2[0] - e1[0] * e2[2];
-            n[2] = e1[0] * e2[1] - e1[1] * e2[0];
-            for (int k = 0; k < 3; k++)
-                dot += n[k] * r.dir[k];
-            for (int k = 0; k < 3; k++)
-                nrm[3 * m + k] = dot > 0.0f ? -n[k] : n[k];
-            m++;
-        }
-    memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
-    *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
-                            .lights = li, .nlights = 1, .samples = 64,
-                            .seed = 7, .offset = KDR_OFFSET_DIAGONAL,
-                            .epsilon = 1e-4f};
-}
-
-/* bench_queries' closest-point workload: even points near a random
- * triangle (a random point of it plus up to 1e-3 diagonal per axis), odd
- * points uniform in the box. */
-static void closest_points(const scene_in *s, size_t n, float *pts) {
-    stress_rng r;
-    stress_rng_seed(&r, 7);
-    for (size_t i = 0; i < n; i++) {
-        float *p = pts + 3 * i;
-        if (i % 2) {
-            for (int k = 0; k < 3; k++)
-                p[k] = s->lo[k] + (s->hi[k] - s->lo[k]) * stress_rng_float(&r);
-            continue;
-        }
-        const float *t = s->tris + 9 * (stress_rng_next(&r) % s->ntris);
-        float a = stress_rng_float(&r), b = stress_rng_float(&r);
-        if (a + b > 1.0f)
-            a = 1.0f - a, b = 1.0f - b;
-        for (int k = 0; k < 3; k++)
-            p[k] = (1 - a - b) * t[k] + a * t[3 + k] + b * t[6 + k] +
-                   1e-3f * s->diag * (stress_rng_float(&r) - 0.5f);
-    }
 }
 
 /* ---- one ray set, traced by A, B and Embree -------------------------------- */
@@ -700,7 +422,7 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             j.sq = &sq;
             j.n = sq.n * spp;
         } else if (set == SET_CONECAM) {
-            conecam_query(&si, kd[0], n / 64, bdir, &li, &sq);
+            conecam_query(&si, cores[0].intersect1, kd[0], n / 64, bdir, &li, &sq);
             j.sq = &sq;
             j.n = sq.n * 64;
         } else if (set == SET_CLOSEST) {

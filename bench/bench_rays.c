@@ -69,18 +69,7 @@ static void random_rays(const kdr_scene *kd, size_t n, kdr_ray *out) {
 
 /* A point on triangle tri with its unit geometric normal. */
 static void surface_point(const float *tri, stress_rng *r, float p[3], float nrm[3]) {
-    float a = stress_rng_float(r), c = stress_rng_float(r);
-    if (a + c > 1.0f)
-        a = 1.0f - a, c = 1.0f - c;
-    float e1[3], e2[3];
-    for (int k = 0; k < 3; k++) {
-        e1[k] = tri[3 + k] - tri[k];
-        e2[k] = tri[6 + k] - tri[k];
-        p[k] = tri[k] + a * e1[k] + c * e2[k];
-    }
-    nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
-    nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
-    nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    stress_tri_point(r, tri, p, nrm);
     const float len = sqrtf(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
     for (int k = 0; k < 3; k++)
         nrm[k] = len > 0 ? nrm[k] / len : (k == 1);

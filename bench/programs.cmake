@@ -62,7 +62,8 @@ add_test(NAME bench_dead_smoke
 # `cmake --build build --target bench_e2e` (haus and 2CylinderEngine, 1M
 # rays per workload, about a minute).
 if(TARGET kdrayd AND TARGET kdray_trace)
-  add_executable(kdray_bench_e2e ${CMAKE_CURRENT_SOURCE_DIR}/bench_e2e.c)
+  add_executable(kdray_bench_e2e ${CMAKE_CURRENT_SOURCE_DIR}/bench_e2e.c
+                 ${CMAKE_CURRENT_SOURCE_DIR}/e2e_wire.c)
   target_link_libraries(kdray_bench_e2e PRIVATE kdray_bench_lib Threads::Threads)
   add_custom_target(bench_e2e
     COMMAND kdray_bench_e2e $<TARGET_FILE:kdrayd> $<TARGET_FILE:kdray_trace>

@@ -104,11 +104,21 @@
  * lives in L2 anyway, hence the threshold (a core's L2 is 1 MiB here). */
 #define KD_PREFETCH_MIN_BYTES ((size_t)1 << 20)
 
-/* ---- bundles (kd_batch.c, kd_traverse_bundle.h) ----------------------------
+/* ---- bundles (kd_batch.c, kd_traverse_bundle_run.h) ------------------------
  * Rays are bundled in chunks of KB_CHUNK; a chunk whose mean direction
  * spread per 8 rays exceeds KB_SORT_SPREAD is regrouped by direction first. */
 #define KB_CHUNK 256
 #define KB_SORT_SPREAD 0.5f
+/* Rays are incoherent when the average lane occupancy (active lanes per
+ * node step / lanes that entered the tree) of a chunk's first KB_PROBE or
+ * more bundles falls under KB_OCC_MIN; the rest of the chunk and the next
+ * KB_FALLBACK_CHUNKS chunks of the batch then go through the interleaved
+ * walk (kd_stream_trace), in the caller's order (no regrouping), after
+ * which the next chunk probes again. Chunks that kd_batch_scattered calls
+ * scattered go there without a probe (KB_FALLBACK flag only). */
+#define KB_OCC_MIN 0.3
+#define KB_PROBE 4
+#define KB_FALLBACK_CHUNKS 4
 
 /* ---- cone shadows (kd_cone.c, kd_cone_cells.c) ------------------------------
  * Measured with kdray_bench_cone (default scene and 2CylinderEngine, a small

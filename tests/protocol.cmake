@@ -1,8 +1,12 @@
 # protocol/ (owner: protocol): request parsing and validation with exact
-# error details, base64, float formatting and response encoding.
+# error details (protocol); base64, float formatting and response encoding
+# (protocol_encode).
 add_executable(test_protocol ${CMAKE_CURRENT_SOURCE_DIR}/test_protocol.c)
 target_link_libraries(test_protocol PRIVATE kdray_protocol)
 add_test(NAME protocol COMMAND test_protocol)
+add_executable(test_protocol_encode ${CMAKE_CURRENT_SOURCE_DIR}/test_protocol_encode.c)
+target_link_libraries(test_protocol_encode PRIVATE kdray_protocol)
+add_test(NAME protocol_encode COMMAND test_protocol_encode)
 
 # Throughput of parsing and encoding 1M-ray bundles (not a test: run by hand,
 # `test_protocol_speed [rays]`).

@@ -11,10 +11,14 @@ add_test(NAME scenes_fetch_partial
          COMMAND ${CMAKE_CURRENT_SOURCE_DIR}/test_fetch_partial.sh
                  ${CMAKE_SOURCE_DIR}/scenes/fetch ${KDRAY_ASSIMP_MODELS})
 
-# Synthetic files written by the test: every feature and error path.
-add_executable(test_scenes ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes.c)
-target_link_libraries(test_scenes PRIVATE kdray_scenes m)
+# Synthetic files written by the tests (test_scenes_util.h): every feature
+# (scenes_loader) and every error path (scenes_loader_errors).
+foreach(t scenes scenes_errors)
+  add_executable(test_${t} ${CMAKE_CURRENT_SOURCE_DIR}/test_${t}.c)
+  target_link_libraries(test_${t} PRIVATE kdray_scenes m)
+endforeach()
 add_test(NAME scenes_loader COMMAND test_scenes)
+add_test(NAME scenes_loader_errors COMMAND test_scenes_errors)
 
 # Real files: assimp-testmodels, the default scene, the fetched ladder.
 add_executable(test_scenes_real ${CMAKE_CURRENT_SOURCE_DIR}/test_scenes_real.c)

@@ -25,23 +25,10 @@
 #include "old_codecs.h"
 #define CHECK_PRINT_MAX 30
 #include "check.h"
+#include "test_util.h"
 
 static uint64_t rng_state = 0x3c6ef372fe94f82bull;
-static uint64_t rng(void) {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 7;
-    rng_state ^= rng_state << 17;
-    return rng_state;
-}
-
-static void *xmalloc(size_t n) {
-    void *p = malloc(n ? n : 1);
-    if (!p) {
-        fprintf(stderr, "test_codecs: out of memory\n");
-        exit(2);
-    }
-    return p;
-}
+static uint64_t rng(void) { return xorshift64(&rng_state); }
 
 /* ---- base64 --------------------------------------------------------------------- */
 

@@ -20,6 +20,7 @@
 #include <cbor.h>
 
 #include "kdr_protocol.h"
+#include "test_util.h"
 
 #define REPEAT 3
 
@@ -36,19 +37,7 @@ static double cpu_seconds(void) {
 
 static uint64_t rng_state = 0x9e3779b97f4a7c15ull;
 static float rnd(void) {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 7;
-    rng_state ^= rng_state << 17;
-    return (float)(rng_state >> 40) * 0x1p-24f * 2.0f - 1.0f;
-}
-
-static void *xmalloc(size_t n) {
-    void *p = malloc(n ? n : 1);
-    if (!p) {
-        fprintf(stderr, "test_protocol_speed: out of memory\n");
-        exit(2);
-    }
-    return p;
+    return (float)(xorshift64(&rng_state) >> 40) * 0x1p-24f * 2.0f - 1.0f;
 }
 
 static void put_floats(kdr_buf *b, const char *name, const float *v, size_t n, int b64) {

@@ -17,25 +17,12 @@
 #include "kdr_protocol.h"
 #define CHECK_PRINT_MAX 40
 #include "check.h"
+#include "test_util.h"
 
 static uint64_t rng_state = 0x510e527fade682d1ull;
-static inline uint64_t rng(void) {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 7;
-    rng_state ^= rng_state << 17;
-    return rng_state;
-}
+static inline uint64_t rng(void) { return xorshift64(&rng_state); }
 static inline float frand(float lo, float hi) {
     return lo + (hi - lo) * (float)(rng() >> 40) * 0x1p-24f;
-}
-
-static inline void *xmalloc(size_t n) {
-    void *p = malloc(n ? n : 1);
-    if (!p) {
-        fprintf(stderr, "test_protocol_cbor: out of memory\n");
-        exit(2);
-    }
-    return p;
 }
 
 /* ---- building bodies -------------------------------------------------------------- */

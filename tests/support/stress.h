@@ -86,5 +86,9 @@ uint64_t stress_rng_next(stress_rng *r);
 float stress_rng_float(stress_rng *r); /* [0, 1) */
 /* Uniform direction on the unit sphere. */
 void stress_rng_dir(stress_rng *r, float d[3]);
+/* A uniform point p of triangle tri (9 floats; two draws, folded into the
+ * triangle) and its geometric normal e1 x e2, not normalised: the surface
+ * points of the benchmarks' AO and shadow rays. */
+void stress_tri_point(stress_rng *r, const float *tri, float p[3], float nrm[3]);
 
 #endif /* KDRAY_TEST_STRESS_H */

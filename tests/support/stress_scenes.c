@@ -44,6 +44,21 @@ void stress_rng_dir(stress_rng *r, float d[3]) {
     }
 }
 
+void stress_tri_point(stress_rng *r, const float *tri, float p[3], float nrm[3]) {
+    float a = stress_rng_float(r), c = stress_rng_float(r);
+    if (a + c > 1.0f)
+        a = 1.0f - a, c = 1.0f - c;
+    float e1[3], e2[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = tri[3 + k] - tri[k];
+        e2[k] = tri[6 + k] - tri[k];
+        p[k] = tri[k] + a * e1[k] + c * e2[k];
+    }
+    nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
+}
+
 static float rng_range(stress_rng *r, float lo, float hi) {
     return lo + (hi - lo) * stress_rng_float(r);
 }
