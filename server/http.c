@@ -51,8 +51,6 @@
  * Bodies arrive in smaller reads; a 60 MB upload cost the same daemon CPU
  * (128 vs 130 ms) and an 8 MB one 10.5 vs 11.0 ms. */
 static const size_t CONNECTION_MEMORY = 32 * 1024;
-/* Seconds an idle connection is kept. */
-static const unsigned CONNECTION_TIMEOUT_S = 60;
 /* A body this small is parsed on the HTTP thread (tens of microseconds),
  * and answered there too when its work should take under 0.2 ms (query.c
  * decides from the scene's measured cost per ray): no hand-off to a worker
@@ -629,7 +627,7 @@ kdr_http *kdr_http_start(kdr_server *srv, const char *addr) {
         MHD_OPTION_CONNECTION_LIMIT, (unsigned)srv->max_connections,
         MHD_OPTION_NOTIFY_COMPLETED, on_completed, (void *)h,
         MHD_OPTION_CONNECTION_MEMORY_LIMIT, CONNECTION_MEMORY,
-        MHD_OPTION_CONNECTION_TIMEOUT, CONNECTION_TIMEOUT_S,
+        MHD_OPTION_CONNECTION_TIMEOUT, srv->connection_timeout_s,
         MHD_OPTION_END);
     /* clang-format on */
     if (!h->d) {

@@ -25,6 +25,7 @@ typedef struct kdr_server {
     unsigned threads;         /* executor workers */
     unsigned http_threads;    /* libmicrohttpd's thread pool */
     unsigned max_connections; /* HTTP connections at once */
+    unsigned connection_timeout_s; /* --connection-timeout-s */
     double deadline_ms;       /* --deadline-ms, 0 = none */
     int worker_nice;          /* --worker-nice */
     kdr_access_log access_log;

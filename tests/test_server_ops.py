@@ -482,12 +482,13 @@ def test_flags(t):
     r = run_kdrayd("--help")
     for flag in ("--threads", "--http-threads", "--max-queue", "--max-inflight-mb",
                  "--deadline-ms", "--max-connections", "--access-log", "--log-level",
-                 "--shutdown-grace-s", "/v1/ready", "SIGHUP"):
+                 "--shutdown-grace-s", "--connection-timeout-s", "/v1/ready", "SIGHUP"):
         t.check(flag in r.stdout, "--help mentions " + flag)
     for bad in (["--max-queue", "-1"], ["--max-inflight-mb", "0"],
                 ["--max-inflight-mb", "100"], ["--deadline-ms", "soon"],
                 ["--log-level", "loud"], ["--http-threads", "0"],
                 ["--max-connections", "0"], ["--shutdown-grace-s", "x"],
+                ["--connection-timeout-s", "0"], ["--connection-timeout-s", "86401"],
                 ["--access-log", "/nonexistent/dir/access.log"]):
         r = run_kdrayd(*bad)
         t.eq(r.returncode, 2, "exit 2 for %s" % bad)
