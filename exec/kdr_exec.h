@@ -66,7 +66,7 @@ extern "C" {
 /* Bytes charged per body byte for parsing it, up front: what a JSON body of
  * usual decimals takes (1.3 per byte while its float arrays grow; CBOR
  * typed arrays take none). A parse that needs more is charged more as it
- * allocates (kdr_exec.c, metered_parse). The body itself is charged on
+ * allocates (kdr_exec_job.c, metered_parse). The body itself is charged on
  * top. */
 #define KDR_EXEC_PARSE_BYTES_PER_BODY_BYTE 2
 

@@ -1,6 +1,7 @@
 /*
- * kdr_exec_internal.h — what the scheduler (kdr_exec.c), its books
- * (kdr_exec_admit.c) and the query kinds (kdr_exec_kinds.c) share: the
+ * kdr_exec_internal.h — what the scheduler (kdr_exec.c), a job's steps
+ * (kdr_exec_job.c), its books (kdr_exec_admit.c) and the query kinds
+ * (kdr_exec_kinds.c, kdr_exec_hits.c, kdr_exec_render.c) share: the
  * executor struct, the job that carries one query through it, and the table
  * of steps each kind implements. Not installed, not used outside exec/.
  */
@@ -83,9 +84,9 @@ struct kdr_exec_job {
     union {
         struct {
             kdr_bundle_request req;
-            kdr_hits hits;     /* closest, any */
-            kdr_all_hits all;  /* all: max_hits slots per ray; count: nhits */
-            int32_t *offset;   /* all: n + 1, filled when encoding */
+            kdr_hits hits;    /* closest, any */
+            kdr_all_hits all; /* all: max_hits slots per ray; count: nhits */
+            int32_t *offset;  /* all: n + 1, filled when encoding */
         } bundle;
         struct {
             kdr_frustum_request req;
@@ -98,7 +99,7 @@ struct kdr_exec_job {
             size_t per_chunk;        /* points */
         } shadow;
         struct {
-            kdr_render_params p;     /* framed */
+            kdr_render_params p; /* framed */
             kdr_render_image img;
             kdr_render_stats *stats; /* one per band, summed by encode */
         } render;
@@ -156,9 +157,37 @@ int kdr_exec_stream_check(kdr_exec_job *j);
 void kdr_exec_stream_finish(kdr_exec_job *j);
 /* Chunks a windowed stream may trace ahead of the items taken. */
 #define KDR_EXEC_STREAM_WINDOW 16
-/* The one-shot CBOR answer of hits [first, first + count) (kdr_exec_kinds.c). */
+/* The one-shot CBOR answer of hits [first, first + count) (kdr_exec_hits.c). */
 int kdr_exec_hits_slice(const kdr_exec_query *q, const kdr_hits *h, size_t first,
                         size_t count, kdr_query query, unsigned fields, kdr_buf *out);
+/* ---- one job's steps (kdr_exec_job.c) ---- */
+/* CPU time of the calling thread, ns. */
+long long kdr_exec_thread_cpu_ns(void);
+/* Records why j stops (the first reason wins). */
+void kdr_exec_set_stop(kdr_exec_job *j, kdr_exec_stop why);
+/* Checked before every chunk: cancelled, shutting down or past the deadline. */
+kdr_exec_stop kdr_exec_check_stop(kdr_exec_job *j);
+/* Sets j's deadline from the caller's and the request's (0: none). */
+void kdr_exec_apply_deadline(kdr_exec_job *j, double request_ms);
+/* The problem answer of a job stopped for why. */
+void kdr_exec_stopped_result(kdr_exec_job *j, kdr_exec_stop why);
+/* Parses the body, charges and allocates; sets nchunks (0 when the job
+ * already has its answer: an error, or a stop before it began). */
+void kdr_exec_prepare_work(kdr_exec *ex, kdr_exec_job *j);
+/* ---- shared by the kinds (kdr_exec_kinds.c, kdr_exec_hits.c) ---- */
+/* The encoding an answer is written in: CBOR when the answer media type
+ * is CBOR, else the JSON or base64 text the request asked for. */
+kdr_encoding kdr_exec_answer_encoding(const kdr_exec_job *j, kdr_encoding asked);
+/* After an encoder (rc its result): records its failure or the answer's
+ * Content-Type, and gives back what the answer's bound did not use. */
+int kdr_exec_encoded(kdr_exec_job *j, int rc, kdr_encoding enc);
+/* Chunks of per items that cover total items. */
+static inline size_t kdr_exec_chunks_of(size_t total, size_t per) {
+    return (total + per - 1) / per;
+}
+/* The step tables of bundle and frustum (kdr_exec_hits.c). */
+const kdr_exec_kind_ops *kdr_exec_bundle_ops(void);
+const kdr_exec_kind_ops *kdr_exec_frustum_ops(void);
 /* First item and count of chunk c, for work of total items in chunks of per. */
 void kdr_exec_chunk_range(size_t total, size_t per, size_t c, size_t *first,
                           size_t *count);

@@ -276,11 +276,12 @@ static int serve(kdr_server *srv, const kdr_options *o) {
         snprintf(deadline, sizeof deadline, "%.0f ms", srv->deadline_ms);
     kdr_log("kdrayd %s starting: %zu scene%s, %u worker threads (nice +%d), %u HTTP "
             "threads, queue %zu, in flight %zu MiB, max body %zu MiB, max rays %zu, "
-            "deadline %s, %u connections, %s bundles",
+            "deadline %s, %u connections (idle timeout %u s), %s bundles",
             KDRAY_VERSION, kdr_registry_count(srv->registry),
             kdr_registry_count(srv->registry) == 1 ? "" : "s", srv->threads,
             srv->worker_nice, srv->http_threads, o->max_queue, o->max_inflight_mb,
             o->max_body_mb, srv->max_rays, deadline, srv->max_connections,
+            srv->connection_timeout_s,
             kdr_cpu_has_avx2() ? "8-wide (AVX2)" : "4-wide");
     kdr_http *h = kdr_http_start(srv, o->listen);
     int status = 1;
@@ -335,6 +336,7 @@ int main(int argc, char **argv) {
         srv.max_rays = o.max_rays;
         srv.max_inflight = o.max_inflight_mb << 20;
         srv.max_connections = o.max_connections;
+        srv.connection_timeout_s = o.connection_timeout_s;
         srv.deadline_ms = o.deadline_ms;
         srv.worker_nice = o.worker_nice;
         rc = serve(&srv, &o);

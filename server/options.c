@@ -37,6 +37,11 @@ static const size_t MAX_BODY_MB_LIMIT = 4096;
 static const size_t MAX_INFLIGHT_MB_LIMIT = (size_t)1 << 20; /* 1 TiB */
 static const size_t MAX_QUEUE_LIMIT = 65536;
 static const unsigned MAX_CONNECTIONS_LIMIT = 65536;
+/* Seconds a connection may go without a byte moving either way: an idle
+ * keep-alive client, a body that stops arriving, or a client that stopped
+ * reading its (streamed) answer. */
+static const unsigned DEFAULT_CONNECTION_TIMEOUT_S = 60;
+static const unsigned MAX_CONNECTION_TIMEOUT_S = 86400;
 static const double MAX_DEADLINE_MS = 86400000.0;
 static const size_t DEFAULT_GRACE_S = 30;
 /* Workers run at this nice value above the HTTP threads: with every worker
@@ -59,6 +64,11 @@ static void usage(FILE *f) {
         "  --max-connections N   HTTP connections at once (default %u)\n"
         "  --http-threads N      threads that read requests and write answers; they\n"
         "                        never trace (default: number of cores, at least 2)\n"
+        "  --connection-timeout-s N  close a connection when no byte has moved\n"
+        "                        either way for N seconds: an idle keep-alive client,\n"
+        "                        a stalled body, or a client that stopped reading its\n"
+        "                        answer (its query is cancelled, its memory and slot\n"
+        "                        freed) (1..86400, default %u)\n"
         "Work and admission:\n"
         "  --threads N           worker threads that parse, trace and encode queries,\n"
         "                        and kd-tree build threads (default: number of cores)\n"
@@ -99,7 +109,8 @@ static void usage(FILE *f) {
         "Endpoints: /v1/health (alive, scenes built), /v1/ready (503 while starting,\n"
         "stopping or saturated), /metrics, "
         "/v1/scenes[/NAME[/bundle|cone-shadow|frustum]].\n",
-        DEFAULT_LISTEN, DEFAULT_MAX_CONNECTIONS, DEFAULT_WORKER_NICE, DEFAULT_MAX_QUEUE,
+        DEFAULT_LISTEN, DEFAULT_MAX_CONNECTIONS, DEFAULT_CONNECTION_TIMEOUT_S,
+        DEFAULT_WORKER_NICE, DEFAULT_MAX_QUEUE,
         DEFAULT_MAX_INFLIGHT_MB, DEFAULT_INFLIGHT_BODIES, DEFAULT_MAX_BODY_MB,
         DEFAULT_MAX_RAYS, DEFAULT_GRACE_S);
 }
@@ -136,6 +147,7 @@ static const char *const FLAGS[] = {"--scene",
                                     "--listen",
                                     "--threads",
                                     "--http-threads",
+                                    "--connection-timeout-s",
                                     "--max-body-mb",
                                     "--max-rays",
                                     "--max-inflight-mb",
@@ -192,6 +204,10 @@ static int take(kdr_options *o, const char *flag, const char *v) {
         if (parse_size(v, 1, MAX_CONNECTIONS_LIMIT, &n))
             return bad_flag("--max-connections %s: expected 1..65536", v);
         o->max_connections = (unsigned)n;
+    } else if (!strcmp(flag, "--connection-timeout-s")) {
+        if (parse_size(v, 1, MAX_CONNECTION_TIMEOUT_S, &n))
+            return bad_flag("--connection-timeout-s %s: expected 1..86400", v);
+        o->connection_timeout_s = (unsigned)n;
     } else if (!strcmp(flag, "--deadline-ms")) {
         if (parse_size(v, 0, (size_t)MAX_DEADLINE_MS, &n))
             return bad_flag("--deadline-ms %s: expected 0 (none)..86400000", v);
@@ -258,6 +274,7 @@ int kdr_options_parse(kdr_options *o, int argc, char **argv) {
                        .max_rays = DEFAULT_MAX_RAYS,
                        .max_queue = DEFAULT_MAX_QUEUE,
                        .max_connections = DEFAULT_MAX_CONNECTIONS,
+                       .connection_timeout_s = DEFAULT_CONNECTION_TIMEOUT_S,
                        .grace_s = (double)DEFAULT_GRACE_S,
                        .worker_nice = (int)DEFAULT_WORKER_NICE,
                        .log_level = KDR_LOG_INFO};

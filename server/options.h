@@ -13,6 +13,7 @@ typedef struct kdr_options {
     unsigned threads, http_threads;
     size_t max_body_mb, max_rays, max_inflight_mb, max_queue;
     unsigned max_connections;
+    unsigned connection_timeout_s; /* an idle connection is closed after this */
     double deadline_ms;     /* 0: none */
     double grace_s;         /* shutdown: seconds for requests in flight */
     int worker_nice;        /* added to the workers' nice value */

@@ -3,7 +3,7 @@
  * be: hold the scene's current version, hand the body to the executor with
  * its media type (Content-Type) and the answer's (Accept; protocol/
  * decides both), and turn its result into the HTTP answer. The HTTP thread does not wait:
- * the executor calls back when the answer is ready (see http.c), and meanwhile a watcher
+ * the executor calls back when the answer is ready (see http_query.c), and meanwhile a watcher
  * asks now and then whether the client is still there; a client that hung up cancels its
  * query, which stops at its next chunk and frees its worker.
  */

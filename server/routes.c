@@ -344,7 +344,7 @@ void kdr_route_handle(kdr_server *srv, const kdr_request *req, kdr_response *out
     case KDR_EP_PAGE:
         kdr_page_answer(out);
         return;
-    default: /* queries go through kdr_query_start (http.c) */
+    default: /* queries go through kdr_query_start (http_query.c) */
         kdr_route_problem(out, 404, "no such path");
         return;
     }

@@ -25,6 +25,7 @@ typedef struct kdr_server {
     unsigned threads;         /* executor workers */
     unsigned http_threads;    /* libmicrohttpd's thread pool */
     unsigned max_connections; /* HTTP connections at once */
+    unsigned connection_timeout_s; /* --connection-timeout-s */
     double deadline_ms;       /* --deadline-ms, 0 = none */
     int worker_nice;          /* --worker-nice */
     kdr_access_log access_log;
@@ -131,7 +132,7 @@ void kdr_query_watch(kdr_query_call *call, int client_gone);
  * releases everything the call held. */
 void kdr_query_finish(kdr_query_call *call, kdr_response *out);
 
-/* HTTP daemon (http.c). */
+/* HTTP daemon (http_daemon.c; requests in http.c, http_body.c, http_query.c). */
 typedef struct kdr_http kdr_http;
 /* addr is "HOST:PORT" (IPv4 literal, "localhost", or "[IPv6]:PORT"); port 0
  * picks a free port. NULL after logging the reason. */

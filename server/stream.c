@@ -17,7 +17,7 @@
  * resumes the connection if it sleeps, else sets `pending`. Every resume
  * thus follows a suspend, as libmicrohttpd requires, and no wake is lost.
  * While the connection sleeps its socket is not read by libmicrohttpd, so
- * the query stays on the watcher's list until the final item (http.c): a
+ * the query stays on the watcher's list until the final item (http_query.c): a
  * client that hangs up mid-stream cancels the query as before.
  */
 #define _POSIX_C_SOURCE 200809L
@@ -30,8 +30,8 @@
 
 #include "log.h"
 
-/* Bytes libmicrohttpd asks for at most per call (its buffer comes out of
- * the connection's memory pool, 256 KiB in http.c). */
+/* Bytes libmicrohttpd may ask for per call; it asks for less, since its
+ * buffer comes out of the connection's memory pool (32 KiB, http_daemon.c). */
 static const size_t BLOCK = 64 * 1024;
 
 struct kdr_stream {

@@ -47,7 +47,7 @@ from kdray_client import Client  # noqa: E402
 CLIENTS_N = 100
 BODY_MB = 4
 INFLIGHT_MB = 16
-CONN_BUFFER_MB = 0.25   # libmicrohttpd's per-connection memory (http.c)
+CONN_BUFFER_MB = 0.03125  # libmicrohttpd's per-connection memory (http_daemon.c)
 SLACK_MB = 24           # allocator arenas, thread stacks touched, the scrape
 
 

@@ -44,6 +44,11 @@ MANY_RAYS = ["--max-rays", str(LONG_POINTS * 4 * 4096)]
 HEALTH_PROBES = 400
 HEALTH_P99_MS = 5.0
 HEALTH_ROUNDS = 8
+# The relative bound: busy p99 under this many times the idle daemon's p99.
+# Since 1bc4a9b (32 KiB connection pools) the idle daemon probes like a
+# trivial Python server (bench/health_probe.py: 0.8-1.2x at p50-p99), so
+# its idle p99 is the machine's and 1.5x of it is a fair busy bound.
+HEALTH_IDLE_FACTOR = 1.5
 
 
 def post(c, path, body, headers=None):
@@ -477,12 +482,13 @@ def test_flags(t):
     r = run_kdrayd("--help")
     for flag in ("--threads", "--http-threads", "--max-queue", "--max-inflight-mb",
                  "--deadline-ms", "--max-connections", "--access-log", "--log-level",
-                 "--shutdown-grace-s", "/v1/ready", "SIGHUP"):
+                 "--shutdown-grace-s", "--connection-timeout-s", "/v1/ready", "SIGHUP"):
         t.check(flag in r.stdout, "--help mentions " + flag)
     for bad in (["--max-queue", "-1"], ["--max-inflight-mb", "0"],
                 ["--max-inflight-mb", "100"], ["--deadline-ms", "soon"],
                 ["--log-level", "loud"], ["--http-threads", "0"],
                 ["--max-connections", "0"], ["--shutdown-grace-s", "x"],
+                ["--connection-timeout-s", "0"], ["--connection-timeout-s", "86401"],
                 ["--access-log", "/nonexistent/dir/access.log"]):
         r = run_kdrayd(*bad)
         t.eq(r.returncode, 2, "exit 2 for %s" % bad)
@@ -504,12 +510,18 @@ while True:
 '''
 
 
-def probe_health(host, port, n):
+def probe_health(host, port, n, limit_ms=None):
     """n probes, each on a new connection (as a balancer or a kubelet does),
-    5 ms apart; latencies in ms, sorted."""
+    5 ms apart; latencies in ms, sorted. With limit_ms, stops early once
+    more than 1 % of n probes took longer (the p99 is then over the limit
+    whatever follows): probes that wait behind queries take seconds each,
+    and 400 of them would outlast the test's timeout."""
     import http.client
     lat = []
+    slow = 0
     for _ in range(n):
+        if limit_ms is not None and slow > n // 100:
+            break
         t0 = time.perf_counter()
         conn = http.client.HTTPConnection(host, port, timeout=30)
         conn.request("GET", "/v1/health")
@@ -519,6 +531,7 @@ def probe_health(host, port, n):
         if r.status != 200:
             raise RuntimeError("health %d" % r.status)
         lat.append((time.perf_counter() - t0) * 1e3)
+        slow += limit_ms is not None and lat[-1] >= limit_ms
         time.sleep(0.005)
     return sorted(lat)
 
@@ -537,7 +550,7 @@ def test_health_latency(t):
     free of them shows what the daemon does. A daemon whose probes wait
     behind queries fails every round (seconds, not milliseconds). The
     bound is 5 ms (issue 13) or, where the idle daemon itself is slower,
-    twice its idle p99 + 1 ms (below)."""
+    1.5 x its idle p99 (below)."""
     tmp = tempfile.mkdtemp(prefix="kdray-health-")
     body_path = os.path.join(tmp, "long.json")
     with open(body_path, "w") as f:
@@ -548,7 +561,7 @@ def test_health_latency(t):
         c = Client(d.url)
         host, port = d.url.split("//")[1].split(":")
         port = int(port)
-        idle = probe_health(host, port, HEALTH_PROBES // 2)
+        idle = probe_health(host, port, HEALTH_PROBES)
         loads = [subprocess.Popen([sys.executable, "-c", LOAD, host, str(port), body_path])
                  for _ in range(2)]
         t.eq(wait_metric(c, "kdray_workers_busy", 2), 2.0, "both workers trace")
@@ -556,23 +569,24 @@ def test_health_latency(t):
         # jitter puts even the idle daemon's p99 above it (seen: 5.5-11.8 ms,
         # and 4.5-6.1 ms for a trivial Python server), 5 ms would test the
         # machine. What the test must catch is probes that wait behind
-        # queries (seconds): the bound is the larger of 5 ms and twice the
-        # idle p99 + 1 ms. The absolute figure is reported in the output.
-        limit = max(HEALTH_P99_MS, 2.0 * pct(idle, 99) + 1.0)
+        # queries (seconds): the bound is the larger of 5 ms and 1.5 x the
+        # idle p99. The absolute figure is reported in the output.
+        limit = max(HEALTH_P99_MS, HEALTH_IDLE_FACTOR * pct(idle, 99))
         ok = False
         for rnd in range(HEALTH_ROUNDS):
-            busy = probe_health(host, port, HEALTH_PROBES)
+            busy = probe_health(host, port, HEALTH_PROBES, limit)
             still = lib.metric(metrics(c), "kdray_workers_busy")
-            print("  round %d: health p50 %.2f p90 %.2f p99 %.2f max %.2f ms with %d of "
-                  "2 workers busy (idle: p50 %.2f p99 %.2f ms)"
-                  % (rnd + 1, pct(busy, 50), pct(busy, 90), pct(busy, 99), busy[-1],
-                     still, pct(idle, 50), pct(idle, 99)), flush=True)
+            print("  round %d: %d probes, health p50 %.2f p90 %.2f p99 %.2f max %.2f ms "
+                  "with %d of 2 workers busy (idle: p50 %.2f p99 %.2f ms)"
+                  % (rnd + 1, len(busy), pct(busy, 50), pct(busy, 90), pct(busy, 99),
+                     busy[-1], still, pct(idle, 50), pct(idle, 99)), flush=True)
             t.eq(still, 2.0, "every worker still busy after the probes")
-            if pct(busy, 99) < limit:
+            if len(busy) == HEALTH_PROBES and pct(busy, 99) < limit:
                 ok = True
                 break
-        t.check(ok, "health p99 < %.1f ms (the larger of %.0f ms and twice the idle "
-                "daemon's p99 + 1 ms) while every worker is busy" % (limit, HEALTH_P99_MS))
+        t.check(ok, "health p99 < %.1f ms (the larger of %.0f ms and %.1f x the idle "
+                "daemon's p99) while every worker is busy"
+                % (limit, HEALTH_P99_MS, HEALTH_IDLE_FACTOR))
     finally:
         for p in loads:
             p.kill()

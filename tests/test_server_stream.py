@@ -16,7 +16,8 @@ mid-stream cancels its query (kdray_cancellations_total); that a bundle
 stream reuses its window of result slots (answers unchanged) and that a
 client that stops reading stalls its query with no worker inside, still
 stopped by its deadline (a final 503 item once read) and by a SIGTERM
-(exit 0). With
+(exit 0), and, with no deadline, by the connection timeout
+(--connection-timeout-s), which frees its slot and bytes. With
 "memory" (ctest server_stream_memory, normal build only: the sanitizers
 change RSS): a streamed 1M-ray bundle's peak RSS growth is at least 24 MiB
 below the one-piece answer's.
@@ -249,6 +250,108 @@ def test_slow_reader_holds_workers(t, d):
     t.eq(sum(i.get("count", 0) for i in items[1:-1]), 1 << 20, "every ray answered")
 
 
+def free_after_timeout(t, c, what, limit_s):
+    """Polls /metrics until nothing is charged, admitted or in flight but
+    this scrape; returns the seconds it took (t.check fails past limit_s)."""
+    t0 = time.time()
+    m = c.metrics()
+    while time.time() - t0 < limit_s:
+        m = c.metrics()
+        if (lib.metric(m, "kdray_inflight_bytes") == 0 and
+                lib.metric(m, "kdray_queries", state="running") == 0 and
+                lib.metric(m, "kdray_queries", state="receiving") == 0 and
+                lib.metric(m, "kdray_workers_busy") == 0 and
+                lib.metric(m, "kdray_http_requests_in_flight") == 1):
+            return time.time() - t0
+        time.sleep(0.1)
+    t.check(False, "%s: still held %.0f s later: inflight bytes %s, running %s, "
+            "receiving %s, busy %s, requests in flight %s"
+            % (what, limit_s, lib.metric(m, "kdray_inflight_bytes"),
+               lib.metric(m, "kdray_queries", state="running"),
+               lib.metric(m, "kdray_queries", state="receiving"),
+               lib.metric(m, "kdray_workers_busy"),
+               lib.metric(m, "kdray_http_requests_in_flight")))
+    return None
+
+
+def cut_by_daemon(sock, limit_s):
+    """Reads what the daemon had sent on a stalled stream's socket: True if
+    it ends in EOF (or a reset) before the chunked body's last chunk, so the
+    daemon closed the connection in the middle of the answer."""
+    sock.settimeout(limit_s)
+    data = b""
+    try:
+        while True:
+            more = sock.recv(1 << 20)
+            if not more:
+                break
+            data += more
+    except ConnectionResetError:
+        pass
+    except socket.timeout:
+        return False
+    finally:
+        sock.close()
+    return not data.endswith(b"\r\n0\r\n\r\n")
+
+
+def test_stalled_stream_timeout(t):
+    """A client that reads a streamed answer's head and then stops reading,
+    keeping its connection open, with no deadline: the connection timeout
+    (--connection-timeout-s 2 here, 60 by default) closes it and frees
+    everything it held: a stalled bundle stream (window full, no worker
+    inside) is cancelled, its slot and in-flight bytes returned; a frustum
+    stream whose query had finished (its answer too big for the socket
+    buffers) returns its bytes. Workers stay free for other queries
+    meanwhile, and a later query is answered."""
+    timeout_s = 2
+    d = lib.Daemon(KDRAYD, ["--threads", "2", "--max-rays", "67108864",
+                            "--connection-timeout-s", str(timeout_s)])
+    try:
+        c = Client(d.url, binary=True)
+        t.check("idle timeout 2 s" in d.log_text(), "the start-up line names the timeout")
+        cancels = lib.metric(c.metrics(), "kdray_cancellations_total")
+        # the bundle: stalls with its window full
+        sock, _ = open_stalled_stream(t, d.url, big_bundle(c))
+        stalled, t0 = False, time.time()
+        while time.time() - t0 < 60 and not stalled:
+            m = c.metrics()
+            stalled = (lib.metric(m, "kdray_queries", state="running") == 1 and
+                       lib.metric(m, "kdray_workers_busy") == 0 and
+                       lib.metric(m, "kdray_inflight_bytes") > 0)
+            time.sleep(0.05)
+        t.check(stalled, "the bundle stream stalled: running, no worker, bytes held")
+        # the workers are free while it stalls
+        t.eq(len(Client(d.url).bundle(SCENE, [0, 3, 0], [0, -1, 0])["t"]), 1,
+             "a query answered beside the stalled stream")
+        took = free_after_timeout(t, c, "stalled bundle stream", 10 * timeout_s)
+        print("stalled bundle stream: freed %.1f s after it stalled" % took
+              if took is not None else "stalled bundle stream: not freed")
+        t.check(cut_by_daemon(sock, 10 * timeout_s),
+                "the daemon closed the stalled bundle stream mid-answer")
+        t.eq(lib.metric(c.metrics(), "kdray_cancellations_total"), cancels + 1,
+             "the stalled bundle query was cancelled")
+        # the frustum: finished while its answer waits in the connection
+        cam = {"eye": [3, 4, 9], "target": [0, 1, 0], "up": [0, 1, 0],
+               "fov_y_deg": 60, "width": 1024, "height": 1024}
+        sock, _ = open_stalled_stream(t, d.url, {"camera": cam, "fields": ["t", "normal"]},
+                                      endpoint="frustum")
+        time.sleep(0.5)
+        t.check(lib.metric(c.metrics(), "kdray_inflight_bytes") > 0,
+                "the stalled frustum stream holds its bytes")
+        took = free_after_timeout(t, c, "stalled frustum stream", 10 * timeout_s)
+        print("stalled frustum stream: freed %.1f s after it stalled" % took
+              if took is not None else "stalled frustum stream: not freed")
+        t.check(cut_by_daemon(sock, 10 * timeout_s),
+                "the daemon closed the stalled frustum stream mid-answer")
+        s = Client(d.url, stream=True)
+        t.eq(len(s.bundle(SCENE, [0, 3, 0], random_directions(5000, 3))["t"]), 5000,
+             "a streamed query after the timeouts")
+    finally:
+        rc = d.stop()
+    t.eq(rc, 0, "kdrayd exit status")
+
+
 def test_errors_before_streaming(t, d):
     st, h, body = post(d.url, PATH + "bundle", {"origins": [0, 0, 0],
                                                 "directions": [1, 2]}, CBOR_SEQ)
@@ -399,6 +502,7 @@ def main():
         rc = d.stop()
     t.eq(rc, 0, "kdrayd exit status")
     t.run(test_shutdown_with_stalled_stream)
+    t.run(test_stalled_stream_timeout)
     return t.finish()
 
 
