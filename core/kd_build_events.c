@@ -101,21 +101,60 @@ static size_t classify(builder *b, const ev_list *ev, const kd_split *s,
     return nboth;
 }
 
+/* The number of events of a[0..n) smaller than x (a sorted), without a
+ * branch on the data: each step keeps the half that holds the answer. */
+static size_t count_below(const kd_event *a, size_t n, kd_event x) {
+    if (n == 0)
+        return 0;
+    const kd_event *base = a;
+    while (n > 1) {
+        const size_t half = n / 2;
+        base += half & ((size_t)0 - (size_t)(base[half - 1] < x));
+        n -= half;
+    }
+    return (size_t)(base - a) + (*base < x);
+}
+
+/* Few new events among many old ones: each new event's place is found by
+ * count_below and the old run before it moves down in one memmove (the
+ * merge loop below pays a dependent load and compare for every old event
+ * up to the last new one, ~7 cycles each). */
+#define GALLOP_RATIO 16
+
 /* Merges sorted add[0..nadd) into dst, whose old sorted events sit at
- * dst[nadd .. nadd+nold); the write index never passes the read index.
- * Branch-free (the order of old and new events is random): dst[end] is
- * read but not used, so the buffer holds one event more than the lists. */
+ * dst[nadd .. nadd+nold); the write index never passes the read index
+ * (old events move down, never over one not yet read). The old events
+ * before the first new one only move down (memmove); old events after the
+ * last new one are already in place. */
 static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
                        const kd_event *add) {
-    size_t i = nadd, j = 0, w = 0;
+    if (nadd == 0)
+        return;
+    const kd_event *old = dst + nadd;
+    if (nadd * GALLOP_RATIO <= nold) {
+        size_t i = 0, w = 0;
+        for (size_t j = 0; j < nadd; j++) {
+            const size_t r = i + count_below(old + i, nold - i, add[j]);
+            memmove(dst + w, old + i, (r - i) * sizeof *dst);
+            w += r - i;
+            i = r;
+            dst[w++] = add[j];
+        }
+        return;
+    }
+    const size_t p = count_below(old, nold, add[0]);
+    memmove(dst, old, p * sizeof *dst);
+    /* Branch-free (the order of old and new events is random): dst[end] is
+     * read but not used, so the buffer holds one event more than the lists. */
+    size_t i = nadd + p, j = 0, w = p;
     const size_t end = nadd + nold;
     while (j < nadd) {
         const kd_event x = dst[i], y = add[j];
-        const int old = (i < end) & (x <= y);
-        const kd_event m = (kd_event)0 - (kd_event)old; /* mask: ?: made a branch */
+        const int o = (i < end) & (x <= y);
+        const kd_event m = (kd_event)0 - (kd_event)o; /* mask: ?: made a branch */
         dst[w++] = (x & m) | (y & ~m);
-        i += old;
-        j += !old;
+        i += o;
+        j += !o;
     }
 }
 
