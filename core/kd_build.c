@@ -31,6 +31,7 @@
 #include <time.h>
 
 #include "kd_build.h"
+#include "kd_stream.h"
 #include "kd_traverse.h"
 
 #define KD_LOG_PHASES 1000000 /* log each phase above this size */
@@ -461,6 +462,7 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     proto.o = *o;
     proto.max_depth = max_depth_for(o, nvalid);
     proto.spawn_min = spawn_min_for(nvalid, threads);
+    proto.avx512 = kd_cpu_has_avx512();
     const int phases = nvalid > KD_LOG_PHASES;
     double t0 = now_ms();
     kd_task root, sort[3];
