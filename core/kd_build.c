@@ -222,7 +222,7 @@ static void binned_to_exact(builder *b, const kdr_bounds *box, kd_prims *p,
                             int depth, int bad) {
     ev_list ev;
     kd_event *block;
-    int err = kd_prims_to_events(p, &ev, &block);
+    int err = kd_prims_to_events(p, &ev, &block, b->avx512);
     free(p->p);
     p->p = NULL;
     if (err == KDR_OK && !b->side && !(b->side = calloc(b->ntris, 1)))

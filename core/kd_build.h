@@ -169,8 +169,12 @@ static inline void ev_add(kd_event *dst[3], size_t n[3], const kdr_bounds *bb,
 void kd_ev_free(ev_list *l);
 /* LSD radix sort of n events by key (tmp holds n events). */
 void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n);
-/* Sorts a few events (keys are unique). */
-void kd_sort_events(kd_event *a, size_t n);
+/* Sorts a few events (keys are unique); avx512: with kd_rank_sort_avx512. */
+void kd_sort_events(kd_event *a, size_t n, int avx512);
+/* Sorts n <= RANK_MAX events (keys unique): each one's place is the number
+ * of smaller keys, counted 8 keys per compare. */
+#define RANK_MAX 32
+void kd_rank_sort_avx512(kd_event *a, size_t n);
 /* Splits the node's event lists into its children's, ch[0] below and ch[1]
  * above the plane, in the scratch buffer of this depth. */
 int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
@@ -248,7 +252,7 @@ int kd_bin_partition(const builder *b, const kdr_bounds *box, const kd_split *s,
                      const kdr_bounds cbox[2], const kd_prims *in, kd_prims out[2]);
 /* The sorted event lists of a node from its prims, in one malloc'ed block
  * (*block, free it) = where a binned subtree turns exact. */
-int kd_prims_to_events(const kd_prims *p, ev_list *ev, kd_event **block);
+int kd_prims_to_events(const kd_prims *p, ev_list *ev, kd_event **block, int avx512);
 
 /* ---- kd_build_par.c --------------------------------------------------------------- */
 

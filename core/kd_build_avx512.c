@@ -160,3 +160,25 @@ KD_AVX512 void kd_eval_groups_avx512(const sah_ctx *c, int k, const kd_groups *g
         best->planar_left = (left_wins >> l) & 1u;
     }
 }
+
+/* ---- the straddlers' new events: rank sort ---------------------------------- */
+
+KD_AVX512 void kd_rank_sort_avx512(kd_event *a, size_t n) {
+    const __m512i top = _mm512_set1_epi64((long long)UINT64_MAX); /* never smaller */
+    kd_event tmp[RANK_MAX];
+    __m512i v[RANK_MAX / 8];
+    for (size_t q = 0; q < RANK_MAX / 8; q++) {
+        const size_t first = 8 * q;
+        const __mmask8 m =
+            (__mmask8)(n >= first + 8 ? 0xff : n > first ? (1u << (n - first)) - 1 : 0);
+        v[q] = _mm512_mask_loadu_epi64(top, m, a + first);
+        _mm512_storeu_si512(tmp + first, v[q]);
+    }
+    for (size_t i = 0; i < n; i++) {
+        const __m512i x = _mm512_set1_epi64((long long)tmp[i]);
+        uint32_t below = 0;
+        for (size_t q = 0; q < RANK_MAX / 8; q++)
+            below |= (uint32_t)_mm512_cmplt_epu64_mask(v[q], x) << (8 * q);
+        a[__builtin_popcount(below)] = tmp[i];
+    }
+}

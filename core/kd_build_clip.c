@@ -193,5 +193,5 @@ void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
         }
     }
     for (int k = 0; k < 6; k++)
-        kd_sort_events(add[k], nadd[k]);
+        kd_sort_events(add[k], nadd[k], b->avx512);
 }

@@ -165,7 +165,6 @@ static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
  * mispredict about every other compare. (Padding the inner loop to a
  * fixed 8, 16 or 32 keys, so that its exit is predicted, was slower on an
  * engine build's captured lists: 23 against 19 ms.) */
-#define RANK_MAX 32
 static void rank_sort(kd_event *a, size_t n) {
     kd_event tmp[RANK_MAX];
     memcpy(tmp, a, n * sizeof *a);
@@ -179,8 +178,9 @@ static void rank_sort(kd_event *a, size_t n) {
 }
 
 /* Sorts the few new events of straddling triangles (keys are unique):
- * quicksort down to pieces of RANK_MAX, then rank_sort. */
-void kd_sort_events(kd_event *a, size_t n) {
+ * quicksort down to pieces of RANK_MAX, then rank_sort (or its AVX-512
+ * twin, which counts the smaller keys 8 per compare). */
+void kd_sort_events(kd_event *a, size_t n, int avx512) {
     while (n > RANK_MAX) {
         kd_event x = a[0], y = a[n / 2], z = a[n - 1];
         kd_event p = x < y ? (y < z ? y : (x < z ? z : x)) : (x < z ? x : (y < z ? z : y));
@@ -196,11 +196,14 @@ void kd_sort_events(kd_event *a, size_t n) {
             a[i++] = a[j];
             a[j--] = t;
         }
-        kd_sort_events(a, j + 1);
+        kd_sort_events(a, j + 1, avx512);
         a += j + 1;
         n -= j + 1;
     }
-    rank_sort(a, n);
+    if (avx512)
+        kd_rank_sort_avx512(a, n);
+    else
+        rank_sort(a, n);
 }
 
 /* Partitions the node's events into the two children (kept in order,

@@ -12,6 +12,9 @@
  *     AVX-512 (the program says which; the build uses them there).
  * The chosen split (axis, position, side of planar triangles, cost) must
  * be the same bits, and both group passes must write the same groups.
+ * The straddlers' small sort (kd_sort_events, scalar and AVX-512 rank
+ * sort) must give qsort's order on random unique keys of every length
+ * up to 300.
  */
 #include "test_core_util.h"
 #include "kd_build.h"
@@ -150,8 +153,27 @@ static void one_case(size_t ntri, int spread, int avx512) {
     EXPECT(same_split(&r, &v));
 }
 
+static void sort_cases(int avx512) {
+    static kd_event a[300], b[300], c[300];
+    for (size_t n = 0; n <= 300; n++) {
+        for (size_t i = 0; i < n; i++) /* unique: the index in the low bits */
+            a[i] = ev_make(rng_f(-2.0f, 2.0f) * (float)(rng_u32() % 3), rng_u32() % 3,
+                           (uint32_t)i);
+        memcpy(b, a, n * sizeof *a);
+        memcpy(c, a, n * sizeof *a);
+        qsort(a, n, sizeof *a, cmp_ev);
+        kd_sort_events(b, n, 0);
+        EXPECT(memcmp(a, b, n * sizeof *a) == 0);
+        if (avx512) {
+            kd_sort_events(c, n, 1);
+            EXPECT(memcmp(a, c, n * sizeof *a) == 0);
+        }
+    }
+}
+
 int main(void) {
     const int avx512 = kd_cpu_has_avx512();
+    sort_cases(avx512);
     for (int i = 0; i < 2; i++)
         arrays[i] = malloc(4 * (2 * MAXN + KD_GROUP_PAD) * sizeof(uint32_t));
     static const int spreads[] = {1, 3, 16, 200, 100000};
