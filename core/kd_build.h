@@ -102,6 +102,8 @@ typedef struct builder {
     size_t both_cap;
     kd_event *add; /* their new events */
     size_t add_cap;
+    kd_event *old; /* a split's old events of one axis, before the merge */
+    size_t old_cap;
     uint32_t *groups; /* the split search's event groups (kd_groups) */
     size_t groups_cap;
     int avx512; /* the AVX-512 kernels of kd_build_avx512.c may run */
