@@ -11,6 +11,8 @@
  *                      ("perfect splits"), conservative in float;
  *   kd_build_sah.c     the split searches: the exact SAH sweep per axis
  *                      over events, and min-max bins for binned nodes;
+ *   kd_build_avx512.c  AVX-512 twins of the sweep's two passes and of the
+ *                      small sort's last step (same results, bit for bit);
  *   kd_build_bin.c     binned nodes: the root's prims, their partition, and
  *                      the events of a node that turns exact;
  *   kd_build_par.c     tasks on several threads, and the stitch of the
