@@ -31,6 +31,7 @@
 #include <time.h>
 
 #include "kd_build.h"
+#include "kd_stream.h"
 #include "kd_traverse.h"
 
 #define KD_LOG_PHASES 1000000 /* log each phase above this size */
@@ -221,7 +222,7 @@ static void binned_to_exact(builder *b, const kdr_bounds *box, kd_prims *p,
                             int depth, int bad) {
     ev_list ev;
     kd_event *block;
-    int err = kd_prims_to_events(p, &ev, &block);
+    int err = kd_prims_to_events(p, &ev, &block, b->avx512);
     free(p->p);
     p->p = NULL;
     if (err == KDR_OK && !b->side && !(b->side = calloc(b->ntris, 1)))
@@ -362,8 +363,12 @@ static size_t scene_bounds(kdr_scene *s) {
         nvalid++;
         for (int v = 0; v < 3; v++)
             for (int k = 0; k < 3; k++) {
-                b.min[k] = fminf(b.min[k], t[3 * v + k]);
-                b.max[k] = fmaxf(b.max[k], t[3 * v + k]);
+                /* fminf/fmaxf are library calls (18 per triangle, serial
+                 * before the parallel build); these are minss/maxss, the
+                 * same choice x86-64 glibc's make for finite inputs */
+                const float x = t[3 * v + k];
+                b.min[k] = b.min[k] < x ? b.min[k] : x;
+                b.max[k] = b.max[k] > x ? b.max[k] : x;
             }
     }
     if (nvalid == 0)
@@ -461,6 +466,7 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     proto.o = *o;
     proto.max_depth = max_depth_for(o, nvalid);
     proto.spawn_min = spawn_min_for(nvalid, threads);
+    proto.avx512 = kd_cpu_has_avx512();
     const int phases = nvalid > KD_LOG_PHASES;
     double t0 = now_ms();
     kd_task root, sort[3];

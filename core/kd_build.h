@@ -11,6 +11,8 @@
  *                      ("perfect splits"), conservative in float;
  *   kd_build_sah.c     the split searches: the exact SAH sweep per axis
  *                      over events, and min-max bins for binned nodes;
+ *   kd_build_avx512.c  AVX-512 twins of the sweep's two passes and of the
+ *                      small sort's last step (same results, bit for bit);
  *   kd_build_bin.c     binned nodes: the root's prims, their partition, and
  *                      the events of a node that turns exact;
  *   kd_build_par.c     tasks on several threads, and the stitch of the
@@ -102,8 +104,11 @@ typedef struct builder {
     size_t both_cap;
     kd_event *add; /* their new events */
     size_t add_cap;
-    struct kd_group *groups; /* the split search's event groups */
+    kd_event *old; /* a split's old events of one axis, before the merge */
+    size_t old_cap;
+    uint32_t *groups; /* the split search's event groups (kd_groups) */
     size_t groups_cap;
+    int avx512; /* the AVX-512 kernels of kd_build_avx512.c may run */
     kd_frag *frag;
     int err;
     double cpu_ms; /* this worker's thread CPU time in the build */
@@ -168,8 +173,12 @@ static inline void ev_add(kd_event *dst[3], size_t n[3], const kdr_bounds *bb,
 void kd_ev_free(ev_list *l);
 /* LSD radix sort of n events by key (tmp holds n events). */
 void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n);
-/* Sorts a few events (keys are unique). */
-void kd_sort_events(kd_event *a, size_t n);
+/* Sorts a few events (keys are unique); avx512: with kd_rank_sort_avx512. */
+void kd_sort_events(kd_event *a, size_t n, int avx512);
+/* Sorts n <= RANK_MAX events (keys unique): each one's place is the number
+ * of smaller keys, counted 8 keys per compare. */
+#define RANK_MAX 32
+void kd_rank_sort_avx512(kd_event *a, size_t n);
 /* Splits the node's event lists into its children's, ch[0] below and ch[1]
  * above the plane, in the scratch buffer of this depth. */
 int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
@@ -189,6 +198,39 @@ unsigned kd_clip_tri(const float *tri, const kdr_bounds *box, int axis, float po
 void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
                   const kd_split *s, const kdr_bounds cbox[2], kd_event *add[6],
                   size_t nadd[6], size_t ntri[2]);
+
+/* ---- the split search's kernels (kd_build_sah.c, kd_build_avx512.c) ---- */
+
+/* The SAH terms of the planes of one axis of a node. */
+typedef struct sah_ctx {
+    float min, max;      /* node extent on the axis */
+    float cap, perim;    /* child area = 2 (cap + len * perim) */
+    float inv_area;      /* 1 / node area */
+    float isect, trav, bonus;
+} sah_ctx;
+
+/* One axis' events folded into groups of equal position, as four arrays
+ * (room for KD_GROUP_PAD more than the events: the vector kernels store
+ * whole vectors): the group's key, the number of end and of planar events
+ * up to and including it (cumulative over the list), and the index after
+ * its last event. With cumulative counts every group's SAH terms follow
+ * from its own and the previous group's entries, so the groups can be
+ * evaluated in any order, or 16 at a time. */
+#define KD_GROUP_PAD 16
+typedef struct kd_groups {
+    uint32_t *key, *ends, *planars, *end;
+} kd_groups;
+
+/* Folds n sorted events into groups; returns their count. */
+size_t kd_group_events(const kd_event *e, size_t n, const kd_groups *g);
+size_t kd_group_events_avx512(const kd_event *e, size_t n, const kd_groups *g);
+/* Evaluates the SAH at every group strictly inside the node on axis k and
+ * keeps the cheapest in *best when it beats best->cost; the first of equal
+ * costs wins (the order of a sweep that replaces only on "<"). */
+void kd_eval_groups(const sah_ctx *c, int k, const kd_groups *g, size_t ng,
+                    size_t ntri, kd_split *best);
+void kd_eval_groups_avx512(const sah_ctx *c, int k, const kd_groups *g, size_t ng,
+                           size_t ntri, kd_split *best);
 
 /* ---- kd_build_sah.c -------------------------------------------------------------- */
 
@@ -214,7 +256,7 @@ int kd_bin_partition(const builder *b, const kdr_bounds *box, const kd_split *s,
                      const kdr_bounds cbox[2], const kd_prims *in, kd_prims out[2]);
 /* The sorted event lists of a node from its prims, in one malloc'ed block
  * (*block, free it) = where a binned subtree turns exact. */
-int kd_prims_to_events(const kd_prims *p, ev_list *ev, kd_event **block);
+int kd_prims_to_events(const kd_prims *p, ev_list *ev, kd_event **block, int avx512);
 
 /* ---- kd_build_par.c --------------------------------------------------------------- */
 

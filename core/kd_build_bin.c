@@ -122,7 +122,7 @@ int kd_bin_partition(const builder *b, const kdr_bounds *box, const kd_split *s,
     return KDR_OK;
 }
 
-int kd_prims_to_events(const kd_prims *p, ev_list *ev, kd_event **block) {
+int kd_prims_to_events(const kd_prims *p, ev_list *ev, kd_event **block, int avx512) {
     const size_t per = 2 * p->n + 1;
     /* three lists, then room for the radix sort's scratch */
     kd_event *m = malloc(4 * per * sizeof *m);
@@ -140,7 +140,7 @@ int kd_prims_to_events(const kd_prims *p, ev_list *ev, kd_event **block) {
     }
     for (int k = 0; k < 3; k++) {
         if (ev->n[k] < RADIX_MIN)
-            kd_sort_events(ev->e[k], ev->n[k]);
+            kd_sort_events(ev->e[k], ev->n[k], avx512);
         else
             kd_radix_sort(ev->e[k], m + 3 * per, ev->n[k]);
     }

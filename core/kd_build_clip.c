@@ -13,6 +13,8 @@
 
 #include "kd_build.h"
 
+#define KD_CLIP_AHEAD 8 /* straddlers prefetched ahead of the one clipped */
+
 typedef struct cvert {
     double p[3];
     unsigned exact; /* bit k: p[k] is exactly a float of the input */
@@ -172,6 +174,14 @@ void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
                   const kd_split *s, const kdr_bounds cbox[2], kd_event *add[6],
                   size_t nadd[6], size_t ntri[2]) {
     for (size_t i = 0; i < nboth; i++) {
+        /* the straddlers are scattered over the triangle array (36 bytes
+         * each, often two cache lines): fetch a few ahead, their loads
+         * were a fifth of the clipping time */
+        if (i + KD_CLIP_AHEAD < nboth) {
+            const float *next = b->tris + 9 * (size_t)b->both[i + KD_CLIP_AHEAD];
+            __builtin_prefetch(next);
+            __builtin_prefetch(next + 8);
+        }
         const float *tri = b->tris + 9 * (size_t)b->both[i];
         kdr_bounds bb[2];
         const unsigned sides = kd_clip_tri(tri, box, s->axis, s->pos, cbox, bb);
@@ -183,5 +193,5 @@ void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
         }
     }
     for (int k = 0; k < 6; k++)
-        kd_sort_events(add[k], nadd[k]);
+        kd_sort_events(add[k], nadd[k], b->avx512);
 }

@@ -6,8 +6,11 @@
  * (kd_build_clip.c), sorted and merged in. This is what makes the build
  * O(N log N) (Wald and Havran 2006). The children's lists live in a
  * scratch buffer per depth: the build is depth-first, so a subtree only
- * ever writes the buffers below it.
+ * ever writes the buffers below it. A side that gets new events has its
+ * old ones partitioned into a buffer of their own first and merged into
+ * place from there (from both ends at once).
  */
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -101,21 +104,67 @@ static size_t classify(builder *b, const ev_list *ev, const kd_split *s,
     return nboth;
 }
 
-/* Merges sorted add[0..nadd) into dst, whose old sorted events sit at
- * dst[nadd .. nadd+nold); the write index never passes the read index.
- * Branch-free (the order of old and new events is random): dst[end] is
- * read but not used, so the buffer holds one event more than the lists. */
-static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
-                       const kd_event *add) {
-    size_t i = nadd, j = 0, w = 0;
-    const size_t end = nadd + nold;
-    while (j < nadd) {
-        const kd_event x = dst[i], y = add[j];
-        const int old = (i < end) & (x <= y);
-        const kd_event m = (kd_event)0 - (kd_event)old; /* mask: ?: made a branch */
-        dst[w++] = (x & m) | (y & ~m);
-        i += old;
-        j += !old;
+/* The number of events of a[0..n) smaller than x (a sorted), without a
+ * branch on the data: each step keeps the half that holds the answer. */
+static size_t count_below(const kd_event *a, size_t n, kd_event x) {
+    if (n == 0)
+        return 0;
+    const kd_event *base = a;
+    while (n > 1) {
+        const size_t half = n / 2;
+        base += half & ((size_t)0 - (size_t)(base[half - 1] < x));
+        n -= half;
+    }
+    return (size_t)(base - a) + (*base < x);
+}
+
+/* Few new events among many old ones: each new event's place is found by
+ * count_below and the old run before it is copied in one memcpy (a merge
+ * pays a dependent load and compare for every event). */
+#define GALLOP_RATIO 16
+
+/* Merges the sorted old[0..no) and add[0..na) into out (keys are unique:
+ * a straddler's old events were dropped). Both inputs have sentinels:
+ * old[-1] = add[-1] = 0 below every key, old[no] = add[na] = UINT64_MAX
+ * above (no key is either: key 0 would be a NaN position, UINT64_MAX a
+ * type 3). Without branches on the data (their order is random), from
+ * both ends at once: the front half and the back half are two independent
+ * chains of load, compare and select, which the core overlaps (one chain
+ * waited ~7 cycles per event on its own loads). */
+static void merge_out(kd_event *out, const kd_event *old, size_t no,
+                      const kd_event *add, size_t na) {
+    if (na * GALLOP_RATIO <= no) {
+        size_t i = 0, w = 0;
+        for (size_t j = 0; j < na; j++) {
+            const size_t r = i + count_below(old + i, no - i, add[j]);
+            memcpy(out + w, old + i, (r - i) * sizeof *out);
+            w += r - i;
+            i = r;
+            out[w++] = add[j];
+        }
+        memcpy(out + w, old + i, (no - i) * sizeof *out);
+        return;
+    }
+    const size_t total = no + na, back = total / 2;
+    size_t i = 0, j = 0, w = 0;
+    ptrdiff_t ib = (ptrdiff_t)no - 1, jb = (ptrdiff_t)na - 1, wb = (ptrdiff_t)total - 1;
+    for (size_t step = 0; step < back; step++) {
+        const kd_event x = old[i], y = add[j];
+        const size_t tf = x < y;
+        const kd_event mf = (kd_event)0 - (kd_event)tf; /* mask: ?: made a branch */
+        out[w++] = (x & mf) | (y & ~mf);
+        i += tf;
+        j += tf ^ 1u;
+        const kd_event xb = old[ib], yb = add[jb];
+        const ptrdiff_t tb = xb > yb;
+        const kd_event mb = (kd_event)0 - (kd_event)tb;
+        out[wb--] = (xb & mb) | (yb & ~mb);
+        ib -= tb;
+        jb -= tb ^ 1;
+    }
+    if (total - back > back) {
+        const kd_event x = old[i], y = add[j];
+        out[w] = x < y ? x : y;
     }
 }
 
@@ -126,7 +175,6 @@ static void merge_tail(kd_event *dst, size_t nadd, size_t nold,
  * mispredict about every other compare. (Padding the inner loop to a
  * fixed 8, 16 or 32 keys, so that its exit is predicted, was slower on an
  * engine build's captured lists: 23 against 19 ms.) */
-#define RANK_MAX 32
 static void rank_sort(kd_event *a, size_t n) {
     kd_event tmp[RANK_MAX];
     memcpy(tmp, a, n * sizeof *a);
@@ -140,8 +188,9 @@ static void rank_sort(kd_event *a, size_t n) {
 }
 
 /* Sorts the few new events of straddling triangles (keys are unique):
- * quicksort down to pieces of RANK_MAX, then rank_sort. */
-void kd_sort_events(kd_event *a, size_t n) {
+ * quicksort down to pieces of RANK_MAX, then rank_sort (or its AVX-512
+ * twin, which counts the smaller keys 8 per compare). */
+void kd_sort_events(kd_event *a, size_t n, int avx512) {
     while (n > RANK_MAX) {
         kd_event x = a[0], y = a[n / 2], z = a[n - 1];
         kd_event p = x < y ? (y < z ? y : (x < z ? z : x)) : (x < z ? x : (y < z ? z : y));
@@ -157,11 +206,35 @@ void kd_sort_events(kd_event *a, size_t n) {
             a[i++] = a[j];
             a[j--] = t;
         }
-        kd_sort_events(a, j + 1);
+        kd_sort_events(a, j + 1, avx512);
         a += j + 1;
         n -= j + 1;
     }
-    rank_sort(a, n);
+    if (avx512)
+        kd_rank_sort_avx512(a, n);
+    else
+        rank_sort(a, n);
+}
+
+/* Copies each event of in[0..n) to w[0] and/or w[1] as its triangle's side
+ * says, in order, and advances them. Without branches: SIDE_LEFT is bit 0
+ * and SIDE_RIGHT bit 1 (with sd == SIDE_LEFT and sd == SIDE_RIGHT gcc 12
+ * saw that only one can hold and branched); every event is written to both
+ * and each pointer advances by its bit (the slot after a list's last
+ * event may be written, but never beyond n slots from where it began). */
+static void partition(const kd_event *in, size_t n, const uint8_t *side,
+                      kd_event *w[2]) {
+    kd_event *w0 = w[0], *w1 = w[1];
+    for (size_t i = 0; i < n; i++) {
+        const kd_event e = in[i];
+        const unsigned sd = side[ev_tri(e)];
+        *w0 = e;
+        *w1 = e;
+        w0 += sd & 1u;
+        w1 += sd >> 1;
+    }
+    w[0] = w0;
+    w[1] = w1;
 }
 
 /* Partitions the node's events into the two children (kept in order,
@@ -174,49 +247,48 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
     const size_t nboth = classify(b, ev, s, &nleft);
     if (nboth == (size_t)-1)
         return KDR_ENOMEM;
-    const size_t stride = 2 * nboth + 1;
+    /* each list of new events has a sentinel slot before and after it */
+    const size_t stride = 2 * nboth + 2;
     if (grow((void **)&b->add, &b->add_cap, 6 * stride, sizeof *b->add))
         return KDR_ENOMEM;
     kd_event *add[6];
     /* the straddlers kept on each side are added by kd_clip_both */
     size_t nadd[6] = {0, 0, 0, 0, 0, 0}, ntri[2] = {nleft, ev->ntri - nleft - nboth};
     for (int k = 0; k < 6; k++)
-        add[k] = b->add + (size_t)k * stride;
+        add[k] = b->add + (size_t)k * stride + 1;
     kd_clip_both(b, nboth, box, s, cbox, add, nadd, ntri);
-    size_t need = 1; /* merge_tail reads one past the last list */
-    for (int k = 0; k < 3; k++)
+    size_t need = 0, most = 0;
+    for (int k = 0; k < 3; k++) {
+        add[k][-1] = add[3 + k][-1] = 0;
+        add[k][nadd[k]] = add[3 + k][nadd[3 + k]] = UINT64_MAX;
         need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
-    if (grow((void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)))
+        most = ev->n[k] > most ? ev->n[k] : most;
+    }
+    if (grow((void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)) ||
+        grow((void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event)))
         return KDR_ENOMEM;
     kd_event *base = b->lvl[depth];
     for (int k = 0; k < 3; k++) {
-        kd_event *w[2];
+        /* a side without new events gets its old ones in place; the others
+         * in b->old (with sentinel slots), to be merged from there */
+        kd_event *w[2], *old[2];
         for (int side = 0; side < 2; side++) {
             ch[side].e[k] = base;
-            w[side] = base + nadd[3 * side + k];
             base += ev->n[k] + nadd[3 * side + k];
+            old[side] = nadd[3 * side + k] ? b->old + (size_t)side * (most + 2) + 1
+                                            : ch[side].e[k];
+            w[side] = old[side];
         }
-        const kd_event *in = ev->e[k];
-        const uint8_t *side = b->side;
-        kd_event *w0 = w[0], *w1 = w[1];
-        const size_t n = ev->n[k];
-        /* SIDE_LEFT is bit 0 and SIDE_RIGHT bit 1: with sd == SIDE_LEFT and
-         * sd == SIDE_RIGHT gcc 12 saw that only one can hold and branched */
-        for (size_t i = 0; i < n; i++) {
-            const kd_event e = in[i];
-            const unsigned sd = side[ev_tri(e)];
-            *w0 = e;
-            *w1 = e;
-            w0 += sd & 1u;
-            w1 += sd >> 1;
-        }
-        w[0] = w0;
-        w[1] = w1;
+        partition(ev->e[k], ev->n[k], b->side, w);
         for (int side = 0; side < 2; side++) {
             const size_t na = nadd[3 * side + k];
-            const size_t nold = (size_t)(w[side] - ch[side].e[k]) - na;
-            merge_tail(ch[side].e[k], na, nold, add[3 * side + k]);
-            ch[side].n[k] = na + nold;
+            const size_t no = (size_t)(w[side] - old[side]);
+            if (na) {
+                old[side][-1] = 0;
+                old[side][no] = UINT64_MAX;
+                merge_out(ch[side].e[k], old[side], no, add[3 * side + k], na);
+            }
+            ch[side].n[k] = na + no;
         }
     }
     ch[0].ntri = ntri[0];

@@ -175,6 +175,7 @@ static void free_scratch(builder *b) {
         free(b->lvl[d]);
     free(b->both);
     free(b->add);
+    free(b->old);
     free(b->groups);
 }
 

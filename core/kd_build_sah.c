@@ -11,13 +11,6 @@
 
 #include "kd_build.h"
 
-typedef struct sah_ctx {
-    float min, max;      /* node extent on the axis */
-    float cap, perim;    /* child area = 2 (cap + len * perim) */
-    float inv_area;      /* 1 / node area */
-    float isect, trav, bonus;
-} sah_ctx;
-
 /* Counts stay below 2^30: the signed conversion is one instruction and
  * gives the same float as the unsigned one. */
 static float sah_cost(const sah_ctx *c, float p, size_t nl, size_t nr) {
@@ -58,63 +51,60 @@ static int sah_init(const builder *b, const kdr_bounds *box, int k, sah_ctx *c) 
     return 1;
 }
 
-/* The events at one position: its key, the counts of end (low 32 bits)
- * and planar events (high 32) there, and the index after its last event
- * (the start events are the rest). Counts and indices fit 32 bits: a node
- * has fewer than 2^30 triangles and at most two events per triangle and
- * axis. */
-struct kd_group {
-    uint64_t count;
-    uint32_t key, end;
-};
-
-/* What one event adds to a group's count, by type. */
-static const uint64_t type_count[4] = {1u, (uint64_t)1 << 32, 0u, 0u};
-
-/* The SAH at the group's position, if it lies strictly inside the node. */
-static inline void sweep_group(const sah_ctx *c, int k, uint32_t key, size_t pe,
-                               size_t pp, size_t ps, size_t *nl, size_t *nr,
-                               kd_split *best) {
-    const float p = key_float(key);
-    *nr -= pp + pe;
-    if (p > c->min && p < c->max)
-        sah_try(c, k, p, *nl, pp, *nr, best);
-    *nl += ps + pp;
+/* Pass one of the sweep: every event writes the current group's entry and
+ * a new group begins when the next key differs, without a branch on the
+ * data (whether the next event shares the position is random: a loop that
+ * stopped at each group's end mispredicted there about once a group). */
+size_t kd_group_events(const kd_event *e, size_t n, const kd_groups *g) {
+    size_t ng = 0;
+    uint32_t ends = 0, planars = 0;
+    for (size_t i = 0; i < n; i++) {
+        const uint32_t key = ev_key(e[i]);
+        const unsigned type = ev_type(e[i]);
+        ends += type == EV_END;
+        planars += type == EV_PLANAR;
+        g->key[ng] = key;
+        g->ends[ng] = ends;
+        g->planars[ng] = planars;
+        g->end[ng] = (uint32_t)(i + 1);
+        const size_t next = i + 1 < n ? i + 1 : i;
+        ng += (next == i) | (ev_key(e[next]) != key);
+    }
+    return ng;
 }
 
-/* One sweep in two passes. The first folds the events into groups without
- * a branch on the data (whether the next event shares the position is
- * random: a loop that stopped at each group's end mispredicted there about
- * once a group); every event writes the current group's record and moves
- * on to a new one when the next key differs. The second evaluates the
- * groups in order, with the same arithmetic as before. */
+/* Pass two: group j has pe end, pp planar and ps start events; left of its
+ * plane lie the triangles that started (or lie) in earlier groups, right
+ * of it those that have not ended there or before. */
+void kd_eval_groups(const sah_ctx *c, int k, const kd_groups *g, size_t ng,
+                    size_t ntri, kd_split *best) {
+    uint32_t pend = 0, pplanar = 0, pidx = 0;
+    for (size_t j = 0; j < ng; j++) {
+        const size_t nl = pidx - pend;
+        const size_t nr = ntri - g->ends[j] - g->planars[j];
+        const size_t pp = g->planars[j] - pplanar;
+        const float p = key_float(g->key[j]);
+        if (p > c->min && p < c->max)
+            sah_try(c, k, p, nl, pp, nr, best);
+        pend = g->ends[j];
+        pplanar = g->planars[j];
+        pidx = g->end[j];
+    }
+}
+
+/* One sweep in two passes: fold the events into groups, then evaluate the
+ * groups (both passes 16 lanes at a time where AVX-512 runs). */
 static void sweep_axis(const kdr_bounds *box, const builder *b, const ev_list *ev,
-                       int k, struct kd_group *g, kd_split *best) {
+                       int k, const kd_groups *g, kd_split *best) {
     sah_ctx c;
     if (!sah_init(b, box, k, &c))
         return;
-    const kd_event *e = ev->e[k];
-    const size_t n = ev->n[k];
-    size_t ng = 0;
-    uint64_t acc = 0;
-    for (size_t i = 0; i < n; i++) {
-        const uint32_t key = ev_key(e[i]);
-        acc += type_count[ev_type(e[i])];
-        g[ng].key = key;
-        g[ng].count = acc;
-        g[ng].end = (uint32_t)(i + 1);
-        const size_t next = i + 1 < n ? i + 1 : i;
-        const uint64_t last = (next == i) | (ev_key(e[next]) != key);
-        ng += last;
-        acc &= last - 1; /* a new group starts from zero */
-    }
-    size_t nl = 0, nr = ev->ntri, begin = 0;
-    for (size_t j = 0; j < ng; j++) {
-        const size_t pe = (size_t)(g[j].count & UINT32_MAX);
-        const size_t pp = (size_t)(g[j].count >> 32);
-        const size_t ps = g[j].end - begin - pe - pp;
-        begin = g[j].end;
-        sweep_group(&c, k, g[j].key, pe, pp, ps, &nl, &nr, best);
+    if (b->avx512) {
+        const size_t ng = kd_group_events_avx512(ev->e[k], ev->n[k], g);
+        kd_eval_groups_avx512(&c, k, g, ng, ev->ntri, best);
+    } else {
+        const size_t ng = kd_group_events(ev->e[k], ev->n[k], g);
+        kd_eval_groups(&c, k, g, ng, ev->ntri, best);
     }
 }
 
@@ -132,15 +122,18 @@ int kd_find_split(builder *b, const kdr_bounds *box, const ev_list *ev,
         while (cap < need)
             cap *= 2;
         free(b->groups);
-        b->groups = malloc(cap * sizeof *b->groups);
+        b->groups = malloc(4 * (cap + KD_GROUP_PAD) * sizeof *b->groups);
         b->groups_cap = b->groups ? cap : 0;
         if (!b->groups) {
             b->err = KDR_ENOMEM;
             return 0;
         }
     }
+    const size_t stride = b->groups_cap + KD_GROUP_PAD;
+    const kd_groups g = {b->groups, b->groups + stride, b->groups + 2 * stride,
+                         b->groups + 3 * stride};
     for (int k = 0; k < 3; k++)
-        sweep_axis(box, b, ev, k, b->groups, best);
+        sweep_axis(box, b, ev, k, &g, best);
     return best->axis >= 0;
 }
 

@@ -28,6 +28,12 @@ add_executable(test_core_build ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c)
 target_link_libraries(test_core_build PRIVATE kdray_core)
 add_test(NAME test_core_build COMMAND test_core_build)
 
+# The build's split-search kernels (scalar and AVX-512) against a plain sweep.
+add_executable(test_core_build_simd ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build_simd.c)
+target_include_directories(test_core_build_simd PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
+target_link_libraries(test_core_build_simd PRIVATE kdray_core)
+add_test(NAME test_core_build_simd COMMAND test_core_build_simd)
+
 # The same program under ThreadSanitizer: clang compiles it with every core
 # source and -fsanitize=thread (the project itself builds with gcc). Not in
 # the ASan/UBSan build (one run is enough). Without clang the test fails.
@@ -46,7 +52,8 @@ if(NOT KDRAY_SANITIZE)
               -lm -lpthread -o ${KDRAY_TSAN_BIN}
       DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c
               ${CMAKE_CURRENT_SOURCE_DIR}/test_core_util.h
-              ${CMAKE_CURRENT_SOURCE_DIR}/support/check.h ${KDRAY_TSAN_CORE}
+              ${CMAKE_CURRENT_SOURCE_DIR}/support/check.h
+              ${CMAKE_CURRENT_SOURCE_DIR}/support/tree_hash.h ${KDRAY_TSAN_CORE}
       COMMENT "Building test_core_build with clang -fsanitize=thread"
       VERBATIM)
     add_custom_target(test_core_build_tsan ALL DEPENDS ${KDRAY_TSAN_BIN})

@@ -9,11 +9,17 @@
  *    must really have run in pieces (the build's log says how many).
  * 2. Binned trees answer like brute force (a sample of rays per mode; the
  *    adversarial scenes of test_core run on binned trees too).
+ * 3. The trees are the ones the build made before its speed work of issue
+ *    11 round 3 (digests of the node and reference arrays recorded at
+ *    3d56534): a change meant to make the build faster must not change a
+ *    tree. A change that means to change trees updates these on purpose.
  * It is also the program the ThreadSanitizer test runs (tests/core.cmake).
  */
+#define _POSIX_C_SOURCE 200809L
 #include <limits.h>
 
 #include "test_core_util.h"
+#include "tree_hash.h"
 
 typedef struct scene {
     const char *name;
@@ -167,13 +173,21 @@ static size_t check_rays(const scene *sc, const kdr_scene *s, int nrays) {
 /* Modes: exact everywhere, a low and a middle switch-over (the default is
  * above these scenes' sizes: exact too). Binning every node is checked on
  * small scenes by test_core; on these it is slow. */
-static void test_scene(const scene *sc) {
+static void test_scene(const scene *sc, const uint64_t want[3][2]) {
     static const int modes[] = {INT_MAX, 500, 8000};
     static const int threads[] = {3, 2, 8, INT_MAX}; /* INT_MAX: capped by the build */
     for (size_t m = 0; m < sizeof modes / sizeof *modes; m++) {
         const int exact_max = modes[m];
         int pieces;
         kdr_scene *ref = build(sc, exact_max, 1, &pieces);
+        uint64_t dig[2];
+        th_tree_digest(ref, dig);
+        if (dig[0] != want[m][0] || dig[1] != want[m][1])
+            fprintf(stderr, "%s, exact_max %d: digests %016llx %016llx, want %016llx %016llx\n",
+                    sc->name, exact_max, (unsigned long long)dig[0],
+                    (unsigned long long)dig[1], (unsigned long long)want[m][0],
+                    (unsigned long long)want[m][1]);
+        EXPECT(dig[0] == want[m][0] && dig[1] == want[m][1]);
         for (size_t t = 0; t < sizeof threads / sizeof *threads; t++) {
             kdr_scene *s = build(sc, exact_max, threads[t], &pieces);
             const int same = same_tree(ref, s);
@@ -194,10 +208,19 @@ static void test_scene(const scene *sc) {
     }
 }
 
+/* Node and reference digests per scene and mode (exact, 500, 8000). */
+static const uint64_t want_digests[2][3][2] = {
+    {{0x34e92f54c4086370ull, 0x34307f141c35c64bull},
+     {0x151fd5fdeabf56aeull, 0xd5e7be04b1e50297ull},
+     {0xf2a3a4065fa42c2aull, 0x1ffb09e247464561ull}},
+    {{0x8d2cb7dd2a149188ull, 0x29e8be8246682092ull},
+     {0xc8785c305ffeb8faull, 0xdfbc812a4210d5bbull},
+     {0xa393d7193ff9047full, 0x839450aabd6d3f65ull}}};
+
 int main(void) {
     scene sc[2] = {make_clusters(40000), make_grid()};
     for (int i = 0; i < 2; i++) {
-        test_scene(&sc[i]);
+        test_scene(&sc[i], want_digests[i]);
         free(sc[i].t);
     }
     if (failures)

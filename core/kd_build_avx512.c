@@ -1,0 +1,184 @@
+/*
+ * kd_build_avx512.c — the AVX-512 kernels of the SAH build's split search
+ * (kd_build.h): the same two passes as kd_build_sah.c's kd_group_events
+ * and kd_eval_groups, 16 events or 16 groups at a time, with the same
+ * results bit for bit (tests/test_core_build_simd.c compares them on
+ * random lists). The build calls them when kd_cpu_has_avx512() said yes
+ * (builder.avx512).
+ *
+ * The ISA's intrinsics live here, apart from the algorithm, rather than in
+ * simd.h: simd.h is the traversal's lane layer (floats and lane masks),
+ * these kernels are about 64-bit event keys, prefix counts and compress.
+ *
+ * Bit for bit: the SAH of a plane is computed with the same float
+ * operations in the same order as sah_cost (no FMA: -ffp-contract=off and
+ * explicit mul/add), counts are converted from int32 (exact below 2^24,
+ * and rounded as the int64 conversion rounds above), and of equal costs
+ * the first group wins, as in a sweep that replaces only on "<".
+ */
+#include <immintrin.h>
+#include <math.h>
+
+#include "kd_build.h"
+#include "simd.h"
+
+/* Lanes 0..15 of the keys and types of e[0..16) (two 8-event halves),
+ * masked to the first n lanes. */
+KD_AVX512 static inline void load16(const kd_event *e, size_t n, __m512i *key,
+                                    __m512i *type) {
+    const __mmask8 m0 = (__mmask8)(n >= 8 ? 0xff : (1u << n) - 1);
+    const __mmask8 m1 = (__mmask8)(n >= 16 ? 0xff : n > 8 ? (1u << (n - 8)) - 1 : 0);
+    const __m512i a = _mm512_maskz_loadu_epi64(m0, e);
+    const __m512i b = _mm512_maskz_loadu_epi64(m1, e + 8);
+    const __m256i ka = _mm512_cvtepi64_epi32(_mm512_srli_epi64(a, 32));
+    const __m256i kb = _mm512_cvtepi64_epi32(_mm512_srli_epi64(b, 32));
+    const __m256i ta = _mm512_cvtepi64_epi32(_mm512_srli_epi64(a, 30));
+    const __m256i tb = _mm512_cvtepi64_epi32(_mm512_srli_epi64(b, 30));
+    *key = _mm512_inserti64x4(_mm512_castsi256_si512(ka), kb, 1);
+    *type = _mm512_and_si512(_mm512_inserti64x4(_mm512_castsi256_si512(ta), tb, 1),
+                             _mm512_set1_epi32(3));
+}
+
+/* Inclusive prefix sum over the 16 lanes. */
+KD_AVX512 static inline __m512i prefix16(__m512i x) {
+    const __m512i z = _mm512_setzero_si512();
+    x = _mm512_add_epi32(x, _mm512_alignr_epi32(x, z, 15));
+    x = _mm512_add_epi32(x, _mm512_alignr_epi32(x, z, 14));
+    x = _mm512_add_epi32(x, _mm512_alignr_epi32(x, z, 12));
+    x = _mm512_add_epi32(x, _mm512_alignr_epi32(x, z, 8));
+    return x;
+}
+
+KD_AVX512 size_t kd_group_events_avx512(const kd_event *e, size_t n,
+                                        const kd_groups *g) {
+    size_t ng = 0;
+    uint32_t ends = 0, planars = 0;
+    const __m512i lane = _mm512_setr_epi32(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13,
+                                           14, 15, 16);
+    for (size_t i = 0; i < n; i += 16) {
+        const size_t left = n - i;
+        __m512i key, type, nkey, ntype;
+        load16(e + i, left, &key, &type);
+        /* the next event's key; the list's last event ends its group */
+        load16(e + i + 1, left - 1, &nkey, &ntype);
+        const __mmask16 valid = (__mmask16)(left >= 16 ? 0xffff : (1u << left) - 1);
+        const __mmask16 tail = (__mmask16)(left > 16 ? 0 : 1u << (left - 1));
+        const __mmask16 last =
+            (__mmask16)((_mm512_cmpneq_epi32_mask(key, nkey) | tail) & valid);
+        const __mmask16 me = _mm512_mask_cmpeq_epi32_mask(valid, type, _mm512_set1_epi32(EV_END));
+        const __mmask16 mp =
+            _mm512_mask_cmpeq_epi32_mask(valid, type, _mm512_set1_epi32(EV_PLANAR));
+        const __m512i ce = _mm512_add_epi32(
+            prefix16(_mm512_maskz_set1_epi32(me, 1)), _mm512_set1_epi32((int)ends));
+        const __m512i cp = _mm512_add_epi32(
+            prefix16(_mm512_maskz_set1_epi32(mp, 1)), _mm512_set1_epi32((int)planars));
+        const __m512i idx = _mm512_add_epi32(lane, _mm512_set1_epi32((int)i));
+        _mm512_storeu_si512(g->key + ng, _mm512_maskz_compress_epi32(last, key));
+        _mm512_storeu_si512(g->ends + ng, _mm512_maskz_compress_epi32(last, ce));
+        _mm512_storeu_si512(g->planars + ng, _mm512_maskz_compress_epi32(last, cp));
+        _mm512_storeu_si512(g->end + ng, _mm512_maskz_compress_epi32(last, idx));
+        ng += (size_t)__builtin_popcount(last);
+        ends += (uint32_t)__builtin_popcount(me);
+        planars += (uint32_t)__builtin_popcount(mp);
+    }
+    return ng;
+}
+
+/* sah_cost for 16 planes: the same operations in the same order. */
+KD_AVX512 static inline __m512 cost16(const sah_ctx *c, __m512 pl, __m512 pr,
+                                      __m512i nl, __m512i nr) {
+    const __mmask16 empty = _mm512_cmpeq_epi32_mask(nl, _mm512_setzero_si512()) |
+                            _mm512_cmpeq_epi32_mask(nr, _mm512_setzero_si512());
+    const __m512 eb = _mm512_mask_blend_ps(empty, _mm512_set1_ps(1.0f),
+                                           _mm512_set1_ps(1.0f - c->bonus));
+    const __m512 sum = _mm512_add_ps(_mm512_mul_ps(pl, _mm512_cvtepi32_ps(nl)),
+                                     _mm512_mul_ps(pr, _mm512_cvtepi32_ps(nr)));
+    return _mm512_add_ps(_mm512_set1_ps(c->trav),
+                         _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(c->isect), eb), sum));
+}
+
+KD_AVX512 void kd_eval_groups_avx512(const sah_ctx *c, int k, const kd_groups *g,
+                                     size_t ng, size_t ntri, kd_split *best) {
+    const __m512 two = _mm512_set1_ps(2.0f), cap = _mm512_set1_ps(c->cap);
+    const __m512 perim = _mm512_set1_ps(c->perim), inv = _mm512_set1_ps(c->inv_area);
+    const __m512 lo = _mm512_set1_ps(c->min), hi = _mm512_set1_ps(c->max);
+    const __m512i vntri = _mm512_set1_epi32((int)ntri);
+    const __m512i sign = _mm512_set1_epi32((int)0x80000000u);
+    const __m512i low31 = _mm512_set1_epi32(0x7fffffff);
+    const __m512 inf = _mm512_set1_ps(INFINITY);
+    for (size_t j = 0; j < ng; j += 16) {
+        const size_t left = ng - j;
+        const __mmask16 valid = (__mmask16)(left >= 16 ? 0xffff : (1u << left) - 1);
+        const __m512i key = _mm512_maskz_loadu_epi32(valid, g->key + j);
+        const __m512i ends = _mm512_maskz_loadu_epi32(valid, g->ends + j);
+        const __m512i planars = _mm512_maskz_loadu_epi32(valid, g->planars + j);
+        /* the previous group's entries (zero before the first) */
+        __m512i pend, pplanar, pidx;
+        if (j == 0) {
+            const __mmask16 v1 = (__mmask16)(valid << 1);
+            pend = _mm512_maskz_loadu_epi32(v1, g->ends - 1);
+            pplanar = _mm512_maskz_loadu_epi32(v1, g->planars - 1);
+            pidx = _mm512_maskz_loadu_epi32(v1, g->end - 1);
+        } else {
+            pend = _mm512_loadu_si512(g->ends + j - 1);
+            pplanar = _mm512_loadu_si512(g->planars + j - 1);
+            pidx = _mm512_loadu_si512(g->end + j - 1);
+        }
+        const __m512i nl = _mm512_sub_epi32(pidx, pend);
+        const __m512i nr = _mm512_sub_epi32(_mm512_sub_epi32(vntri, ends), planars);
+        const __m512i np = _mm512_sub_epi32(planars, pplanar);
+        /* key_float: the order-preserving key back to the float's bits */
+        const __mmask16 pos = _mm512_test_epi32_mask(key, sign);
+        const __m512 p = _mm512_castsi512_ps(_mm512_mask_blend_epi32(
+            pos, _mm512_andnot_si512(key, _mm512_set1_epi32(-1)),
+            _mm512_and_si512(key, low31)));
+        const __mmask16 inside = _mm512_mask_cmp_ps_mask(valid, p, lo, _CMP_GT_OQ) &
+                                 _mm512_cmp_ps_mask(p, hi, _CMP_LT_OQ);
+        if (!inside)
+            continue;
+        const __m512 pl = _mm512_mul_ps(
+            _mm512_mul_ps(two, _mm512_add_ps(cap, _mm512_mul_ps(_mm512_sub_ps(p, lo), perim))),
+            inv);
+        const __m512 pr = _mm512_mul_ps(
+            _mm512_mul_ps(two, _mm512_add_ps(cap, _mm512_mul_ps(_mm512_sub_ps(hi, p), perim))),
+            inv);
+        const __m512 cl = cost16(c, pl, pr, _mm512_add_epi32(nl, np), nr);
+        const __m512 cr = cost16(c, pl, pr, nl, _mm512_add_epi32(nr, np));
+        const __mmask16 left_wins = _mm512_cmp_ps_mask(cl, cr, _CMP_LE_OQ);
+        __m512 cost = _mm512_mask_blend_ps(left_wins, cr, cl);
+        cost = _mm512_mask_blend_ps(inside, inf, cost);
+        const float m = _mm512_reduce_min_ps(cost);
+        if (!(m < best->cost))
+            continue;
+        const __mmask16 at = _mm512_cmp_ps_mask(cost, _mm512_set1_ps(m), _CMP_EQ_OQ);
+        const int l = __builtin_ctz((unsigned)at);
+        float pv[16];
+        _mm512_storeu_ps(pv, p);
+        best->cost = m;
+        best->axis = k;
+        best->pos = pv[l];
+        best->planar_left = (left_wins >> l) & 1u;
+    }
+}
+
+/* ---- the straddlers' new events: rank sort ---------------------------------- */
+
+KD_AVX512 void kd_rank_sort_avx512(kd_event *a, size_t n) {
+    const __m512i top = _mm512_set1_epi64((long long)UINT64_MAX); /* never smaller */
+    kd_event tmp[RANK_MAX];
+    __m512i v[RANK_MAX / 8];
+    for (size_t q = 0; q < RANK_MAX / 8; q++) {
+        const size_t first = 8 * q;
+        const __mmask8 m =
+            (__mmask8)(n >= first + 8 ? 0xff : n > first ? (1u << (n - first)) - 1 : 0);
+        v[q] = _mm512_mask_loadu_epi64(top, m, a + first);
+        _mm512_storeu_si512(tmp + first, v[q]);
+    }
+    for (size_t i = 0; i < n; i++) {
+        const __m512i x = _mm512_set1_epi64((long long)tmp[i]);
+        uint32_t below = 0;
+        for (size_t q = 0; q < RANK_MAX / 8; q++)
+            below |= (uint32_t)_mm512_cmplt_epu64_mask(v[q], x) << (8 * q);
+        a[__builtin_popcount(below)] = tmp[i];
+    }
+}
