@@ -257,5 +257,10 @@ int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
                            size_t first, size_t count, kdr_shadow_mode mode,
                            kd_walk_policy policy, float *visibility,
                            kdr_shadow_stats *stats);
+/* kdr_shadow_trace_order with an explicit walk policy. */
+int kd_shadow_trace_order_policy(const kdr_scene *scene, const kdr_shadow_query *q,
+                                 const size_t *order, size_t count, kdr_shadow_mode mode,
+                                 kd_walk_policy policy, float *visibility,
+                                 kdr_shadow_stats *stats);
 
 #endif /* KD_CONE_H */

@@ -13,6 +13,10 @@
  *    runs of points (a grid in scan order on a tessellated floor and on a
  *    sphere, under occluders, toward small, large and straddling lights,
  *    one and two lights a query);
+ *  - order: kdr_shadow_trace_order (render passes 4x4 squares of pixels)
+ *    gives each point of its list, in any order, exactly its own answer
+ *    under every policy (squares of a grid, a shuffle, with points left
+ *    out: their slots are not written), and refuses an index out of range;
  *  - the cheap edge test (kd_tri_edges_miss) says MISSES only where the
  *    full proof does and no float ray of the cone hits the triangle;
  *  - sharing: points in free space under an empty sky are decided by one
@@ -292,8 +296,74 @@ static void test_edges_miss(void) {
 
 /* ---- answers ------------------------------------------------------------------ */
 
+/* A permutation of a subset of 0..n): the points in 4x4 squares of a
+ * side x side grid (n = side^2, scan order inside a square), else a
+ * shuffle; every point with i % 7 == 3 left out. Its own generator, so the
+ * cases drawn with xrnd stay the same. Returns the length. */
+static size_t make_order(size_t n, size_t *order) {
+    size_t side = (size_t)sqrt((double)n), m = 0;
+    if (side * side == n) {
+        for (size_t ty = 0; ty < side; ty += 4)
+            for (size_t tx = 0; tx < side; tx += 4)
+                for (size_t y = ty; y < ty + 4 && y < side; y++)
+                    for (size_t x = tx; x < tx + 4 && x < side; x++)
+                        if ((y * side + x) % 7 != 3) order[m++] = y * side + x;
+        return m;
+    }
+    for (size_t i = 0; i < n; i++)
+        if (i % 7 != 3) order[m++] = i;
+    uint64_t z = 0x9E3779B97F4A7C15ull;
+    for (size_t i = m; i > 1; i--) {
+        z = z * 6364136223846793005ull + 1442695040888963407ull;
+        const size_t j = (size_t)((z >> 33) % i), t = order[i - 1];
+        order[i - 1] = order[j];
+        order[j] = t;
+    }
+    return m;
+}
+
+/* kdr_shadow_trace_order under every policy (and the reference mode): each
+ * listed point's slots equal the plain query's vr, the others untouched. */
+static void check_order(const char *label, const kdr_scene *s, const kdr_shadow_query *q,
+                        const float *vr) {
+    const size_t m = q->n * q->nlights;
+    size_t *order = malloc(q->n * sizeof *order);
+    float *v = malloc(m * sizeof *v);
+    const size_t count = make_order(q->n, order);
+    const kd_walk_policy pol[4] = {KD_WALK_AUTO, KD_WALK_GROUPS, KD_WALK_ALWAYS,
+                                   KD_WALK_NEVER};
+    const char *names[5] = {"auto", "groups", "always", "never", "rays"};
+    for (int k = 0; k < 5; k++) {
+        for (size_t j = 0; j < m; j++)
+            v[j] = -1.0f;
+        const int rc = k < 4 ? kd_shadow_trace_order_policy(s, q, order, count,
+                                                            KDR_SHADOW_CONE, pol[k], v, NULL)
+                             : kdr_shadow_trace_order(s, q, order, count, KDR_SHADOW_RAYS,
+                                                      v, NULL);
+        CHECK(rc == KDR_OK, "%s ordered %s", label, names[k]);
+        size_t bad = 0, first = 0;
+        for (size_t j = 0; j < m; j++) {
+            const float want = (j / q->nlights) % 7 == 3 ? -1.0f : vr[j];
+            if (memcmp(&v[j], &want, sizeof want) != 0 && bad++ == 0) first = j;
+        }
+        CHECK(bad == 0, "%s: ordered %s differs on %zu slots (first %zu: %.6f vs %.6f)",
+              label, names[k], bad, first, v[first], vr[first]);
+    }
+    /* an index out of range, or no list, is refused before anything is written */
+    order[count / 2] = q->n;
+    v[0] = -2.0f;
+    CHECK(kdr_shadow_trace_order(s, q, order, count, KDR_SHADOW_CONE, v, NULL) ==
+                  KDR_EINVAL &&
+              kdr_shadow_trace_order(s, q, NULL, 1, KDR_SHADOW_CONE, v, NULL) == KDR_EINVAL &&
+              v[0] == -2.0f,
+          "%s: a bad order is refused", label);
+    free(order);
+    free(v);
+}
+
 /* Every policy and the reference mode agree bit for bit, and equal a brute
- * force count; returns the automatic policy's stats. */
+ * force count; the same answers in another order; returns the automatic
+ * policy's stats. */
 static kdr_shadow_stats check_policies(const char *label, const kdr_scene *s,
                                        const tri_buf *b, const kdr_shadow_query *q) {
     const size_t m = q->n * q->nlights;
@@ -317,6 +387,7 @@ static kdr_shadow_stats check_policies(const char *label, const kdr_scene *s,
               label, names[k], bad, first, v[first], vr[first]);
         if (k == 0) sa = st;
     }
+    check_order(label, s, q, vr);
     /* brute force on a spread subset of the pairs */
     size_t bad = 0;
     for (size_t j = 0; j < m; j += 31) {
