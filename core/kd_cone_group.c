@@ -36,32 +36,30 @@ static double dist3(const double *a, const double *b) {
     return sqrt(d2);
 }
 
-/* The largest coordinate magnitude a point's walk uses for its band. */
-static float apex_magnitude(const kdr_scene *scene, const float *apex) {
-    float m = 0.0f;
-    for (int k = 0; k < 3; k++) {
-        m = fmaxf(m, fmaxf(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
-        m = fmaxf(m, fabsf(apex[k]));
-    }
-    return m;
-}
+/* Plain comparisons, not fmaxf (a libm call; no operand is NaN). */
+static float fmax_plain(float a, float b) { return a > b ? a : b; }
 
 int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
                   double max_spread, kd_cone *c) {
     if (n == 0) return 0;
     /* the ball around the apexes: centre of their box, farthest apex */
     double lo[3], hi[3], cg[3], rg = 0.0, rl = 0.0;
+    /* the largest coordinate magnitude a point's walk uses for its band:
+     * the scene's, or an apex's */
     float mag = 0.0f;
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 3; k++) {
         lo[k] = hi[k] = fs[0]->apex[k];
+        mag = fmax_plain(mag, fmax_plain(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
+    }
     for (size_t i = 0; i < n; i++) {
         if (fs[i]->along != 0.0f) /* no fixed apex: no group */
             return 0;
         for (int k = 0; k < 3; k++) {
-            lo[k] = fmin(lo[k], fs[i]->apex[k]);
-            hi[k] = fmax(hi[k], fs[i]->apex[k]);
+            const double a = fs[i]->apex[k];
+            lo[k] = a < lo[k] ? a : lo[k];
+            hi[k] = a > hi[k] ? a : hi[k];
+            mag = fmax_plain(mag, fabsf(fs[i]->apex[k]));
         }
-        mag = fmaxf(mag, apex_magnitude(scene, fs[i]->apex));
     }
     for (int k = 0; k < 3; k++)
         cg[k] = 0.5 * (lo[k] + hi[k]);
@@ -69,20 +67,30 @@ int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size
     double dmax = 0.0;
     for (size_t i = 0; i < n; i++) {
         const double a[3] = {fs[i]->apex[0], fs[i]->apex[1], fs[i]->apex[2]};
-        rg = fmax(rg, dist3(a, cg));
+        const double d = dist3(a, cg);
+        rg = d > rg ? d : rg;
     }
     /* rl >= the light's radius: most groups that fail, fail here, before
      * any per-point trigonometry */
     if (!(rg <= max_spread * fs[0]->radius * (1.0 + 1e-3)))
         return 0;
+    /* tan of 2e-5 rad: folds at compile time */
+    const double tan_slack = tan(2e-5);
     for (size_t i = 0; i < n; i++) {
         /* the point's truncated cone, angular slack included, reaches this
-         * far from the light's centre: its disc at t_far */
+         * far from the light's centre: its disc at t_far. tan(asin(s) +
+         * 2e-5) by the tangent-sum formula (no asin or tan per point; its
+         * last-bit differences from libm's are far inside GROUP_REL_PAD,
+         * applied to rl below) */
         const kd_shadow_frame *f = fs[i];
         const double tfar = f->dist * (1.0 + 0x1p-16);
-        const double tan_p = tan(asin(f->sin_a) + 2e-5);
-        rl = fmax(rl, hypot(tfar - f->dist, tfar * tan_p));
-        dmax = fmax(dmax, f->dist);
+        const double ta = f->sin_a / sqrt((1.0 - f->sin_a) * (1.0 + f->sin_a));
+        const double den = 1.0 - ta * tan_slack;
+        const double tan_p = den > 0.0 ? (ta + tan_slack) / den : INFINITY;
+        const double x = tfar - f->dist, y = tfar * tan_p;
+        const double reach = sqrt(x * x + y * y);
+        rl = rl > reach ? rl : reach;
+        dmax = dmax > f->dist ? dmax : f->dist;
     }
     /* every point's margins: its band, and the cull's relative slack over
      * the distances involved */

@@ -35,15 +35,18 @@
 #define CULL_REL_SLACK 1e-6
 /* Beyond this half-angle the cull's cone formulas are not trusted. */
 #define CULL_MAX_ANGLE 1.5707
-#define HALF_PI 1.5707963267948966
 
 /* ---- the cone ------------------------------------------------------------ */
+
+/* (Plain comparisons, not fmaxf: a libm call without -ffast-math, one per
+ * point and axis; no operand is NaN.) */
+static float fmax_plain(float a, float b) { return a > b ? a : b; }
 
 static float magnitude(const kdr_scene *scene, const float apex[3], float along) {
     float m = 0.0f;
     for (int k = 0; k < 3; k++) {
-        m = fmaxf(m, fmaxf(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
-        m = fmaxf(m, fabsf(apex[k]) + along);
+        m = fmax_plain(m, fmax_plain(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
+        m = fmax_plain(m, fabsf(apex[k]) + along);
     }
     return m;
 }
@@ -70,10 +73,20 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
     c->band = magnitude(scene, f->apex, f->along) * KD_SLACK_REL + FLT_MIN;
     c->t_far = (float)f->dist * (1.0f + 0x1p-16f) + f->along;
     c->t_near = 0.0f;
-    const double a = asin(sin_a) + CULL_ANGLE_SLACK;
-    c->cos_p = a < CULL_MAX_ANGLE ? cos(a) : 0.0; /* 0: cull disabled */
-    c->sin_p = sin(fmin(a, HALF_PI));
-    c->tan_p = a < CULL_MAX_ANGLE ? c->sin_p / c->cos_p : INFINITY;
+    /* the half-angle widened by CULL_ANGLE_SLACK, by the angle-sum formulas
+     * (cos and sin of the slack fold at compile time) rather than asin, cos
+     * and sin per cone: the results differ from libm's in the last bits,
+     * far inside the slack itself */
+    const double cs = cos(CULL_ANGLE_SLACK), sn = sin(CULL_ANGLE_SLACK);
+    if (sin_a < sin(CULL_MAX_ANGLE - CULL_ANGLE_SLACK)) {
+        c->cos_p = cos_a * cs - sin_a * sn;
+        c->sin_p = sin_a * cs + cos_a * sn;
+        c->tan_p = c->sin_p / c->cos_p;
+    } else { /* within 1e-4 rad of a hemisphere: cull disabled */
+        c->cos_p = 0.0;
+        c->sin_p = 1.0;
+        c->tan_p = INFINITY;
+    }
 }
 
 /* The t >= 0 with t*m <= e (inv_m = 1/m), as [*lo, *hi] padded outward
