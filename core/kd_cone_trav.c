@@ -60,7 +60,7 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
     const double cos_a = sqrt((1.0 - sin_a) * (1.0 + sin_a));
     const double tan_a = sin_a / cos_a;
     for (int k = 0; k < 3; k++) {
-        const double s = sqrt(fmax(0.0, 1.0 - axis[k] * axis[k]));
+        const double s2 = 1.0 - axis[k] * axis[k], s = sqrt(s2 > 0.0 ? s2 : 0.0);
         const float spread = (float)(tan_a * s) + CONE_SLOPE_SLACK;
         c->apex[k] = f->apex[k];
         c->dapex[k] = f->apex[k];
