@@ -99,8 +99,8 @@ typedef struct kd_cand_list {
 
 #define KD_CONE_OVER 1 /* kd_cone_collect gave up: over its budget */
 
-/* The sorted, distinct triangles of the leaves the cone reaches that may
- * touch a segment inside it. Returns KDR_OK, KDR_ENOMEM, or KD_CONE_OVER
+/* The distinct triangles (in walk order) of the leaves the cone reaches
+ * that may touch a segment inside it. Returns KDR_OK, KDR_ENOMEM, or KD_CONE_OVER
  * once more than max_cands candidates or max_nodes nodes are reached (the
  * list is then incomplete). Adds the nodes visited to *nodes. */
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,

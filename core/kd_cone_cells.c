@@ -306,7 +306,7 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
 }
 
 /* walk_with_proofs over the group's list instead of the tree: the pair's
- * cull, then the proofs (the list is sorted and has no duplicates). */
+ * cull, then the proofs (the list has no duplicates). */
 static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
                        const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
     for (size_t j = 0; j < pr->ngroup; j++) {

@@ -20,6 +20,7 @@
  *    watertight test can accept a triangle a few ulps off its true place.
  */
 #include <stdlib.h>
+#include <string.h>
 
 #include "kd_cone.h"
 #include "kd_internal.h"
@@ -434,10 +435,33 @@ const kd_node *kd_cone_walk_next(kd_cone_walk *w) {
     return NULL;
 }
 
+/* Triangles a walk has judged, so that one straddling several leaves is
+ * culled once (open addressing; stops remembering when half full). */
+#define SEEN_SLOTS 256u
+typedef struct seen_set {
+    uint32_t prim[SEEN_SLOTS];
+    uint32_t n;
+} seen_set;
+
+/* 1 if prim was judged before in this walk; else remembers it. */
+static int seen_before(seen_set *st, uint32_t prim) {
+    for (uint32_t h = (prim * 2654435761u) >> 24;; h = (h + 1) & (SEEN_SLOTS - 1)) {
+        if (st->prim[h] == UINT32_MAX) {
+            if (st->n < SEEN_SLOTS / 2) {
+                st->prim[h] = prim;
+                st->n++;
+            }
+            return 0;
+        }
+        if (st->prim[h] == prim)
+            return 1;
+    }
+}
+
 /* Appends the leaf's triangles that may touch a segment; 0 once the list
  * is over max (or memory runs out: *rc = KDR_ENOMEM). */
-static int take_leaf(const kdr_scene *scene, const kd_cone *c,
-                     const kd_node *leaf, kd_cand_list *cl, size_t max, int *rc) {
+static int take_leaf(const kdr_scene *scene, const kd_cone *c, const kd_node *leaf,
+                     kd_cand_list *cl, size_t max, seen_set *seen, int *rc) {
     const uint32_t *refs = scene->refs + leaf->u.first;
     const uint32_t count = kd_count(leaf);
     if (cl->n + count > cl->cap) {
@@ -453,7 +477,7 @@ static int take_leaf(const kdr_scene *scene, const kd_cone *c,
         cl->cap = cap;
     }
     for (uint32_t j = 0; j < count; j++) {
-        if (tri_may_block(c, scene->tris + 9 * (size_t)refs[j]))
+        if (!seen_before(seen, refs[j]) && tri_may_block(c, scene->tris + 9 * (size_t)refs[j]))
             cl->v[cl->n++] = refs[j];
     }
     if (cl->n > max) {
@@ -464,7 +488,7 @@ static int take_leaf(const kdr_scene *scene, const kd_cone *c,
 }
 
 /* Sorts and drops duplicates (a triangle straddling splits sits in several
- * leaves). */
+ * leaves; only needed when the walk's seen set was full). */
 static void cand_unique(kd_cand_list *cl) {
     if (cl->n < 2) /* also: qsort must not see the NULL of an empty list */
         return;
@@ -482,16 +506,19 @@ int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
     kd_cone_walk w;
     const kd_node *leaf;
     int rc = KDR_OK;
+    seen_set seen;
+    memset(seen.prim, 0xff, sizeof seen.prim);
+    seen.n = 0;
     cl->n = 0;
     kd_cone_walk_init(&w, scene, c);
     while (rc == KDR_OK && (leaf = kd_cone_walk_next(&w)) != NULL) {
-        if (!take_leaf(scene, c, leaf, cl, max_cands, &rc))
+        if (!take_leaf(scene, c, leaf, cl, max_cands, &seen, &rc))
             break;
         if (w.visited > max_nodes)
             rc = KD_CONE_OVER;
     }
     *nodes += w.visited;
-    if (rc == KDR_OK)
-        cand_unique(cl);
+    if (rc == KDR_OK && seen.n >= SEEN_SLOTS / 2)
+        cand_unique(cl); /* the seen set filled up: duplicates are possible */
     return rc;
 }
