@@ -494,6 +494,9 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
     }
     for (size_t j = 0; j < gl->n; j++)
         kd_tri_pre_init(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
+    /* the surfaces under the points (most of a list) are dropped here once
+     * for the whole group instead of by each point's cull */
+    kd_group_clear(fs, n, gc.band, ws->gpre, gl->n);
     return 1;
 }
 

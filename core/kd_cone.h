@@ -74,6 +74,9 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
  * max_spread times the light's ball (or the cone would be wide). */
 int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
                   double max_spread, kd_cone *c);
+/* How far from the light's centre the frame's cone, widened by twice the
+ * cull's angular slack, reaches at its t_far (the rim of its last disc). */
+double kd_frame_reach(const kd_shadow_frame *f);
 
 /* Leaf by leaf, front to back (kd_cone_walk_next returns NULL at the end). */
 typedef struct kd_cone_item {
@@ -114,6 +117,7 @@ typedef struct kd_tri_pre {
     double c[3], r;
     double e[3][3], e_off[3];
     int flat;     /* plane and prism usable (not degenerate) */
+    int clear;    /* kd_group_clear: no point of the group needs it */
     uint32_t prim;
 } kd_tri_pre;
 
@@ -121,6 +125,14 @@ void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
 /* kd_cone_tri_may_block from the precomputed data, with margins at least
  * as wide: 0 only if the triangle provably misses every segment of c. */
 int kd_cone_pre_may_block(const kd_cone *c, const kd_tri_pre *p);
+/* Sets pre[j].clear for the group triangles whose plane has every apex of
+ * the n frames (fixed apexes, one light) and the ball of radius
+ * max kd_frame_reach around the light's centre strictly on one side, by
+ * more than any point's cull slack (band: the largest of the points'):
+ * every point's kd_cone_pre_may_block would drop it at its plane test, and
+ * no segment of the group crosses that plane. */
+void kd_group_clear(const kd_shadow_frame *const *fs, size_t n, float band,
+                    kd_tri_pre *pre, size_t npre);
 
 /* ---- proofs about one triangle (kd_cone_proof.c) -------------------------- */
 

@@ -291,6 +291,7 @@ void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
                    e1[0] * e2[1] - e1[1] * e2[0]};
     const double nn = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     p->flat = nn > 0.0;
+    p->clear = 0;
     for (int k = 0; k < 3; k++)
         p->n[k] = p->flat ? n[k] / nn : 0.0;
     p->n_off = p->n[0] * tri[0] + p->n[1] * tri[1] + p->n[2] * tri[2];
