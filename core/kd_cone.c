@@ -482,7 +482,10 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
         return 0;
     const uint64_t max_nodes =
         GROUP_WALK_NODES_BASE + GROUP_WALK_NODES_PER_POINT * (uint64_t)n;
-    const int r = kd_cone_collect(scene, &gc, gl, GROUP_MAX_CANDS, max_nodes,
+    /* no prism test here: each point's own cull has it, and most of what
+     * it would drop (the surface under the points) kd_group_clear drops
+     * for the group anyway (callgrind of the picture: -2.2% without it) */
+    const int r = kd_cone_collect(scene, &gc, gl, GROUP_MAX_CANDS, max_nodes, 0,
                                   &ws->st.nodes_visited);
     if (r == KDR_ENOMEM)
         *rc = KDR_ENOMEM;

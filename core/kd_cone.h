@@ -103,11 +103,13 @@ typedef struct kd_cand_list {
 #define KD_CONE_OVER 1 /* kd_cone_collect gave up: over its budget */
 
 /* The distinct triangles (in walk order) of the leaves the cone reaches
- * that may touch a segment inside it. Returns KDR_OK, KDR_ENOMEM, or KD_CONE_OVER
- * once more than max_cands candidates or max_nodes nodes are reached (the
- * list is then incomplete). Adds the nodes visited to *nodes. */
+ * that may touch a segment inside it (prism: the cull's prism-side test
+ * too; without it the list keeps more, never less). Returns KDR_OK,
+ * KDR_ENOMEM, or KD_CONE_OVER once more than max_cands candidates or
+ * max_nodes nodes are reached (the list is then incomplete). Adds the
+ * nodes visited to *nodes. */
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
-                    size_t max_cands, uint64_t max_nodes, uint64_t *nodes);
+                    size_t max_cands, uint64_t max_nodes, int prism, uint64_t *nodes);
 
 /* A triangle's cull data, made once for the many cones of a group
  * (kd_cone_trav.c): unit normal and offset of its plane, its bounding

@@ -357,7 +357,7 @@ static const uint32_t *cell_list(kd_cells *c, kd_cone_pair *pr, const kd_dir_con
         const int rc = kd_cone_collect(pr->scene, kc, &c->cl, CONE_MAX_CANDS,
                                        CONE_NODES_BASE +
                                            CONE_NODES_PER_SAMPLE * (uint64_t)pr->n,
-                                       &pr->st.nodes_visited);
+                                       1, &pr->st.nodes_visited);
         if (rc != KDR_OK) {
             if (rc == KDR_ENOMEM)
                 pr->rc = KDR_ENOMEM;

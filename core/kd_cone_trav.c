@@ -231,8 +231,9 @@ static int plane_misses(const kd_cone *cc, const float *tri, double un[3]) {
 
 /* 0 only if the triangle provably misses every sample segment: its plane
  * leaves the truncated cone on one side, or its bounding sphere lies beyond
- * the segments' axial reach or farther from the cone than its radius. */
-static int tri_may_block(const kd_cone *cc, const float *tri) {
+ * the segments' axial reach or farther from the cone than its radius, or
+ * (with prism) the cone lies outside one side of its prism. */
+static int tri_may_block(const kd_cone *cc, const float *tri, int prism) {
     if (cc->cos_p == 0.0) /* near-hemisphere cone: keep everything */
         return 1;
     double un[3] = {0, 0, 0};
@@ -262,12 +263,12 @@ static int tri_may_block(const kd_cone *cc, const float *tri) {
     if (proj - rad > (double)cc->t_far || proj + rad < (double)cc->t_near)
         return 0;
     if (proj * cc->cos_p + perp * cc->sin_p <= 0.0) /* nearest: the apex */
-        return wlen <= rad && !prism_misses(cc, tri, un);
-    return perp * cc->cos_p - proj * cc->sin_p <= rad && !prism_misses(cc, tri, un);
+        return wlen <= rad && !(prism && prism_misses(cc, tri, un));
+    return perp * cc->cos_p - proj * cc->sin_p <= rad && !(prism && prism_misses(cc, tri, un));
 }
 
 int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
-    return tri_may_block(c, tri);
+    return tri_may_block(c, tri, 1);
 }
 
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
@@ -462,7 +463,7 @@ static int seen_before(seen_set *st, uint32_t prim) {
 /* Appends the leaf's triangles that may touch a segment; 0 once the list
  * is over max (or memory runs out: *rc = KDR_ENOMEM). */
 static int take_leaf(const kdr_scene *scene, const kd_cone *c, const kd_node *leaf,
-                     kd_cand_list *cl, size_t max, seen_set *seen, int *rc) {
+                     kd_cand_list *cl, size_t max, int prism, seen_set *seen, int *rc) {
     const uint32_t *refs = scene->refs + leaf->u.first;
     const uint32_t count = kd_count(leaf);
     if (cl->n + count > cl->cap) {
@@ -478,7 +479,8 @@ static int take_leaf(const kdr_scene *scene, const kd_cone *c, const kd_node *le
         cl->cap = cap;
     }
     for (uint32_t j = 0; j < count; j++) {
-        if (!seen_before(seen, refs[j]) && tri_may_block(c, scene->tris + 9 * (size_t)refs[j]))
+        if (!seen_before(seen, refs[j]) &&
+            tri_may_block(c, scene->tris + 9 * (size_t)refs[j], prism))
             cl->v[cl->n++] = refs[j];
     }
     if (cl->n > max) {
@@ -503,7 +505,7 @@ static void cand_unique(kd_cand_list *cl) {
 }
 
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
-                    size_t max_cands, uint64_t max_nodes, uint64_t *nodes) {
+                    size_t max_cands, uint64_t max_nodes, int prism, uint64_t *nodes) {
     kd_cone_walk w;
     const kd_node *leaf;
     int rc = KDR_OK;
@@ -513,7 +515,7 @@ int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
     cl->n = 0;
     kd_cone_walk_init(&w, scene, c);
     while (rc == KDR_OK && (leaf = kd_cone_walk_next(&w)) != NULL) {
-        if (!take_leaf(scene, c, leaf, cl, max_cands, &seen, &rc))
+        if (!take_leaf(scene, c, leaf, cl, max_cands, prism, &seen, &rc))
             break;
         if (w.visited > max_nodes)
             rc = KD_CONE_OVER;
