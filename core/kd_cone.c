@@ -357,7 +357,8 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     if (rc != KDR_OK)
         return rc;
     if (group && group->n == 0) {
-        /* the group's cone reaches no triangle: every segment is unblocked */
+        /* the group's cone reaches no triangle but those kd_group_clear
+         * showed harmless: every segment is unblocked */
         ws->st.cones_decided++;
         *vis = 1.0f;
         return KDR_OK;
@@ -498,8 +499,15 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
     for (size_t j = 0; j < gl->n; j++)
         kd_tri_pre_init(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
     /* the surfaces under the points (most of a list) are dropped here once
-     * for the whole group instead of by each point's cull */
+     * for the whole group instead of by each point's cull; gpre keeps the
+     * rest (gl->n of them). None left: no segment of the group can touch a
+     * triangle, and the whole group is lit. */
     kd_group_clear(fs, n, gc.band, ws->gpre, gl->n);
+    size_t kept = 0;
+    for (size_t j = 0; j < gl->n; j++)
+        if (!ws->gpre[j].clear)
+            ws->gpre[kept++] = ws->gpre[j];
+    gl->n = kept;
     return 1;
 }
 

@@ -197,7 +197,9 @@ typedef struct kd_cone_pair {
     uint32_t last;       /* last blocker (in and out) */
     const kd_tri_pre *group; /* non-NULL: the group's list (kd_group_cone's
                                 walk, every triangle any of the pair's
-                                segments can touch) replaces the pair's walk */
+                                segments can touch, less those
+                                kd_group_clear showed harmless) replaces
+                                the pair's walk */
     size_t ngroup;
     kdr_shadow_stats st; /* added to */
     int rc;

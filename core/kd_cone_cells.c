@@ -310,7 +310,7 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
 static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
                        const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
     for (size_t j = 0; j < pr->ngroup; j++) {
-        if (pr->group[j].clear || !kd_cone_pre_may_block(kc, &pr->group[j]))
+        if (!kd_cone_pre_may_block(kc, &pr->group[j]))
             continue;
         const int rc = judge(c, pr, dc, pr->group[j].prim, out, nl, covered);
         if (rc != KDR_OK || *covered)
