@@ -497,7 +497,7 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
         return 0;
     }
     for (size_t j = 0; j < gl->n; j++)
-        kd_tri_pre_init(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
+        kd_tri_pre_plane(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
     /* the surfaces under the points (most of a list) are dropped here once
      * for the whole group instead of by each point's cull; gpre keeps the
      * rest (gl->n of them). None left: no segment of the group can touch a
@@ -505,8 +505,11 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
     kd_group_clear(fs, n, gc.band, ws->gpre, gl->n);
     size_t kept = 0;
     for (size_t j = 0; j < gl->n; j++)
-        if (!ws->gpre[j].clear)
-            ws->gpre[kept++] = ws->gpre[j];
+        if (!ws->gpre[j].clear) {
+            ws->gpre[kept] = ws->gpre[j];
+            kd_tri_pre_sides(&ws->gpre[kept], scene->tris + 9 * (size_t)ws->gpre[kept].prim);
+            kept++;
+        }
     gl->n = kept;
     return 1;
 }

@@ -124,6 +124,10 @@ typedef struct kd_tri_pre {
 } kd_tri_pre;
 
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
+/* kd_tri_pre_init in two parts: the plane and the bounding sphere (all
+ * kd_group_clear needs), then the prism's sides. */
+void kd_tri_pre_plane(kd_tri_pre *p, const float *tri, uint32_t prim);
+void kd_tri_pre_sides(kd_tri_pre *p, const float *tri);
 /* kd_cone_tri_may_block from the precomputed data, with margins at least
  * as wide: 0 only if the triangle provably misses every segment of c. */
 int kd_cone_pre_may_block(const kd_cone *c, const kd_tri_pre *p);

@@ -272,6 +272,11 @@ int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
 }
 
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
+    kd_tri_pre_plane(p, tri, prim);
+    kd_tri_pre_sides(p, tri);
+}
+
+void kd_tri_pre_plane(kd_tri_pre *p, const float *tri, uint32_t prim) {
     double e1[3], e2[3], r2 = 0.0;
     p->prim = prim;
     for (int k = 0; k < 3; k++) {
@@ -296,6 +301,9 @@ void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
     for (int k = 0; k < 3; k++)
         p->n[k] = p->flat ? n[k] / nn : 0.0;
     p->n_off = p->n[0] * tri[0] + p->n[1] * tri[1] + p->n[2] * tri[2];
+}
+
+void kd_tri_pre_sides(kd_tri_pre *p, const float *tri) {
     for (int i = 0; i < 3; i++) {
         const float *a = tri + 3 * i, *b = tri + 3 * ((i + 1) % 3), *o = tri + 3 * ((i + 2) % 3);
         double e[3], m[3], side = 0.0;
