@@ -1,8 +1,9 @@
 /*
  * bench_render.c — kdray-bench-render: the cost of a picture (render/) on
  * one thread, by stage, and what the shadow stage would cost as a single
- * cone-shadow call over the same hit points (so the render's per-row calls
- * are measured against the plain query). Thread CPU time, best of
+ * cone-shadow call over the same hit points in row order (so the render's
+ * per-band calls in 4x4 squares are measured against the plain query in
+ * the order a client would likely send). Thread CPU time, best of
  * --repeat. Not a test: it prints, it asserts nothing. kdrayd spreads the
  * bands over its workers, so on two idle cores a picture takes about half
  * the summed time plus the PNG.

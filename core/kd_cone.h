@@ -74,6 +74,9 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
  * max_spread times the light's ball (or the cone would be wide). */
 int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
                   double max_spread, kd_cone *c);
+/* How far from the light's centre the frame's cone, widened by twice the
+ * cull's angular slack, reaches at its t_far (the rim of its last disc). */
+double kd_frame_reach(const kd_shadow_frame *f);
 
 /* Leaf by leaf, front to back (kd_cone_walk_next returns NULL at the end). */
 typedef struct kd_cone_item {
@@ -99,12 +102,14 @@ typedef struct kd_cand_list {
 
 #define KD_CONE_OVER 1 /* kd_cone_collect gave up: over its budget */
 
-/* The sorted, distinct triangles of the leaves the cone reaches that may
- * touch a segment inside it. Returns KDR_OK, KDR_ENOMEM, or KD_CONE_OVER
- * once more than max_cands candidates or max_nodes nodes are reached (the
- * list is then incomplete). Adds the nodes visited to *nodes. */
+/* The distinct triangles (in walk order) of the leaves the cone reaches
+ * that may touch a segment inside it (prism: the cull's prism-side test
+ * too; without it the list keeps more, never less). Returns KDR_OK,
+ * KDR_ENOMEM, or KD_CONE_OVER once more than max_cands candidates or
+ * max_nodes nodes are reached (the list is then incomplete). Adds the
+ * nodes visited to *nodes. */
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
-                    size_t max_cands, uint64_t max_nodes, uint64_t *nodes);
+                    size_t max_cands, uint64_t max_nodes, int prism, uint64_t *nodes);
 
 /* A triangle's cull data, made once for the many cones of a group
  * (kd_cone_trav.c): unit normal and offset of its plane, its bounding
@@ -114,13 +119,26 @@ typedef struct kd_tri_pre {
     double c[3], r;
     double e[3][3], e_off[3];
     int flat;     /* plane and prism usable (not degenerate) */
+    int clear;    /* kd_group_clear: no point of the group needs it */
     uint32_t prim;
 } kd_tri_pre;
 
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
+/* kd_tri_pre_init in two parts: the plane and the bounding sphere (all
+ * kd_group_clear needs), then the prism's sides. */
+void kd_tri_pre_plane(kd_tri_pre *p, const float *tri, uint32_t prim);
+void kd_tri_pre_sides(kd_tri_pre *p, const float *tri);
 /* kd_cone_tri_may_block from the precomputed data, with margins at least
  * as wide: 0 only if the triangle provably misses every segment of c. */
 int kd_cone_pre_may_block(const kd_cone *c, const kd_tri_pre *p);
+/* Sets pre[j].clear for the group triangles whose plane has every apex of
+ * the n frames (fixed apexes, one light) and the ball of radius
+ * max kd_frame_reach around the light's centre strictly on one side, by
+ * more than any point's cull slack (band: the largest of the points'):
+ * every point's kd_cone_pre_may_block would drop it at its plane test, and
+ * no segment of the group crosses that plane. */
+void kd_group_clear(const kd_shadow_frame *const *fs, size_t n, float band,
+                    kd_tri_pre *pre, size_t npre);
 
 /* ---- proofs about one triangle (kd_cone_proof.c) -------------------------- */
 
@@ -183,7 +201,9 @@ typedef struct kd_cone_pair {
     uint32_t last;       /* last blocker (in and out) */
     const kd_tri_pre *group; /* non-NULL: the group's list (kd_group_cone's
                                 walk, every triangle any of the pair's
-                                segments can touch) replaces the pair's walk */
+                                segments can touch, less those
+                                kd_group_clear showed harmless) replaces
+                                the pair's walk */
     size_t ngroup;
     kdr_shadow_stats st; /* added to */
     int rc;
@@ -257,5 +277,10 @@ int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
                            size_t first, size_t count, kdr_shadow_mode mode,
                            kd_walk_policy policy, float *visibility,
                            kdr_shadow_stats *stats);
+/* kdr_shadow_trace_order with an explicit walk policy. */
+int kd_shadow_trace_order_policy(const kdr_scene *scene, const kdr_shadow_query *q,
+                                 const size_t *order, size_t count, kdr_shadow_mode mode,
+                                 kd_walk_policy policy, float *visibility,
+                                 kdr_shadow_stats *stats);
 
 #endif /* KD_CONE_H */

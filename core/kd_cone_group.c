@@ -36,14 +36,75 @@ static double dist3(const double *a, const double *b) {
     return sqrt(d2);
 }
 
-/* The largest coordinate magnitude a point's walk uses for its band. */
-static float apex_magnitude(const kdr_scene *scene, const float *apex) {
-    float m = 0.0f;
-    for (int k = 0; k < 3; k++) {
-        m = fmaxf(m, fmaxf(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
-        m = fmaxf(m, fabsf(apex[k]));
+/* Plain comparisons, not fmaxf (a libm call; no operand is NaN). */
+static float fmax_plain(float a, float b) { return a > b ? a : b; }
+
+double kd_frame_reach(const kd_shadow_frame *f) {
+    /* the disc at t_far of the cone widened by 2e-5 rad (twice the cull's
+     * CULL_ANGLE_SLACK): tan(asin(s) + 2e-5) by the tangent-sum formula (no
+     * asin or tan per point; its last-bit differences from libm's are far
+     * inside the callers' margins) */
+    const double tan_slack = tan(2e-5); /* folds at compile time */
+    const double tfar = f->dist * (1.0 + 0x1p-16);
+    const double ta = f->sin_a / sqrt((1.0 - f->sin_a) * (1.0 + f->sin_a));
+    const double den = 1.0 - ta * tan_slack;
+    const double tan_p = den > 0.0 ? (ta + tan_slack) / den : INFINITY;
+    const double x = tfar - f->dist, y = tfar * tan_p;
+    return sqrt(x * x + y * y);
+}
+
+void kd_group_clear(const kd_shadow_frame *const *fs, size_t n, float band,
+                    kd_tri_pre *pre, size_t npre) {
+    if (n == 0) return;
+    double lo[3], hi[3], cg[3], rg2 = 0.0, reach = 0.0, dmax = 0.0, a1 = 0.0;
+    const double *lc = fs[0]->center;
+    for (int k = 0; k < 3; k++)
+        lo[k] = hi[k] = fs[0]->apex[k];
+    for (size_t i = 0; i < n; i++) {
+        const double r = kd_frame_reach(fs[i]);
+        reach = r > reach ? r : reach;
+        dmax = fs[i]->dist > dmax ? fs[i]->dist : dmax;
+        double l1 = 0.0;
+        for (int k = 0; k < 3; k++) {
+            const double a = fs[i]->apex[k];
+            lo[k] = a < lo[k] ? a : lo[k];
+            hi[k] = a > hi[k] ? a : hi[k];
+            l1 += fabs(a);
+        }
+        a1 = l1 > a1 ? l1 : a1;
     }
-    return m;
+    for (int k = 0; k < 3; k++) {
+        cg[k] = 0.5 * (lo[k] + hi[k]);
+        rg2 += 0.25 * (hi[k] - lo[k]) * (hi[k] - lo[k]);
+    }
+    const double rg = sqrt(rg2), lc1 = fabs(lc[0]) + fabs(lc[1]) + fabs(lc[2]);
+    /* every point's t_far (a float of dist (1 + 2^-16)) is below this */
+    const double tfar = dmax * (1.0 + 1e-5);
+    for (size_t j = 0; j < npre; j++) {
+        kd_tri_pre *p = &pre[j];
+        p->clear = 0;
+        if (!p->flat) continue;
+        double c1 = 0.0, wc[3];
+        for (int k = 0; k < 3; k++) {
+            c1 += fabs(p->c[k]);
+            wc[k] = p->c[k] - cg[k];
+        }
+        /* kd_cone_pre_may_block's plane slack for any point of the group
+         * (its |centre - apex| is at most |centre - cg| + rg), plus 1e-9
+         * relative for this function's own rounding */
+        const double w = sqrt(wc[0] * wc[0] + wc[1] * wc[1] + wc[2] * wc[2]) + rg;
+        const double slack = band + 1e-6 * (w + p->r + tfar) +
+                             1e-9 * (a1 + c1 + p->r) +
+                             1e-9 * (a1 + lc1 + reach + tfar + fabs(p->n_off));
+        /* the apexes' distances to the plane lie within those of their box */
+        const double dc = p->n[0] * cg[0] + p->n[1] * cg[1] + p->n[2] * cg[2] - p->n_off;
+        const double ext = 0.5 * (fabs(p->n[0]) * (hi[0] - lo[0]) +
+                                  fabs(p->n[1]) * (hi[1] - lo[1]) +
+                                  fabs(p->n[2]) * (hi[2] - lo[2]));
+        const double smin = dc - ext, smax = dc + ext;
+        const double dl = p->n[0] * lc[0] + p->n[1] * lc[1] + p->n[2] * lc[2] - p->n_off;
+        p->clear = (smin > slack && dl - reach > slack) || (smax < -slack && dl + reach < -slack);
+    }
 }
 
 int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
@@ -51,17 +112,22 @@ int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size
     if (n == 0) return 0;
     /* the ball around the apexes: centre of their box, farthest apex */
     double lo[3], hi[3], cg[3], rg = 0.0, rl = 0.0;
+    /* the largest coordinate magnitude a point's walk uses for its band:
+     * the scene's, or an apex's */
     float mag = 0.0f;
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 3; k++) {
         lo[k] = hi[k] = fs[0]->apex[k];
+        mag = fmax_plain(mag, fmax_plain(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
+    }
     for (size_t i = 0; i < n; i++) {
         if (fs[i]->along != 0.0f) /* no fixed apex: no group */
             return 0;
         for (int k = 0; k < 3; k++) {
-            lo[k] = fmin(lo[k], fs[i]->apex[k]);
-            hi[k] = fmax(hi[k], fs[i]->apex[k]);
+            const double a = fs[i]->apex[k];
+            lo[k] = a < lo[k] ? a : lo[k];
+            hi[k] = a > hi[k] ? a : hi[k];
+            mag = fmax_plain(mag, fabsf(fs[i]->apex[k]));
         }
-        mag = fmaxf(mag, apex_magnitude(scene, fs[i]->apex));
     }
     for (int k = 0; k < 3; k++)
         cg[k] = 0.5 * (lo[k] + hi[k]);
@@ -69,20 +135,17 @@ int kd_group_cone(const kdr_scene *scene, const kd_shadow_frame *const *fs, size
     double dmax = 0.0;
     for (size_t i = 0; i < n; i++) {
         const double a[3] = {fs[i]->apex[0], fs[i]->apex[1], fs[i]->apex[2]};
-        rg = fmax(rg, dist3(a, cg));
+        const double d = dist3(a, cg);
+        rg = d > rg ? d : rg;
     }
     /* rl >= the light's radius: most groups that fail, fail here, before
      * any per-point trigonometry */
     if (!(rg <= max_spread * fs[0]->radius * (1.0 + 1e-3)))
         return 0;
     for (size_t i = 0; i < n; i++) {
-        /* the point's truncated cone, angular slack included, reaches this
-         * far from the light's centre: its disc at t_far */
-        const kd_shadow_frame *f = fs[i];
-        const double tfar = f->dist * (1.0 + 0x1p-16);
-        const double tan_p = tan(asin(f->sin_a) + 2e-5);
-        rl = fmax(rl, hypot(tfar - f->dist, tfar * tan_p));
-        dmax = fmax(dmax, f->dist);
+        const double reach = kd_frame_reach(fs[i]);
+        rl = rl > reach ? rl : reach;
+        dmax = dmax > fs[i]->dist ? dmax : fs[i]->dist;
     }
     /* every point's margins: its band, and the cull's relative slack over
      * the distances involved */

@@ -20,6 +20,7 @@
  *    watertight test can accept a triangle a few ulps off its true place.
  */
 #include <stdlib.h>
+#include <string.h>
 
 #include "kd_cone.h"
 #include "kd_internal.h"
@@ -35,15 +36,18 @@
 #define CULL_REL_SLACK 1e-6
 /* Beyond this half-angle the cull's cone formulas are not trusted. */
 #define CULL_MAX_ANGLE 1.5707
-#define HALF_PI 1.5707963267948966
 
 /* ---- the cone ------------------------------------------------------------ */
+
+/* (Plain comparisons, not fmaxf: a libm call without -ffast-math, one per
+ * point and axis; no operand is NaN.) */
+static float fmax_plain(float a, float b) { return a > b ? a : b; }
 
 static float magnitude(const kdr_scene *scene, const float apex[3], float along) {
     float m = 0.0f;
     for (int k = 0; k < 3; k++) {
-        m = fmaxf(m, fmaxf(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
-        m = fmaxf(m, fabsf(apex[k]) + along);
+        m = fmax_plain(m, fmax_plain(fabsf(scene->root.min[k]), fabsf(scene->root.max[k])));
+        m = fmax_plain(m, fabsf(apex[k]) + along);
     }
     return m;
 }
@@ -57,7 +61,7 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
     const double cos_a = sqrt((1.0 - sin_a) * (1.0 + sin_a));
     const double tan_a = sin_a / cos_a;
     for (int k = 0; k < 3; k++) {
-        const double s = sqrt(fmax(0.0, 1.0 - axis[k] * axis[k]));
+        const double s2 = 1.0 - axis[k] * axis[k], s = sqrt(s2 > 0.0 ? s2 : 0.0);
         const float spread = (float)(tan_a * s) + CONE_SLOPE_SLACK;
         c->apex[k] = f->apex[k];
         c->dapex[k] = f->apex[k];
@@ -70,10 +74,20 @@ void kd_cone_init(kd_cone *c, const kdr_scene *scene, const kd_shadow_frame *f,
     c->band = magnitude(scene, f->apex, f->along) * KD_SLACK_REL + FLT_MIN;
     c->t_far = (float)f->dist * (1.0f + 0x1p-16f) + f->along;
     c->t_near = 0.0f;
-    const double a = asin(sin_a) + CULL_ANGLE_SLACK;
-    c->cos_p = a < CULL_MAX_ANGLE ? cos(a) : 0.0; /* 0: cull disabled */
-    c->sin_p = sin(fmin(a, HALF_PI));
-    c->tan_p = a < CULL_MAX_ANGLE ? c->sin_p / c->cos_p : INFINITY;
+    /* the half-angle widened by CULL_ANGLE_SLACK, by the angle-sum formulas
+     * (cos and sin of the slack fold at compile time) rather than asin, cos
+     * and sin per cone: the results differ from libm's in the last bits,
+     * far inside the slack itself */
+    const double cs = cos(CULL_ANGLE_SLACK), sn = sin(CULL_ANGLE_SLACK);
+    if (sin_a < sin(CULL_MAX_ANGLE - CULL_ANGLE_SLACK)) {
+        c->cos_p = cos_a * cs - sin_a * sn;
+        c->sin_p = sin_a * cs + cos_a * sn;
+        c->tan_p = c->sin_p / c->cos_p;
+    } else { /* within 1e-4 rad of a hemisphere: cull disabled */
+        c->cos_p = 0.0;
+        c->sin_p = 1.0;
+        c->tan_p = INFINITY;
+    }
 }
 
 /* The t >= 0 with t*m <= e (inv_m = 1/m), as [*lo, *hi] padded outward
@@ -217,8 +231,9 @@ static int plane_misses(const kd_cone *cc, const float *tri, double un[3]) {
 
 /* 0 only if the triangle provably misses every sample segment: its plane
  * leaves the truncated cone on one side, or its bounding sphere lies beyond
- * the segments' axial reach or farther from the cone than its radius. */
-static int tri_may_block(const kd_cone *cc, const float *tri) {
+ * the segments' axial reach or farther from the cone than its radius, or
+ * (with prism) the cone lies outside one side of its prism. */
+static int tri_may_block(const kd_cone *cc, const float *tri, int prism) {
     if (cc->cos_p == 0.0) /* near-hemisphere cone: keep everything */
         return 1;
     double un[3] = {0, 0, 0};
@@ -248,15 +263,20 @@ static int tri_may_block(const kd_cone *cc, const float *tri) {
     if (proj - rad > (double)cc->t_far || proj + rad < (double)cc->t_near)
         return 0;
     if (proj * cc->cos_p + perp * cc->sin_p <= 0.0) /* nearest: the apex */
-        return wlen <= rad && !prism_misses(cc, tri, un);
-    return perp * cc->cos_p - proj * cc->sin_p <= rad && !prism_misses(cc, tri, un);
+        return wlen <= rad && !(prism && prism_misses(cc, tri, un));
+    return perp * cc->cos_p - proj * cc->sin_p <= rad && !(prism && prism_misses(cc, tri, un));
 }
 
 int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
-    return tri_may_block(c, tri);
+    return tri_may_block(c, tri, 1);
 }
 
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
+    kd_tri_pre_plane(p, tri, prim);
+    kd_tri_pre_sides(p, tri);
+}
+
+void kd_tri_pre_plane(kd_tri_pre *p, const float *tri, uint32_t prim) {
     double e1[3], e2[3], r2 = 0.0;
     p->prim = prim;
     for (int k = 0; k < 3; k++) {
@@ -277,9 +297,13 @@ void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
                    e1[0] * e2[1] - e1[1] * e2[0]};
     const double nn = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     p->flat = nn > 0.0;
+    p->clear = 0;
     for (int k = 0; k < 3; k++)
         p->n[k] = p->flat ? n[k] / nn : 0.0;
     p->n_off = p->n[0] * tri[0] + p->n[1] * tri[1] + p->n[2] * tri[2];
+}
+
+void kd_tri_pre_sides(kd_tri_pre *p, const float *tri) {
     for (int i = 0; i < 3; i++) {
         const float *a = tri + 3 * i, *b = tri + 3 * ((i + 1) % 3), *o = tri + 3 * ((i + 2) % 3);
         double e[3], m[3], side = 0.0;
@@ -421,10 +445,33 @@ const kd_node *kd_cone_walk_next(kd_cone_walk *w) {
     return NULL;
 }
 
+/* Triangles a walk has judged, so that one straddling several leaves is
+ * culled once (open addressing; stops remembering when half full). */
+#define SEEN_SLOTS 256u
+typedef struct seen_set {
+    uint32_t prim[SEEN_SLOTS];
+    uint32_t n;
+} seen_set;
+
+/* 1 if prim was judged before in this walk; else remembers it. */
+static int seen_before(seen_set *st, uint32_t prim) {
+    for (uint32_t h = (prim * 2654435761u) >> 24;; h = (h + 1) & (SEEN_SLOTS - 1)) {
+        if (st->prim[h] == UINT32_MAX) {
+            if (st->n < SEEN_SLOTS / 2) {
+                st->prim[h] = prim;
+                st->n++;
+            }
+            return 0;
+        }
+        if (st->prim[h] == prim)
+            return 1;
+    }
+}
+
 /* Appends the leaf's triangles that may touch a segment; 0 once the list
  * is over max (or memory runs out: *rc = KDR_ENOMEM). */
-static int take_leaf(const kdr_scene *scene, const kd_cone *c,
-                     const kd_node *leaf, kd_cand_list *cl, size_t max, int *rc) {
+static int take_leaf(const kdr_scene *scene, const kd_cone *c, const kd_node *leaf,
+                     kd_cand_list *cl, size_t max, int prism, seen_set *seen, int *rc) {
     const uint32_t *refs = scene->refs + leaf->u.first;
     const uint32_t count = kd_count(leaf);
     if (cl->n + count > cl->cap) {
@@ -440,7 +487,8 @@ static int take_leaf(const kdr_scene *scene, const kd_cone *c,
         cl->cap = cap;
     }
     for (uint32_t j = 0; j < count; j++) {
-        if (tri_may_block(c, scene->tris + 9 * (size_t)refs[j]))
+        if (!seen_before(seen, refs[j]) &&
+            tri_may_block(c, scene->tris + 9 * (size_t)refs[j], prism))
             cl->v[cl->n++] = refs[j];
     }
     if (cl->n > max) {
@@ -451,7 +499,7 @@ static int take_leaf(const kdr_scene *scene, const kd_cone *c,
 }
 
 /* Sorts and drops duplicates (a triangle straddling splits sits in several
- * leaves). */
+ * leaves; only needed when the walk's seen set was full). */
 static void cand_unique(kd_cand_list *cl) {
     if (cl->n < 2) /* also: qsort must not see the NULL of an empty list */
         return;
@@ -465,20 +513,23 @@ static void cand_unique(kd_cand_list *cl) {
 }
 
 int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
-                    size_t max_cands, uint64_t max_nodes, uint64_t *nodes) {
+                    size_t max_cands, uint64_t max_nodes, int prism, uint64_t *nodes) {
     kd_cone_walk w;
     const kd_node *leaf;
     int rc = KDR_OK;
+    seen_set seen;
+    memset(seen.prim, 0xff, sizeof seen.prim);
+    seen.n = 0;
     cl->n = 0;
     kd_cone_walk_init(&w, scene, c);
     while (rc == KDR_OK && (leaf = kd_cone_walk_next(&w)) != NULL) {
-        if (!take_leaf(scene, c, leaf, cl, max_cands, &rc))
+        if (!take_leaf(scene, c, leaf, cl, max_cands, prism, &seen, &rc))
             break;
         if (w.visited > max_nodes)
             rc = KD_CONE_OVER;
     }
     *nodes += w.visited;
-    if (rc == KDR_OK)
-        cand_unique(cl);
+    if (rc == KDR_OK && seen.n >= SEEN_SLOTS / 2)
+        cand_unique(cl); /* the seen set filled up: duplicates are possible */
     return rc;
 }

@@ -345,6 +345,15 @@ int kdr_shadow_ray(const kdr_scene *scene, const kdr_shadow_query *q, size_t i,
 int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
                      size_t first, size_t count, kdr_shadow_mode mode,
                      float *visibility, kdr_shadow_stats *stats);
+/* The same answers for the points order[0..count) (indices into q->points,
+ * each < q->n), traced in that order: point order[j] keeps its own samples
+ * (its index seeds them) and writes only visibility[order[j]*nlights + l].
+ * The order changes nothing but the cost: consecutive points that lie
+ * close together share cone walks (render/ passes a picture's pixels tile
+ * by tile rather than row by row). KDR_EINVAL for an index out of range. */
+int kdr_shadow_trace_order(const kdr_scene *scene, const kdr_shadow_query *q,
+                           const size_t *order, size_t count, kdr_shadow_mode mode,
+                           float *visibility, kdr_shadow_stats *stats);
 
 /* ---- frustum queries ------------------------------------------------------ */
 

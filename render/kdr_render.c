@@ -140,12 +140,17 @@ static void hit_geometry(const kdr_scene *scene, const kdr_render_params *p,
 /* ---- shadow ------------------------------------------------------------------- */
 
 /* Visibility of the light from every hit pixel of rows [y0, y1): one
- * cone-shadow call per run of hit pixels in a row (point index = pixel
- * index). A point inside the light (the core refuses it) counts as lit. */
+ * cone-shadow call for the band, its hit pixels passed square by square
+ * (KDR_RENDER_SHADOW_TILE pixels a side, rows inside a square) through
+ * kdr_shadow_trace_order, so that runs of consecutive points are compact
+ * on the screen and their cones share walks (kd_cone_group.c); point index
+ * = pixel index, so each pixel keeps its samples and its answer whatever
+ * the order. A point inside the light (the core refuses it) counts as
+ * lit. */
 static int shadow_rows(const kdr_scene *scene, const kdr_render_params *p,
                        kdr_render_image *img, uint32_t y0, uint32_t y1,
                        kdr_shadow_stats *st) {
-    const uint32_t w = p->cam.width;
+    const uint32_t w = p->cam.width, T = KDR_RENDER_SHADOW_TILE;
     const kdr_shadow_query q = {.n = pixels(p),
                                 .points = img->points,
                                 .normals = img->normals,
@@ -155,32 +160,30 @@ static int shadow_rows(const kdr_scene *scene, const kdr_render_params *p,
                                 .seed = KDR_RENDER_SEED,
                                 .offset = KDR_OFFSET_DIAGONAL,
                                 .epsilon = KDR_RENDER_EPSILON};
-    for (uint32_t y = y0; y < y1; y++) {
-        size_t x = 0;
-        while (x < w) {
-            const size_t row = (size_t)y * w;
-            while (x < w && img->hits.prim[row + x] < 0)
-                x++;
-            size_t x1 = x;
-            while (x1 < w && img->hits.prim[row + x1] >= 0)
-                x1++;
-            if (x1 == x) break;
-            int rc = kdr_shadow_trace(scene, &q, row + x, x1 - x, KDR_SHADOW_CONE,
-                                      img->visibility, st);
-            for (size_t k = x; rc == KDR_EINVAL && k < x1; k++) {
-                int r1 = kdr_shadow_trace(scene, &q, row + k, 1, KDR_SHADOW_CONE,
-                                          img->visibility, st);
-                if (r1 == KDR_EINVAL)
-                    img->visibility[row + k] = 1.0f;
-                else if (r1 != KDR_OK)
-                    return r1;
-                if (k + 1 == x1) rc = KDR_OK;
-            }
-            if (rc != KDR_OK) return rc;
-            x = x1;
+    size_t *order = malloc((size_t)(y1 - y0) * w * sizeof *order), n = 0;
+    if (!order) return KDR_ENOMEM;
+    for (uint32_t ty = y0; ty < y1; ty += T)
+        for (uint32_t tx = 0; tx < w; tx += T)
+            for (uint32_t y = ty; y < ty + T && y < y1; y++)
+                for (uint32_t x = tx; x < tx + T && x < w; x++) {
+                    const size_t i = (size_t)y * w + x;
+                    if (img->hits.prim[i] >= 0) order[n++] = i;
+                }
+    int rc = kdr_shadow_trace_order(scene, &q, order, n, KDR_SHADOW_CONE, img->visibility, st);
+    for (size_t k = 0; rc == KDR_EINVAL && k < n; k++) {
+        /* some point is refused: each alone, the refused ones lit */
+        int r1 = kdr_shadow_trace(scene, &q, order[k], 1, KDR_SHADOW_CONE, img->visibility,
+                                  st);
+        if (r1 == KDR_EINVAL)
+            img->visibility[order[k]] = 1.0f;
+        else if (r1 != KDR_OK) {
+            free(order);
+            return r1;
         }
+        if (k + 1 == n) rc = KDR_OK;
     }
-    return KDR_OK;
+    free(order);
+    return rc;
 }
 
 /* ---- ambient occlusion ------------------------------------------------------------ */

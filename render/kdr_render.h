@@ -37,6 +37,7 @@ extern "C" {
 #endif
 
 #define KDR_RENDER_TILE 8u          /* frustum tile of the primary rays */
+#define KDR_RENDER_SHADOW_TILE 4u   /* shadow points go square by square */
 #define KDR_RENDER_SEED 1u          /* cone-shadow and ao sample seed */
 #define KDR_RENDER_EPSILON 1e-4f    /* shadow offset, times the scene diagonal
                                        (KDR_OFFSET_DIAGONAL, a numeric

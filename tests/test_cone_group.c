@@ -13,6 +13,14 @@
  *    runs of points (a grid in scan order on a tessellated floor and on a
  *    sphere, under occluders, toward small, large and straddling lights,
  *    one and two lights a query);
+ *  - order: kdr_shadow_trace_order (render passes 4x4 squares of pixels)
+ *    gives each point of its list, in any order, exactly its own answer
+ *    under every policy (squares of a grid, a shuffle, with points left
+ *    out: their slots are not written), and refuses an index out of range;
+ *  - group clearing (kd_group_clear): a group triangle marked clear is hit
+ *    by no float sample ray of any point of the group, and every point's
+ *    own cull drops it too; points on a bumpy floor under lights near and
+ *    far, among tilted triangles through and beside the points;
  *  - the cheap edge test (kd_tri_edges_miss) says MISSES only where the
  *    full proof does and no float ray of the cone hits the triangle;
  *  - sharing: points in free space under an empty sky are decided by one
@@ -214,6 +222,104 @@ static void test_containment(void) {
     free(b.v);
 }
 
+/* ---- group clearing ---------------------------------------------------------------- */
+
+/* kd_group_clear marks only triangles that no sample segment of the group
+ * touches (every float sample ray of every point tested with
+ * kd_tri_intersect) and that every point's own cull would drop. */
+static void test_clear(void) {
+    tri_buf b = {0};
+    floor_grid(&b, 8, 0.01f);
+    kdr_scene *s = build(&b);
+    long cleared = 0, judged = 0, rays = 0;
+    for (int trial = 0; trial < 200; trial++) {
+        enum { N = 16, T = 48 };
+        float pts[3 * N], nrm[3 * N];
+        /* points on the floor (a 4x4 patch found by rays from above) */
+        const float span = (float)pow(10.0, -3.0 + 2.0 * xrnd());
+        const float bx = (float)(1.6 * (xrnd() - 0.5)), bz = (float)(1.6 * (xrnd() - 0.5));
+        int ok = 1;
+        for (int i = 0; i < N; i++) {
+            kdr_ray r = {.org = {bx + span * (float)(i % 4), 5.0f, bz + span * (float)(i / 4)},
+                         .dir = {0, -1, 0},
+                         .tmin = 0,
+                         .tmax = INFINITY};
+            kdr_hit h;
+            ok &= kdr_intersect1(s, &r, &h, NULL);
+            pts[3 * i] = r.org[0], pts[3 * i + 1] = r.org[1] - h.t, pts[3 * i + 2] = r.org[2];
+            nrm[3 * i] = 0.0f, nrm[3 * i + 1] = 1.0f, nrm[3 * i + 2] = 0.0f;
+        }
+        const double dist = 0.3 + 4.0 * xrnd();
+        kdr_sphere_light light = {{(float)(dist * (xrnd() - 0.5)), (float)(0.2 + dist),
+                                   (float)(dist * (xrnd() - 0.5))},
+                                  (float)(pow(10.0, -2.0 + 1.5 * xrnd()) * dist)};
+        kdr_shadow_query q = {.n = N, .points = pts, .normals = nrm, .lights = &light,
+                              .nlights = 1, .samples = 64, .seed = (uint64_t)trial,
+                              .offset = trial % 2 ? KDR_OFFSET_AUTO : KDR_OFFSET_DIAGONAL,
+                              .epsilon = 1e-4f};
+        kd_shadow_frame fr[N];
+        const kd_shadow_frame *fs[N];
+        for (int i = 0; ok && i < N; i++) {
+            ok &= kd_shadow_frame_init(s, &q, (size_t)i, 0, &fr[i]) == KDR_OK;
+            fs[i] = &fr[i];
+        }
+        kd_cone gc;
+        if (!ok || !kd_group_cone(s, fs, N, 1.0, &gc)) continue;
+        /* the floor's triangles, and tilted ones through, under and beside
+         * the patch */
+        float tris[9 * T];
+        kd_tri_pre pre[T];
+        size_t nt = 0;
+        for (size_t t = 0; t < b.n && nt < T / 2; t++) {
+            const float *v = b.v + 9 * t;
+            if (fabsf(v[0] - bx) < 0.5f && fabsf(v[2] - bz) < 0.5f)
+                memcpy(tris + 9 * nt++, v, 9 * sizeof(float));
+        }
+        while (nt < T) {
+            const float size = span * (float)pow(10.0, 2.0 * xrnd());
+            const float lift = (float)((xrnd() - 0.6) * 4.0 * span);
+            for (int v = 0; v < 3; v++) {
+                tris[9 * nt + 3 * v] = bx + 1.5f * span + size * (float)(xrnd() - 0.5);
+                tris[9 * nt + 3 * v + 1] = pts[1] + lift + 0.3f * size * (float)(xrnd() - 0.5);
+                tris[9 * nt + 3 * v + 2] = bz + 1.5f * span + size * (float)(xrnd() - 0.5);
+            }
+            nt++;
+        }
+        for (size_t t = 0; t < nt; t++)
+            kd_tri_pre_init(&pre[t], tris + 9 * t, (uint32_t)t);
+        kd_group_clear(fs, N, gc.band, pre, nt);
+        for (size_t t = 0; t < nt; t++) {
+            judged++;
+            if (!pre[t].clear) continue;
+            cleared++;
+            for (int i = 0; i < N; i++) {
+                kd_cone pc;
+                kd_cone_init(&pc, s, &fr[i], NULL, 0.0);
+                CHECK(!kd_cone_pre_may_block(&pc, &pre[t]),
+                      "trial %d: triangle %zu cleared but point %d's cull keeps it", trial, t, i);
+                for (uint32_t k = 0; k < q.samples; k++) {
+                    kdr_ray r;
+                    kd_shadow_frame_ray(&fr[i], k, q.samples, &r);
+                    kd_ray_pre rp;
+                    float th, u, v;
+                    kd_ray_precompute(r.org, r.dir, &rp);
+                    rays++;
+                    if (kd_tri_intersect(&rp, tris + 9 * t, r.tmin, r.tmax, &th, &u, &v)) {
+                        CHECK(0, "trial %d: triangle %zu cleared but point %d sample %u hits it",
+                              trial, t, i, k);
+                        k = q.samples, i = N;
+                    }
+                }
+            }
+        }
+    }
+    printf("clear: %ld of %ld group triangles cleared, %ld rays tested\n", cleared, judged,
+           rays);
+    CHECK(cleared > judged / 10, "too few triangles cleared (%ld of %ld)", cleared, judged);
+    kdr_scene_free(s);
+    free(b.v);
+}
+
 /* ---- the cheap edge test --------------------------------------------------------- */
 
 /* kd_tri_edges_miss decides only what the full view decides as MISSES, and
@@ -292,8 +398,74 @@ static void test_edges_miss(void) {
 
 /* ---- answers ------------------------------------------------------------------ */
 
+/* A permutation of a subset of 0..n): the points in 4x4 squares of a
+ * side x side grid (n = side^2, scan order inside a square), else a
+ * shuffle; every point with i % 7 == 3 left out. Its own generator, so the
+ * cases drawn with xrnd stay the same. Returns the length. */
+static size_t make_order(size_t n, size_t *order) {
+    size_t side = (size_t)sqrt((double)n), m = 0;
+    if (side * side == n) {
+        for (size_t ty = 0; ty < side; ty += 4)
+            for (size_t tx = 0; tx < side; tx += 4)
+                for (size_t y = ty; y < ty + 4 && y < side; y++)
+                    for (size_t x = tx; x < tx + 4 && x < side; x++)
+                        if ((y * side + x) % 7 != 3) order[m++] = y * side + x;
+        return m;
+    }
+    for (size_t i = 0; i < n; i++)
+        if (i % 7 != 3) order[m++] = i;
+    uint64_t z = 0x9E3779B97F4A7C15ull;
+    for (size_t i = m; i > 1; i--) {
+        z = z * 6364136223846793005ull + 1442695040888963407ull;
+        const size_t j = (size_t)((z >> 33) % i), t = order[i - 1];
+        order[i - 1] = order[j];
+        order[j] = t;
+    }
+    return m;
+}
+
+/* kdr_shadow_trace_order under every policy (and the reference mode): each
+ * listed point's slots equal the plain query's vr, the others untouched. */
+static void check_order(const char *label, const kdr_scene *s, const kdr_shadow_query *q,
+                        const float *vr) {
+    const size_t m = q->n * q->nlights;
+    size_t *order = malloc(q->n * sizeof *order);
+    float *v = malloc(m * sizeof *v);
+    const size_t count = make_order(q->n, order);
+    const kd_walk_policy pol[4] = {KD_WALK_AUTO, KD_WALK_GROUPS, KD_WALK_ALWAYS,
+                                   KD_WALK_NEVER};
+    const char *names[5] = {"auto", "groups", "always", "never", "rays"};
+    for (int k = 0; k < 5; k++) {
+        for (size_t j = 0; j < m; j++)
+            v[j] = -1.0f;
+        const int rc = k < 4 ? kd_shadow_trace_order_policy(s, q, order, count,
+                                                            KDR_SHADOW_CONE, pol[k], v, NULL)
+                             : kdr_shadow_trace_order(s, q, order, count, KDR_SHADOW_RAYS,
+                                                      v, NULL);
+        CHECK(rc == KDR_OK, "%s ordered %s", label, names[k]);
+        size_t bad = 0, first = 0;
+        for (size_t j = 0; j < m; j++) {
+            const float want = (j / q->nlights) % 7 == 3 ? -1.0f : vr[j];
+            if (memcmp(&v[j], &want, sizeof want) != 0 && bad++ == 0) first = j;
+        }
+        CHECK(bad == 0, "%s: ordered %s differs on %zu slots (first %zu: %.6f vs %.6f)",
+              label, names[k], bad, first, v[first], vr[first]);
+    }
+    /* an index out of range, or no list, is refused before anything is written */
+    order[count / 2] = q->n;
+    v[0] = -2.0f;
+    CHECK(kdr_shadow_trace_order(s, q, order, count, KDR_SHADOW_CONE, v, NULL) ==
+                  KDR_EINVAL &&
+              kdr_shadow_trace_order(s, q, NULL, 1, KDR_SHADOW_CONE, v, NULL) == KDR_EINVAL &&
+              v[0] == -2.0f,
+          "%s: a bad order is refused", label);
+    free(order);
+    free(v);
+}
+
 /* Every policy and the reference mode agree bit for bit, and equal a brute
- * force count; returns the automatic policy's stats. */
+ * force count; the same answers in another order; returns the automatic
+ * policy's stats. */
 static kdr_shadow_stats check_policies(const char *label, const kdr_scene *s,
                                        const tri_buf *b, const kdr_shadow_query *q) {
     const size_t m = q->n * q->nlights;
@@ -317,6 +489,7 @@ static kdr_shadow_stats check_policies(const char *label, const kdr_scene *s,
               label, names[k], bad, first, v[first], vr[first]);
         if (k == 0) sa = st;
     }
+    check_order(label, s, q, vr);
     /* brute force on a spread subset of the pairs */
     size_t bad = 0;
     for (size_t j = 0; j < m; j += 31) {
@@ -441,6 +614,7 @@ int main(void) {
     test_edges_miss();
     test_answers();
     test_sharing();
+    test_clear(); /* last: the cases above were drawn before it existed */
     if (failures) {
         fprintf(stderr, "test_cone_group: %d failure(s)\n", failures);
         return 1;
