@@ -80,7 +80,7 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
         }
         if (n) {
             s->nodes++;
-            test_leaf(sc, n, &pre, &pre4, avx2, r->tmin, s);
+            test_leaf(sc, n, &pre, &pre4, avx2, r->tmin, s, sc->prefetch_leaves);
             if (s->oom) return;
         }
         const float bound = kd_term_bound(s->bound);

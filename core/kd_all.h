@@ -140,13 +140,15 @@ test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
 
 /* Every reference of leaf n over [tmin, bound]; leaves of at least
  * KD_LEAF_AVX2_MIN / KD_LEAF_SIMD_MIN references eight / four at a time,
- * as the single-ray walk does. */
+ * as the single-ray walk does. prefetch: request the leaf's triangles first
+ * (sc->prefetch_leaves; 0 where a staged walk requested them already). */
 static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *pre,
-                      const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s) {
+                      const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s,
+                      int prefetch) {
     const uint32_t *ref = sc->refs + n->u.first;
     const uint32_t count = kd_count(n);
     s->tests += count;
-    if (sc->prefetch_leaves) kd_prefetch_tris(sc, ref, count);
+    if (prefetch) kd_prefetch_tris(sc, ref, count);
     if (avx2 && count >= KD_LEAF_AVX2_MIN) {
         test_leaf8(sc, ref, count, pre, tmin, s);
         return;

@@ -148,7 +148,8 @@ static inline int ka_turn(const ka_src *c, ka_ray *r) {
     } else {
         r->pend = 0;
         r->s.nodes++;
-        test_leaf(sc, n, &r->pre, &r->pre4, c->avx2, r->tmin, &r->s);
+        test_leaf(sc, n, &r->pre, &r->pre4, c->avx2, r->tmin, &r->s,
+                  sc->prefetch_leaves && !c->stage);
         if (r->s.oom) return 0;
     }
     /* walk()'s pop */
