@@ -11,12 +11,14 @@
  * A finished ray writes its answer and its slot takes the batch's next ray.
  *
  * Exact: per ray this is kd_all.c's walk() step for step: the same set-up
- * (all_setup), the same node rule written the same way, the same leaf test
+ * (all_setup), the same node rule (written without branches, as the
+ * closest-hit stream of kd_traverse_stream.c writes it: the same float
+ * operations, so the same intervals and children), the same leaf test
  * (test_leaf) into the same kind of sink over the same [tmin, bound], the
  * same pop against kd_term_bound(bound). Only the order in which DIFFERENT
  * rays advance changes, and they share nothing but the read-only scene, so
  * every list, count and the work sums equal kdr_intersect_all1's /
- * kdr_count1's bit for bit (tests/test_all.c checks it ray by ray).
+ * kdr_count1's bit for bit (tests/test_all_stream.c checks it ray by ray).
  */
 #include "kd_all.h"
 #include "kd_tune.h"
@@ -31,6 +33,7 @@ typedef struct ka_ray {
                * requested on the last turn */
     float tmin;
     float org[3], inv[3], ss[3];
+    uint32_t neg[3]; /* signbit(inv[k]): the near child is above */
     size_t id;
     kd_ray_pre pre;
     kd_ntri_pre4 pre4;
@@ -87,8 +90,10 @@ static int ka_start(ka_src *c, ka_ray *r, int k, size_t id) {
         ka_finish(c, r);
         return 0;
     }
-    for (int a = 0; a < 3; a++)
+    for (int a = 0; a < 3; a++) {
         r->org[a] = ray.org[a];
+        r->neg[a] = signbit(r->inv[a]) ? 1u : 0u;
+    }
     r->tmin = ray.tmin;
     r->sp = 0;
     r->pend = 0;
@@ -97,44 +102,58 @@ static int ka_start(ka_src *c, ka_ray *r, int k, size_t id) {
     return 1;
 }
 
+/* c ? a : b for c in {0, 1}, without a branch. */
+static inline uint32_t ka_sel(uint32_t c, uint32_t a, uint32_t b) {
+    const uint32_t m = 0u - c;
+    return (a & m) | (b & ~m);
+}
+static inline float ka_self(uint32_t c, float a, float b) {
+    uint32_t x, y;
+    memcpy(&x, &a, 4);
+    memcpy(&y, &b, 4);
+    x = ka_sel(c, x, y);
+    memcpy(&a, &x, 4);
+    return a;
+}
+
 /* One turn of ray r: a node step, or (a stage of) a leaf and the pop after
  * it. Returns 1 while the ray goes on, 0 when it is done. */
 static inline int ka_turn(const ka_src *c, ka_ray *r) {
     const kdr_scene *sc = c->sc;
     const kd_node *nodes = sc->nodes, *n = r->n;
     if (!kd_is_leaf(n)) {
-        /* walk()'s node step, one node per turn */
+        /* walk()'s node step, one node per turn, without its branches (a
+         * mispredicted branch here would stall every ray in flight): with
+         * t_lo <= t_hi, or a NaN, its five cases are "near needed unless
+         * t_hi < tn" and "far needed unless t_lo > tf", minus an empty
+         * child (bit 2 of bits: below empty, bit 3: above); the far entry
+         * is always written (sp < KD_MAX_DEPTH at an interior node) and
+         * kept only when both children are taken. When only the near child
+         * is taken because t_lo > tf, min(t_hi, tf) is tf; when only the
+         * far one because t_hi < tn, max(t_lo, tn) is tn: the intervals are
+         * walk()'s. */
         r->s.nodes++;
         const int axis = kd_axis(n);
         const float a = n->u.split - r->org[axis];
         const float t_lo = (a - r->ss[axis]) * r->inv[axis];
         const float t_hi = (a + r->ss[axis]) * r->inv[axis];
-        const int neg = signbit(r->inv[axis]) ? 1 : 0;
-        const kd_node *below = n + 1, *above = nodes + kd_above(n);
-        const kd_node *nearc = neg ? above : below, *farc = neg ? below : above;
-        const int near_empty = neg ? kd_above_empty(n) : kd_below_empty(n);
-        const int far_empty = neg ? kd_below_empty(n) : kd_above_empty(n);
-        const float tn = r->tn, tf = r->tf;
-        const kd_node *next;
-        if (t_lo > tf) {
-            next = near_empty ? NULL : nearc;
-        } else if (t_hi < tn) {
-            next = far_empty ? NULL : farc;
-        } else if (far_empty) { /* both sides, or a NaN: the near one */
-            next = nearc;
-            r->tf = t_hi < tf ? t_hi : tf;
-        } else if (near_empty) {
-            next = farc;
-            r->tn = t_lo > tn ? t_lo : tn;
-        } else {
-            all_todo *e = &r->stack[r->sp++];
-            e->node = farc;
-            e->tn = t_lo > tn ? t_lo : tn;
-            e->tf = tf;
-            next = nearc;
-            r->tf = t_hi < tf ? t_hi : tf;
-        }
-        if (next) {
+        const uint32_t bits = n->bits, neg = r->neg[axis];
+        const uint32_t below = (uint32_t)(n - nodes) + 1, above = bits >> 4;
+        const uint32_t nearc = ka_sel(neg, above, below);
+        const uint32_t farc = nearc ^ above ^ below;
+        const uint32_t go_near = (uint32_t) !(t_hi < r->tn) & ~(bits >> (2 + neg)) & 1u;
+        const uint32_t go_far = (uint32_t) !(t_lo > r->tf) & ~(bits >> (3 - neg)) & 1u;
+        const float far_tn = t_lo > r->tn ? t_lo : r->tn;
+        const float near_tf = t_hi < r->tf ? t_hi : r->tf;
+        all_todo *e = &r->stack[r->sp];
+        e->node = nodes + farc;
+        e->tn = far_tn;
+        e->tf = r->tf;
+        r->sp += (int)(go_near & go_far);
+        const kd_node *next = nodes + ka_sel(go_near, nearc, farc);
+        r->tn = ka_self(go_near, r->tn, far_tn);
+        r->tf = ka_self(go_near, near_tf, r->tf);
+        if (go_near | go_far) {
             __builtin_prefetch(next);
             r->n = next;
             return 1;
