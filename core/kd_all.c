@@ -132,7 +132,8 @@ static int batch_ok(const kdr_ray_batch *b, size_t first, size_t count) {
  * KD_ALL_STREAM_MIN_BYTES and more, where it hides the loads of nodes,
  * references and triangles that miss the caches; on smaller scenes, whose
  * walks are bound by their instructions, not their loads, it lost to one
- * ray at a time (docs/TRAVERSAL.md, "All hits and counts"). */
+ * ray at a time (measured with branches in its node step; docs/
+ * TRAVERSAL.md, "All hits and counts"). */
 static int all_interleave(const kdr_scene *sc, size_t count) {
     return count > 1 && sc->nodes && sc->stats.bytes >= KD_ALL_STREAM_MIN_BYTES;
 }
