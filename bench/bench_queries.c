@@ -22,6 +22,12 @@
  *    the number differing printed: the two triangle tests may disagree on
  *    rays through shared edges, which the vote is there to outvote).
  *    Correctness against the winding number is tests/test_occupancy.c's.
+ *  - each list and count kdray's two ways: one ray at a time (kd_all16,
+ *    kd_all, kd_count: kdr_intersect_all1, kdr_count1) and through the
+ *    batch calls kdrayd makes (the _batch methods: kdr_all_batch,
+ *    kdr_count_batch in calls of Q_CHUNK rays with per-ray origins, which
+ *    take the interleaved walk on large scenes); the closing table rates
+ *    the batch calls.
  * Workloads: "camera" (primary rays from outside through the scene: many
  * surfaces per ray) and "random" (origins in the box). Checks: kdray's hit
  * total equals the filter's within 0.1% (they differ only on rounding
@@ -38,13 +44,87 @@
 
 #define CAPPED 16u
 
+/* The workload as a batch with per-ray origins and intervals (what a
+ * client's request becomes), answered in calls of Q_CHUNK rays into
+ * outputs reused for every call. */
+#define Q_CHUNK 256
+
+typedef struct q_batch {
+    float *org, *dir, *tmin, *tmax;
+    uint32_t *nhits;
+    float *t, *u, *v;
+    int32_t *prim;
+} q_batch;
+
 typedef struct q_ctx {
     const bench_scene *s;
     const bench_workload *w;
     const oracle *fast, *filter;
     kdr_hit *buf;
+    const q_batch *qb;
     uint64_t hits; /* the last pass's total */
 } q_ctx;
+
+static void q_batch_free(q_batch *b) {
+    free(b->org), free(b->dir), free(b->tmin), free(b->tmax), free(b->nhits);
+    free(b->t), free(b->u), free(b->v), free(b->prim);
+}
+
+static int q_batch_make(q_batch *b, const bench_workload *w) {
+    const size_t n = w->n, slots = (size_t)Q_CHUNK * KDR_MAX_HITS_LIMIT;
+    *b = (q_batch){malloc(3 * n * sizeof(float)), malloc(3 * n * sizeof(float)),
+                   malloc(n * sizeof(float)), malloc(n * sizeof(float)),
+                   malloc(Q_CHUNK * sizeof(uint32_t)), malloc(slots * sizeof(float)),
+                   malloc(slots * sizeof(float)), malloc(slots * sizeof(float)),
+                   malloc(slots * sizeof(int32_t))};
+    if (!b->org || !b->dir || !b->tmin || !b->tmax || !b->nhits || !b->t || !b->u ||
+        !b->v || !b->prim) {
+        q_batch_free(b);
+        return -1;
+    }
+    for (size_t i = 0; i < n; i++) {
+        memcpy(b->org + 3 * i, w->rays[i].org, sizeof w->rays[i].org);
+        memcpy(b->dir + 3 * i, w->rays[i].dir, sizeof w->rays[i].dir);
+        b->tmin[i] = w->rays[i].tmin;
+        b->tmax[i] = w->rays[i].tmax;
+    }
+    return 0;
+}
+
+/* kdr_all_batch (cap > 0) or kdr_count_batch (cap 0) over the workload;
+ * returns the hit total. */
+static uint64_t kd_batch_pass(const q_ctx *c, uint32_t cap) {
+    const q_batch *qb = c->qb;
+    uint64_t h = 0;
+    for (size_t first = 0; first < c->w->n; first += Q_CHUNK) {
+        const size_t m = c->w->n - first < Q_CHUNK ? c->w->n - first : Q_CHUNK;
+        const kdr_ray_batch b = {m, qb->org + 3 * first, 3, qb->dir + 3 * first,
+                                 qb->tmin + first, 1, qb->tmax + first, 1};
+        kdr_all_hits out = {qb->nhits, qb->t, qb->u, qb->v, qb->prim};
+        if (cap)
+            kdr_all_batch(c->s->kd, &b, 0, m, cap, &out, NULL);
+        else
+            kdr_count_batch(c->s->kd, &b, 0, m, qb->nhits, NULL);
+        for (size_t i = 0; i < m; i++)
+            h += qb->nhits[i];
+    }
+    return h;
+}
+
+static void kd_capped_batch(void *p) {
+    q_ctx *c = p;
+    c->hits = kd_batch_pass(c, CAPPED);
+}
+
+static void kd_every_batch(void *p) {
+    q_ctx *c = p;
+    c->hits = kd_batch_pass(c, KDR_MAX_HITS_LIMIT);
+}
+
+static void kd_count_batch(void *p) {
+    q_ctx *c = p;
+    c->hits = kd_batch_pass(c, 0);
+}
 
 static void kd_capped(void *p) {
     q_ctx *c = p;
@@ -282,23 +362,34 @@ static int queries_run(const bench_scene *s, const bench_opts *o) {
             rc = -1;
             break;
         }
-        q_ctx ctx[6];
-        for (int m = 0; m < 6; m++)
-            ctx[m] = (q_ctx){s, &w, rival_oracle(s->emb), rival_oracle(filt), buf, 0};
-        bench_method m[6] = {
+        q_batch qb;
+        if (q_batch_make(&qb, &w) != 0) {
+            bench_workload_free(&w);
+            rc = -1;
+            break;
+        }
+        enum { NM = 9 };
+        q_ctx ctx[NM];
+        for (int m = 0; m < NM; m++)
+            ctx[m] = (q_ctx){s, &w, rival_oracle(s->emb), rival_oracle(filt), buf, &qb, 0};
+        bench_method m[NM] = {
             {"kd_all16", 0, NULL, kd_capped, &ctx[0], 0},
             {"embree_requery16", BENCH_RIVAL, NULL, emb_requery, &ctx[1], 0},
             {"kd_all", 0, NULL, kd_every, &ctx[2], 0},
             {"kd_count", 0, NULL, kd_count, &ctx[3], 0},
             {"embree_filter_all", BENCH_RIVAL, NULL, emb_filter, &ctx[4], 0},
             {"embree_filter_count", BENCH_RIVAL, NULL, emb_filter_count, &ctx[5], 0},
+            {"kd_all16_batch", 0, NULL, kd_capped_batch, &ctx[6], 0},
+            {"kd_all_batch", 0, NULL, kd_every_batch, &ctx[7], 0},
+            {"kd_count_batch", 0, NULL, kd_count_batch, &ctx[8], 0},
         };
-        bench_measure(m, 6, o->repeat, 200.0);
+        bench_measure(m, NM, o->repeat, 200.0);
         char wk[64];
-        for (int i = 0; i < 6; i++) {
-            /* lists capped at 16, every hit, counts: each against its own rival */
-            const char *kind = i < 2 ? "all16" : (i == 3 || i == 5) ? "count" : "all";
-            snprintf(wk, sizeof wk, "%s_%s", kind, q_workloads[k]);
+        /* lists capped at 16, every hit, counts: each against its own rival */
+        static const char *const kinds[NM] = {"all16", "all16", "all", "count", "all",
+                                              "count", "all16", "all", "count"};
+        for (int i = 0; i < NM; i++) {
+            snprintf(wk, sizeof wk, "%s_%s", kinds[i], q_workloads[k]);
             bench_summary_add(s, wk, m[i].name, w.n, m[i].best_ms, -1.0);
         }
         printf("%-8s hits: kd_all16 %llu, requery16 %llu, kd_all %llu, kd_count %llu, "
@@ -312,17 +403,33 @@ static int queries_run(const bench_scene *s, const bench_opts *o) {
                q_workloads[k], m[0].best_ms, m[1].best_ms, m[1].best_ms / m[0].best_ms,
                m[2].best_ms, m[3].best_ms, m[4].best_ms, m[5].best_ms,
                m[4].best_ms / m[2].best_ms, m[5].best_ms / m[3].best_ms);
+        printf("%-8s batch ms: kd_all16 %.1f (%.2fx requery16, %.2fx one ray at a time) | "
+               "kd_all %.1f (%.2fx filter, %.2fx) | kd_count %.1f (%.2fx filter count, "
+               "%.2fx)\n",
+               q_workloads[k], m[6].best_ms, m[1].best_ms / m[6].best_ms,
+               m[0].best_ms / m[6].best_ms, m[7].best_ms, m[4].best_ms / m[7].best_ms,
+               m[2].best_ms / m[7].best_ms, m[8].best_ms, m[5].best_ms / m[8].best_ms,
+               m[3].best_ms / m[8].best_ms);
         const double d = fabs((double)ctx[2].hits - (double)ctx[4].hits);
         if (ctx[2].hits != ctx[3].hits || d > 0.001 * (double)ctx[4].hits + 2 ||
             ctx[5].hits != ctx[4].hits)
             bench_fail("%s %s: kd_all %llu / kd_count %llu hits vs the filter's %llu",
                        s->name, q_workloads[k], (unsigned long long)ctx[2].hits,
                        (unsigned long long)ctx[3].hits, (unsigned long long)ctx[4].hits);
+        if (ctx[6].hits != ctx[0].hits || ctx[7].hits != ctx[2].hits ||
+            ctx[8].hits != ctx[3].hits)
+            bench_fail("%s %s: batch hit totals %llu / %llu / %llu differ from one ray at "
+                       "a time's %llu / %llu / %llu",
+                       s->name, q_workloads[k], (unsigned long long)ctx[6].hits,
+                       (unsigned long long)ctx[7].hits, (unsigned long long)ctx[8].hits,
+                       (unsigned long long)ctx[0].hits, (unsigned long long)ctx[2].hits,
+                       (unsigned long long)ctx[3].hits);
         if (ctx[1].hits > ctx[0].hits)
             bench_fail(
                 "%s %s: the re-query loop found more hits (%llu) than kd_all16 (%llu)",
                 s->name, q_workloads[k], (unsigned long long)ctx[1].hits,
                 (unsigned long long)ctx[0].hits);
+        q_batch_free(&qb);
         bench_workload_free(&w);
     }
     if (rc == 0) rc = occupancy_run(s, o, rival_oracle(filt), buf);
@@ -334,20 +441,28 @@ static int queries_run(const bench_scene *s, const bench_opts *o) {
 
 static void queries_finish(const bench_opts *o) {
     (void)o;
-    printf("\n== all hits: Embree ms / kdray ms (> 1: kdray faster)\n");
-    printf("%-10s | %-22s | %-22s | %-22s | %-22s | %-22s | %-22s\n", "scene",
-           "all16 camera (requery)", "all16 random (requery)", "all camera (filter)",
-           "all random (filter)", "closest (point query)", "occupancy (filter)");
+    printf("\n== all hits: Embree ms / kdray ms (> 1: kdray faster); kdray through "
+           "kdr_all_batch / kdr_count_batch\n");
+    static const char *const head[8] = {
+        "all16 camera (requery)", "all16 random (requery)", "all camera (filter)",
+        "all random (filter)",    "count camera (filter)",  "count random (filter)",
+        "closest (point query)",  "occupancy (filter)"};
+    printf("%-10s", "scene");
+    for (int r = 0; r < 8; r++)
+        printf(" | %-22s", head[r]);
+    printf("\n");
     for (int i = 0; i < g_nscenes; i++) {
         printf("%-10s", g_scene[i]);
-        static const char *const rows[6][3] = {
-            {"all16_camera", "kd_all16", "embree_requery16"},
-            {"all16_random", "kd_all16", "embree_requery16"},
-            {"all_camera", "kd_all", "embree_filter_all"},
-            {"all_random", "kd_all", "embree_filter_all"},
+        static const char *const rows[8][3] = {
+            {"all16_camera", "kd_all16_batch", "embree_requery16"},
+            {"all16_random", "kd_all16_batch", "embree_requery16"},
+            {"all_camera", "kd_all_batch", "embree_filter_all"},
+            {"all_random", "kd_all_batch", "embree_filter_all"},
+            {"count_camera", "kd_count_batch", "embree_filter_count"},
+            {"count_random", "kd_count_batch", "embree_filter_count"},
             {"closest_point", "kd_closest", "embree_point_query"},
             {"occupancy", "kd_occupancy", "embree_filter_occupancy"}};
-        for (int r = 0; r < 6; r++) {
+        for (int r = 0; r < 8; r++) {
             const double kd = bench_summary_ms(g_scene[i], rows[r][0], rows[r][1]);
             const double em = bench_summary_ms(g_scene[i], rows[r][0], rows[r][2]);
             if (kd > 0 && em > 0)

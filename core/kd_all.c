@@ -26,156 +26,7 @@
  * starts on the stack and moves to the heap past KD_COUNT_STACK entries,
  * then sorts (by insertion when few) and counts distinct prims.
  */
-#include <stdlib.h>
-#include <string.h>
-
-#include "kd_internal.h"
-#include "kd_traverse.h"
-#include "kd_tri.h"
-#include "kd_tri_ntri.h"
-
-#define KD_COUNT_STACK 256
-
-typedef struct all_todo {
-    const kd_node *node;
-    float tn, tf;
-} all_todo;
-
-/* Where accepted hits go: a sorted, prim-unique list of at most cap hits
- * (all), or a growing list of prims (count). */
-typedef struct all_sink {
-    kdr_hit *hits; /* all: sorted by (t, prim) */
-    uint32_t cap, n;
-    uint32_t *prims; /* count */
-    size_t np, pcap;
-    int heap, oom;
-    float bound; /* triangle tests use [tmin, bound] */
-    uint64_t nodes, tests;
-} all_sink;
-
-/* all: inserts (t, prim) unless it is already held or cannot be among the
- * first cap hits. The walk goes front to back, so a new hit mostly
- * belongs at or near the end: its place is found from the end. */
-static void keep_all(all_sink *s, float t, int32_t prim, float u, float v) {
-    if (s->n == s->cap &&
-        !kd_hit_better(t, prim, s->hits[s->n - 1].t, s->hits[s->n - 1].prim))
-        return;
-    /* first position whose (t, prim) is not better than the new one */
-    uint32_t lo = s->n;
-    while (lo > 0 && !kd_hit_better(s->hits[lo - 1].t, s->hits[lo - 1].prim, t, prim))
-        lo--;
-    if (lo < s->n && s->hits[lo].prim == prim)
-        return; /* the same triangle, found again in another leaf */
-    const uint32_t keep = s->n < s->cap ? s->n : s->cap - 1;
-    for (uint32_t i = keep; i > lo; i--)
-        s->hits[i] = s->hits[i - 1];
-    s->hits[lo] = (kdr_hit){t, u, v, prim};
-    s->n = keep + 1;
-    if (s->n == s->cap) s->bound = s->hits[s->n - 1].t;
-}
-
-/* count: appends prim, growing the buffer (first move: off the stack). */
-static void keep_prim(all_sink *s, int32_t prim) {
-    if (s->np == s->pcap) {
-        const size_t cap = 2 * s->pcap;
-        uint32_t *p =
-            s->heap ? realloc(s->prims, cap * sizeof *p) : malloc(cap * sizeof *p);
-        if (!p) {
-            s->oom = 1;
-            return;
-        }
-        if (!s->heap) memcpy(p, s->prims, s->np * sizeof *p);
-        s->prims = p;
-        s->pcap = cap;
-        s->heap = 1;
-    }
-    s->prims[s->np++] = (uint32_t)prim;
-}
-
-/* One accepted hit into the sink. */
-static inline void keep(all_sink *s, float t, int32_t prim, float u, float v) {
-    if (s->hits)
-        keep_all(s, t, prim, u, v);
-    else
-        keep_prim(s, prim);
-}
-
-/* Four references at once (the last group repeats its final reference: a
- * hit found twice is kept once); the same float operations as
- * kd_tri_intersect, so t, u, v are bit for bit the scalar ones. */
-static void test_group4(const kdr_scene *sc, const uint32_t *ref, uint32_t left,
-                        const kd_ntri_pre4 *pre4, float tmin, all_sink *s) {
-    const float *rows[4];
-    int32_t prims[4];
-    kd_ntri_rows4(sc->tris, ref, left, prims, rows);
-    f4 t, V, W, det;
-    const int hits =
-        kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(s->bound), &t, &V, &W, &det);
-    if (!hits) return;
-    _Alignas(16) float tv[4], vv[4], wv[4], dv[4];
-    f4_store(tv, t);
-    f4_store(vv, V);
-    f4_store(wv, W);
-    f4_store(dv, det);
-    for (int j = 0; j < 4; j++)
-        if ((hits >> j) & 1 && tv[j] <= s->bound)
-            keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
-}
-
-/* Eight at a time (AVX2); the last group is the last eight references. Not
- * inlined: the caller is not compiled for AVX2. */
-KD_AVX2 __attribute__((noinline)) static void
-test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
-           const kd_ray_pre *pre, float tmin, all_sink *s) {
-    kd_ntri_pre8 pre8;
-    kd_ntri_pre_init8(pre, &pre8);
-    const f8 tmin8 = f8_set1(tmin);
-    for (uint32_t i = 0; i < count && !s->oom; i += 8) {
-        const uint32_t base = i + 8 <= count ? i : count - 8;
-        const float *rows[8];
-        for (int j = 0; j < 8; j++)
-            rows[j] = sc->tris + 9 * (size_t)ref[base + j];
-        f8 t, V, W, det;
-        const int hits =
-            kd_ntri_test8(&pre8, rows, tmin8, f8_set1(s->bound), &t, &V, &W, &det);
-        if (!hits) continue;
-        _Alignas(32) float tv[8], vv[8], wv[8], dv[8];
-        f8_store(tv, t);
-        f8_store(vv, V);
-        f8_store(wv, W);
-        f8_store(dv, det);
-        for (int j = 0; j < 8; j++)
-            if ((hits >> j) & 1 && tv[j] <= s->bound)
-                keep(s, tv[j], (int32_t)ref[base + j], vv[j] / dv[j], wv[j] / dv[j]);
-    }
-}
-
-/* Every reference of leaf n over [tmin, bound]; leaves of at least
- * KD_LEAF_AVX2_MIN / KD_LEAF_SIMD_MIN references eight / four at a time,
- * as the single-ray walk does. */
-static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *pre,
-                      const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s) {
-    const uint32_t *ref = sc->refs + n->u.first;
-    const uint32_t count = kd_count(n);
-    s->tests += count;
-    if (sc->prefetch_leaves) kd_prefetch_tris(sc, ref, count);
-    if (avx2 && count >= KD_LEAF_AVX2_MIN) {
-        test_leaf8(sc, ref, count, pre, tmin, s);
-        return;
-    }
-    if (count >= KD_LEAF_SIMD_MIN) {
-        for (uint32_t i = 0; i < count && !s->oom; i += 4)
-            test_group4(sc, ref + i, count - i, pre4, tmin, s);
-        return;
-    }
-    for (uint32_t i = 0; i < count && !s->oom; i++) {
-        float t, u, v;
-        const int32_t prim = (int32_t)ref[i];
-        if (kd_tri_intersect(pre, sc->tris + 9 * (size_t)prim, tmin, s->bound, &t, &u,
-                             &v))
-            keep(s, t, prim, u, v);
-    }
-}
+#include "kd_all.h"
 
 /* The front-to-back walk over every leaf the ray passes (within the slack)
  * that can still hold a hit at or before the bound. */
@@ -229,7 +80,7 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
         }
         if (n) {
             s->nodes++;
-            test_leaf(sc, n, &pre, &pre4, avx2, r->tmin, s);
+            test_leaf(sc, n, &pre, &pre4, avx2, r->tmin, s, sc->prefetch_leaves);
             if (s->oom) return;
         }
         const float bound = kd_term_bound(s->bound);
@@ -241,13 +92,6 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
         tn = stack[sp].tn;
         tf = stack[sp].tf;
     }
-}
-
-static void add_stats(kdr_trav_stats *st, const all_sink *s) {
-    if (!st) return;
-    st->rays++;
-    st->nodes_visited += s->nodes;
-    st->tri_tests += s->tests;
 }
 
 int kdr_intersect_all1(const kdr_scene *scene, const kdr_ray *ray, uint32_t max_hits,
@@ -263,28 +107,6 @@ int kdr_intersect_all1(const kdr_scene *scene, const kdr_ray *ray, uint32_t max_
     return KDR_OK;
 }
 
-static int cmp_u32(const void *a, const void *b) {
-    const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
-    return (x > y) - (x < y);
-}
-
-/* Sorts the prims of a ray: by insertion when there are few (the common
- * case, where qsort's calls through a comparison pointer cost more than
- * the walk's hit collection), else qsort. */
-static void sort_prims(uint32_t *p, size_t n) {
-    if (n > 32) {
-        qsort(p, n, sizeof *p, cmp_u32);
-        return;
-    }
-    for (size_t i = 1; i < n; i++) {
-        const uint32_t x = p[i];
-        size_t j = i;
-        for (; j > 0 && p[j - 1] > x; j--)
-            p[j] = p[j - 1];
-        p[j] = x;
-    }
-}
-
 int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
                kdr_trav_stats *stats) {
     if (count) *count = 0;
@@ -293,25 +115,10 @@ int kdr_count1(const kdr_scene *scene, const kdr_ray *ray, uint32_t *count,
     all_sink s = {.prims = local, .pcap = KD_COUNT_STACK, .bound = ray->tmax};
     walk(scene, ray, &s);
     add_stats(stats, &s);
-    if (!s.oom) sort_prims(s.prims, s.np);
-    uint32_t distinct = 0;
-    for (size_t i = 0; i < s.np; i++)
-        distinct += i == 0 || s.prims[i] != s.prims[i - 1];
-    if (s.heap) free(s.prims);
+    const uint32_t distinct = all_distinct(&s);
     if (s.oom) return KDR_ENOMEM;
     *count = distinct;
     return KDR_OK;
-}
-
-/* The ray i of a batch (kd_batch.c reads batches the same way). */
-static void batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
-    const float *o = b->org + (b->org_stride ? 3 * i : 0);
-    for (int k = 0; k < 3; k++) {
-        r->org[k] = o[k];
-        r->dir[k] = b->dir[3 * i + k];
-    }
-    r->tmin = b->tmin ? b->tmin[b->tmin_stride ? i : 0] : 0.0f;
-    r->tmax = b->tmax ? b->tmax[b->tmax_stride ? i : 0] : INFINITY;
 }
 
 static int batch_ok(const kdr_ray_batch *b, size_t first, size_t count) {
@@ -321,6 +128,16 @@ static int batch_ok(const kdr_ray_batch *b, size_t first, size_t count) {
     return first <= b->n && count <= b->n - first;
 }
 
+/* Batches go to the interleaved walk (kd_all_stream.c) on scenes of
+ * KD_ALL_STREAM_MIN_BYTES and more, where it hides the loads of nodes,
+ * references and triangles that miss the caches; on smaller scenes, whose
+ * walks are bound by their instructions, not their loads, it lost to one
+ * ray at a time (measured with branches in its node step; docs/
+ * TRAVERSAL.md, "All hits and counts"). */
+static int all_interleave(const kdr_scene *sc, size_t count) {
+    return count > 1 && sc->nodes && sc->stats.bytes >= KD_ALL_STREAM_MIN_BYTES;
+}
+
 int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
                   size_t count, uint32_t max_hits, kdr_all_hits *out,
                   kdr_trav_stats *stats) {
@@ -328,19 +145,30 @@ int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t fir
         !out->prim || !out->u || !out->v || max_hits == 0 ||
         max_hits > KDR_MAX_HITS_LIMIT)
         return KDR_EINVAL;
-    kdr_hit buf[KDR_MAX_HITS_LIMIT];
+    kdr_hit local[KDR_MAX_HITS_LIMIT];
+    if (all_interleave(scene, count)) {
+        /* the interleaved walk's lists: on the stack when small, else on
+         * the heap; without memory, ray by ray below */
+        const size_t need = (size_t)KD_ALL_RAYS * max_hits;
+        kdr_hit *buf = need <= KDR_MAX_HITS_LIMIT ? local : malloc(need * sizeof *buf);
+        if (buf) {
+            kd_all_stream(scene, batch, first, count, max_hits, buf, out, NULL, 0, stats);
+            if (buf != local) free(buf);
+            return KDR_OK;
+        }
+    }
     for (size_t i = first; i < first + count; i++) {
         kdr_ray r;
         uint32_t nh = 0;
-        batch_ray(batch, i, &r);
-        kdr_intersect_all1(scene, &r, max_hits, buf, &nh, stats);
+        all_batch_ray(batch, i, &r);
+        kdr_intersect_all1(scene, &r, max_hits, local, &nh, stats);
         out->nhits[i] = nh;
         const size_t base = i * (size_t)max_hits;
         for (uint32_t k = 0; k < nh; k++) {
-            out->t[base + k] = buf[k].t;
-            out->prim[base + k] = buf[k].prim;
-            out->u[base + k] = buf[k].u;
-            out->v[base + k] = buf[k].v;
+            out->t[base + k] = local[k].t;
+            out->prim[base + k] = local[k].prim;
+            out->u[base + k] = local[k].u;
+            out->v[base + k] = local[k].v;
         }
     }
     return KDR_OK;
@@ -349,9 +177,11 @@ int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t fir
 int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
                     size_t count, uint32_t *counts, kdr_trav_stats *stats) {
     if (!scene || !batch_ok(batch, first, count) || !counts) return KDR_EINVAL;
+    if (all_interleave(scene, count))
+        return kd_all_stream(scene, batch, first, count, 0, NULL, NULL, counts, 0, stats);
     for (size_t i = first; i < first + count; i++) {
         kdr_ray r;
-        batch_ray(batch, i, &r);
+        all_batch_ray(batch, i, &r);
         const int rc = kdr_count1(scene, &r, &counts[i], stats);
         if (rc != KDR_OK) return rc;
     }

@@ -123,7 +123,7 @@ static inline float cell_d2(f4 p, f4 lo, f4 hi) {
 /* All ones in lane axis, zeros elsewhere. */
 static inline f4 axis_mask(int axis) {
     static const _Alignas(16) int32_t m[3][4] = {{-1, 0, 0, 0}, {0, -1, 0, 0}, {0, 0, -1, 0}};
-    return _mm_castsi128_ps(_mm_load_si128((const __m128i *)m[axis]));
+    return f4_load_words(m[axis]);
 }
 
 /* A cell is searched while its distance (a lower bound of it) is at most
@@ -180,17 +180,9 @@ static inline void test_ref(const kdr_scene *s, int32_t prim, float box, const f
  * condition holds (in the scalar order) is selected: a lane's divisions by
  * zero in a region it does not select are discarded. */
 
-typedef __m256d d4;
-
 KD_AVX2 static inline d4 d4_dot(const d4 x[3], const d4 y[3]) {
-    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x[0], y[0]), _mm256_mul_pd(x[1], y[1])),
-                         _mm256_mul_pd(x[2], y[2]));
+    return d4_add(d4_add(d4_mul(x[0], y[0]), d4_mul(x[1], y[1])), d4_mul(x[2], y[2]));
 }
-KD_AVX2 static inline d4 d4_le(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_LE_OQ); }
-KD_AVX2 static inline d4 d4_ge(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_GE_OQ); }
-KD_AVX2 static inline d4 d4_and(d4 a, d4 b) { return _mm256_and_pd(a, b); }
-/* lanes of m: a, others b */
-KD_AVX2 static inline d4 d4_sel(d4 m, d4 a, d4 b) { return _mm256_blendv_pd(b, a, m); }
 
 typedef struct cp_lanes {
     _Alignas(32) double d2[4], u[4], v[4], q[3][4];
@@ -202,38 +194,38 @@ KD_AVX2 static void point_triangle4(const float p[3], const float *const r[4],
     kd_ntri_load4(r, A4, B4, C4);
     d4 a[3], ab[3], ac[3], ap[3], bp[3], cp[3], pk[3];
     for (int k = 0; k < 3; k++) {
-        pk[k] = _mm256_set1_pd((double)p[k]);
-        a[k] = _mm256_cvtps_pd(A4[k]);
-        const d4 b = _mm256_cvtps_pd(B4[k]), c = _mm256_cvtps_pd(C4[k]);
-        ab[k] = _mm256_sub_pd(b, a[k]);
-        ac[k] = _mm256_sub_pd(c, a[k]);
-        ap[k] = _mm256_sub_pd(pk[k], a[k]);
-        bp[k] = _mm256_sub_pd(pk[k], b);
-        cp[k] = _mm256_sub_pd(pk[k], c);
+        pk[k] = d4_set1((double)p[k]);
+        a[k] = d4_from_f4(A4[k]);
+        const d4 b = d4_from_f4(B4[k]), c = d4_from_f4(C4[k]);
+        ab[k] = d4_sub(b, a[k]);
+        ac[k] = d4_sub(c, a[k]);
+        ap[k] = d4_sub(pk[k], a[k]);
+        bp[k] = d4_sub(pk[k], b);
+        cp[k] = d4_sub(pk[k], c);
     }
     const d4 d1 = d4_dot(ab, ap), d2 = d4_dot(ac, ap);
     const d4 d3 = d4_dot(ab, bp), d4v = d4_dot(ac, bp);
     const d4 d5 = d4_dot(ab, cp), d6 = d4_dot(ac, cp);
-    const d4 vc = _mm256_sub_pd(_mm256_mul_pd(d1, d4v), _mm256_mul_pd(d3, d2));
-    const d4 vb = _mm256_sub_pd(_mm256_mul_pd(d5, d2), _mm256_mul_pd(d1, d6));
-    const d4 va = _mm256_sub_pd(_mm256_mul_pd(d3, d6), _mm256_mul_pd(d5, d4v));
-    const d4 zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
+    const d4 vc = d4_sub(d4_mul(d1, d4v), d4_mul(d3, d2));
+    const d4 vb = d4_sub(d4_mul(d5, d2), d4_mul(d1, d6));
+    const d4 va = d4_sub(d4_mul(d3, d6), d4_mul(d5, d4v));
+    const d4 zero = d4_zero(), one = d4_set1(1.0);
     /* the face, then each region of higher priority over it */
-    const d4 den = _mm256_div_pd(one, _mm256_add_pd(_mm256_add_pd(va, vb), vc));
-    d4 u = _mm256_mul_pd(vb, den), v = _mm256_mul_pd(vc, den);
-    const d4 e43 = _mm256_sub_pd(d4v, d3), e56 = _mm256_sub_pd(d5, d6);
+    const d4 den = d4_div(one, d4_add(d4_add(va, vb), vc));
+    d4 u = d4_mul(vb, den), v = d4_mul(vc, den);
+    const d4 e43 = d4_sub(d4v, d3), e56 = d4_sub(d5, d6);
     const d4 m_bc = d4_and(d4_le(va, zero), d4_and(d4_ge(e43, zero), d4_ge(e56, zero)));
-    const d4 v_bc = _mm256_div_pd(e43, _mm256_add_pd(e43, e56));
-    u = d4_sel(m_bc, _mm256_sub_pd(one, v_bc), u);
+    const d4 v_bc = d4_div(e43, d4_add(e43, e56));
+    u = d4_sel(m_bc, d4_sub(one, v_bc), u);
     v = d4_sel(m_bc, v_bc, v);
     const d4 m_ac = d4_and(d4_le(vb, zero), d4_and(d4_ge(d2, zero), d4_le(d6, zero)));
     u = d4_sel(m_ac, zero, u);
-    v = d4_sel(m_ac, _mm256_div_pd(d2, _mm256_sub_pd(d2, d6)), v);
+    v = d4_sel(m_ac, d4_div(d2, d4_sub(d2, d6)), v);
     const d4 m_c = d4_and(d4_ge(d6, zero), d4_le(d5, d6));
     u = d4_sel(m_c, zero, u);
     v = d4_sel(m_c, one, v);
     const d4 m_ab = d4_and(d4_le(vc, zero), d4_and(d4_ge(d1, zero), d4_le(d3, zero)));
-    u = d4_sel(m_ab, _mm256_div_pd(d1, _mm256_sub_pd(d1, d3)), u);
+    u = d4_sel(m_ab, d4_div(d1, d4_sub(d1, d3)), u);
     v = d4_sel(m_ab, zero, v);
     const d4 m_b = d4_and(d4_ge(d3, zero), d4_le(d4v, d3));
     u = d4_sel(m_b, one, u);
@@ -243,15 +235,14 @@ KD_AVX2 static void point_triangle4(const float p[3], const float *const r[4],
     v = d4_sel(m_a, zero, v);
     d4 sum = zero;
     for (int k = 0; k < 3; k++) {
-        const d4 q = _mm256_add_pd(_mm256_add_pd(a[k], _mm256_mul_pd(u, ab[k])),
-                                   _mm256_mul_pd(v, ac[k]));
-        const d4 e = _mm256_sub_pd(pk[k], q);
-        _mm256_store_pd(out->q[k], q);
-        sum = _mm256_add_pd(sum, _mm256_mul_pd(e, e));
+        const d4 q = d4_add(d4_add(a[k], d4_mul(u, ab[k])), d4_mul(v, ac[k]));
+        const d4 e = d4_sub(pk[k], q);
+        d4_store(out->q[k], q);
+        sum = d4_add(sum, d4_mul(e, e));
     }
-    _mm256_store_pd(out->d2, sum);
-    _mm256_store_pd(out->u, u);
-    _mm256_store_pd(out->v, v);
+    d4_store(out->d2, sum);
+    d4_store(out->u, u);
+    d4_store(out->v, v);
 }
 
 /* The exact tests of n (1..4) references, four lanes at once (the last
@@ -369,10 +360,10 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     cp_todo stack[CP_NEAREST_MAX + 2 * (KD_MAX_DEPTH + 1)];
     int sp = 0, nearest = 1;
-    const f4 p4 = _mm_setr_ps(p[0], p[1], p[2], 0.0f);
+    const f4 p4 = f4_xyz0(p[0], p[1], p[2]);
     stack[sp].node = s->nodes;
-    stack[sp].lo = _mm_setr_ps(s->root.min[0], s->root.min[1], s->root.min[2], 0.0f);
-    stack[sp].hi = _mm_setr_ps(s->root.max[0], s->root.max[1], s->root.max[2], 0.0f);
+    stack[sp].lo = f4_xyz0(s->root.min[0], s->root.min[1], s->root.min[2]);
+    stack[sp].hi = f4_xyz0(s->root.max[0], s->root.max[1], s->root.max[2]);
     stack[sp].d2 = cell_d2(p4, stack[sp].lo, stack[sp].hi);
     sp++;
     while (sp > 0) {

@@ -217,7 +217,10 @@ typedef struct kdr_all_hits {
 int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
                   size_t count, uint32_t max_hits, kdr_all_hits *out,
                   kdr_trav_stats *stats);
-/* counts[i] = kdr_count1 of ray i. */
+/* counts[i] = kdr_count1 of ray i. KDR_ENOMEM when a ray's scratch list
+ * cannot grow: ray by ray (scenes under 16 MiB) the rays after it are not
+ * answered; interleaved (larger scenes, core/kd_all_stream.c) every other
+ * ray is, and that ray's count is 0. */
 int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
                     size_t count, uint32_t *counts, kdr_trav_stats *stats);
 

@@ -116,6 +116,13 @@ static inline f4 f4_lane3(f4 a, float x) {
     return f4_sel(m, a, _mm_set1_ps(x));
 }
 
+/* (x, y, z, 0): a point or box corner as one vector. */
+static inline f4 f4_xyz0(float x, float y, float z) { return _mm_setr_ps(x, y, z, 0.0f); }
+/* Four 32-bit words (16-byte aligned) as a float vector: a constant mask. */
+static inline f4 f4_load_words(const int32_t *p) {
+    return _mm_castsi128_ps(_mm_load_si128((const __m128i *)p));
+}
+
 /* Number of set bits in a lane mask (<= 8 lanes). A table, because the
  * baseline build has no popcnt instruction and __builtin_popcount would be
  * a library call. */
@@ -124,6 +131,25 @@ static inline int kd_lane_count(int bits) {
                                           1, 2, 2, 3, 2, 3, 3, 4};
     return nib[bits & 15] + nib[(bits >> 4) & 15];
 }
+
+/* ---- 4 double lanes (AVX2): exact point-triangle tests (kd_closest.c) --- */
+
+typedef __m256d d4;
+
+KD_AVX2 static inline d4 d4_set1(double x) { return _mm256_set1_pd(x); }
+KD_AVX2 static inline d4 d4_zero(void) { return _mm256_setzero_pd(); }
+/* the four floats of a, widened (exactly) */
+KD_AVX2 static inline d4 d4_from_f4(f4 a) { return _mm256_cvtps_pd(a); }
+KD_AVX2 static inline void d4_store(double *p, d4 a) { _mm256_store_pd(p, a); }
+KD_AVX2 static inline d4 d4_add(d4 a, d4 b) { return _mm256_add_pd(a, b); }
+KD_AVX2 static inline d4 d4_sub(d4 a, d4 b) { return _mm256_sub_pd(a, b); }
+KD_AVX2 static inline d4 d4_mul(d4 a, d4 b) { return _mm256_mul_pd(a, b); }
+KD_AVX2 static inline d4 d4_div(d4 a, d4 b) { return _mm256_div_pd(a, b); }
+KD_AVX2 static inline d4 d4_le(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_LE_OQ); }
+KD_AVX2 static inline d4 d4_ge(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_GE_OQ); }
+KD_AVX2 static inline d4 d4_and(d4 a, d4 b) { return _mm256_and_pd(a, b); }
+/* lanes of m: a, others b */
+KD_AVX2 static inline d4 d4_sel(d4 m, d4 a, d4 b) { return _mm256_blendv_pd(b, a, m); }
 
 /* ---- 8 lanes (AVX2) ------------------------------------------------------ */
 

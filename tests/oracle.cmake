@@ -64,6 +64,14 @@ if(TARGET kdray_scenes)
   target_compile_definitions(test_all PRIVATE KDRAY_HAVE_GLTF=1)
 endif()
 add_test(NAME all_hits COMMAND test_all 1500 ${CMAKE_SOURCE_DIR}/scenes/default.glb)
+# The interleaved walk of all hits and counts (core/kd_all_stream.c) against
+# the one-ray walk, bit for bit, on test_bundle's adversarial ray sets, and
+# kdr_all_batch / kdr_count_batch on a soup large enough to take it.
+add_executable(test_all_stream ${CMAKE_CURRENT_SOURCE_DIR}/test_all_stream.c
+                               ${CMAKE_CURRENT_SOURCE_DIR}/test_bundle_sets.c)
+target_link_libraries(test_all_stream PRIVATE kdray_core m)
+target_include_directories(test_all_stream PRIVATE ${CMAKE_SOURCE_DIR}/core)
+add_test(NAME all_stream COMMAND test_all_stream)
 
 # Closest points (issue 15): the distance against an independent double
 # reference, the kd search against brute force bit for bit and against

@@ -1,0 +1,241 @@
+/*
+ * kd_all.h — what the two walks of all hits and counts share: the one-ray
+ * walk (kd_all.c, kdr_intersect_all1 / kdr_count1, the reference) and the
+ * interleaved walk of a batch (kd_all_stream.c, kdr_all_batch /
+ * kdr_count_batch): the to-do entry, where accepted hits go (the sink: a
+ * sorted, prim-unique list for "all", a growing list of prims for "count"),
+ * a leaf's test (1, 4 or 8 references at a time) and the ray's set-up. Both
+ * walks call exactly these, so their answers are the same bits. Internal
+ * to core/.
+ */
+#ifndef KD_ALL_H
+#define KD_ALL_H
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "kd_internal.h"
+#include "kd_all_stream.h"
+#include "kd_tune.h"
+#include "kd_traverse.h"
+#include "kd_tri.h"
+#include "kd_tri_ntri.h"
+
+#define KD_COUNT_STACK 256
+
+typedef struct all_todo {
+    const kd_node *node;
+    float tn, tf;
+} all_todo;
+
+/* Where accepted hits go: a sorted, prim-unique list of at most cap hits
+ * (all), or a growing list of prims (count). */
+typedef struct all_sink {
+    kdr_hit *hits; /* all: sorted by (t, prim) */
+    uint32_t cap, n;
+    uint32_t *prims; /* count */
+    size_t np, pcap;
+    int heap, oom;
+    float bound; /* triangle tests use [tmin, bound] */
+    uint64_t nodes, tests;
+} all_sink;
+
+/* all: inserts (t, prim) unless it is already held or cannot be among the
+ * first cap hits. The walk goes front to back, so a new hit mostly
+ * belongs at or near the end: its place is found from the end. */
+static void keep_all(all_sink *s, float t, int32_t prim, float u, float v) {
+    if (s->n == s->cap &&
+        !kd_hit_better(t, prim, s->hits[s->n - 1].t, s->hits[s->n - 1].prim))
+        return;
+    /* first position whose (t, prim) is not better than the new one */
+    uint32_t lo = s->n;
+    while (lo > 0 && !kd_hit_better(s->hits[lo - 1].t, s->hits[lo - 1].prim, t, prim))
+        lo--;
+    if (lo < s->n && s->hits[lo].prim == prim)
+        return; /* the same triangle, found again in another leaf */
+    const uint32_t keep = s->n < s->cap ? s->n : s->cap - 1;
+    for (uint32_t i = keep; i > lo; i--)
+        s->hits[i] = s->hits[i - 1];
+    s->hits[lo] = (kdr_hit){t, u, v, prim};
+    s->n = keep + 1;
+    if (s->n == s->cap) s->bound = s->hits[s->n - 1].t;
+}
+
+/* count: appends prim, growing the buffer (first move: off the stack). */
+static void keep_prim(all_sink *s, int32_t prim) {
+    if (s->np == s->pcap) {
+        const size_t cap = 2 * s->pcap;
+        uint32_t *p =
+            s->heap ? realloc(s->prims, cap * sizeof *p) : malloc(cap * sizeof *p);
+        if (!p) {
+            s->oom = 1;
+            return;
+        }
+        if (!s->heap) memcpy(p, s->prims, s->np * sizeof *p);
+        s->prims = p;
+        s->pcap = cap;
+        s->heap = 1;
+    }
+    s->prims[s->np++] = (uint32_t)prim;
+}
+
+/* One accepted hit into the sink. */
+static inline void keep(all_sink *s, float t, int32_t prim, float u, float v) {
+    if (s->hits)
+        keep_all(s, t, prim, u, v);
+    else
+        keep_prim(s, prim);
+}
+
+/* Four references at once (the last group repeats its final reference: a
+ * hit found twice is kept once); the same float operations as
+ * kd_tri_intersect, so t, u, v are bit for bit the scalar ones. */
+static void test_group4(const kdr_scene *sc, const uint32_t *ref, uint32_t left,
+                        const kd_ntri_pre4 *pre4, float tmin, all_sink *s) {
+    const float *rows[4];
+    int32_t prims[4];
+    kd_ntri_rows4(sc->tris, ref, left, prims, rows);
+    f4 t, V, W, det;
+    const int hits =
+        kd_ntri_test4(pre4, rows, f4_set1(tmin), f4_set1(s->bound), &t, &V, &W, &det);
+    if (!hits) return;
+    _Alignas(16) float tv[4], vv[4], wv[4], dv[4];
+    f4_store(tv, t);
+    f4_store(vv, V);
+    f4_store(wv, W);
+    f4_store(dv, det);
+    for (int j = 0; j < 4; j++)
+        if ((hits >> j) & 1 && tv[j] <= s->bound)
+            keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+}
+
+/* Eight at a time (AVX2); the last group is the last eight references. Not
+ * inlined: the caller is not compiled for AVX2. */
+KD_AVX2 __attribute__((noinline)) static void
+test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
+           const kd_ray_pre *pre, float tmin, all_sink *s) {
+    kd_ntri_pre8 pre8;
+    kd_ntri_pre_init8(pre, &pre8);
+    const f8 tmin8 = f8_set1(tmin);
+    for (uint32_t i = 0; i < count && !s->oom; i += 8) {
+        const uint32_t base = i + 8 <= count ? i : count - 8;
+        const float *rows[8];
+        for (int j = 0; j < 8; j++)
+            rows[j] = sc->tris + 9 * (size_t)ref[base + j];
+        f8 t, V, W, det;
+        const int hits =
+            kd_ntri_test8(&pre8, rows, tmin8, f8_set1(s->bound), &t, &V, &W, &det);
+        if (!hits) continue;
+        _Alignas(32) float tv[8], vv[8], wv[8], dv[8];
+        f8_store(tv, t);
+        f8_store(vv, V);
+        f8_store(wv, W);
+        f8_store(dv, det);
+        for (int j = 0; j < 8; j++)
+            if ((hits >> j) & 1 && tv[j] <= s->bound)
+                keep(s, tv[j], (int32_t)ref[base + j], vv[j] / dv[j], wv[j] / dv[j]);
+    }
+}
+
+/* Every reference of leaf n over [tmin, bound]; leaves of at least
+ * KD_LEAF_AVX2_MIN / KD_LEAF_SIMD_MIN references eight / four at a time,
+ * as the single-ray walk does. prefetch: request the leaf's triangles first
+ * (sc->prefetch_leaves; 0 where a staged walk requested them already). */
+static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *pre,
+                      const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s,
+                      int prefetch) {
+    const uint32_t *ref = sc->refs + n->u.first;
+    const uint32_t count = kd_count(n);
+    s->tests += count;
+    if (prefetch) kd_prefetch_tris(sc, ref, count);
+    if (avx2 && count >= KD_LEAF_AVX2_MIN) {
+        test_leaf8(sc, ref, count, pre, tmin, s);
+        return;
+    }
+    if (count >= KD_LEAF_SIMD_MIN) {
+        for (uint32_t i = 0; i < count && !s->oom; i += 4)
+            test_group4(sc, ref + i, count - i, pre4, tmin, s);
+        return;
+    }
+    for (uint32_t i = 0; i < count && !s->oom; i++) {
+        float t, u, v;
+        const int32_t prim = (int32_t)ref[i];
+        if (kd_tri_intersect(pre, sc->tris + 9 * (size_t)prim, tmin, s->bound, &t, &u,
+                             &v))
+            keep(s, t, prim, u, v);
+    }
+}
+
+/* The ray's set-up as kd_all.c's walk() writes it out (the single-ray
+ * walk's scalar forms: kd_ray_valid,
+ * 1 / dir, kd_ray_slack, kd_signed_slack, kd_clip_root_slack): inv, ss,
+ * the root interval [tn, tf] and the triangle-test set-up. Returns 0 when
+ * the ray cannot be traced or misses the root box. */
+static inline int all_setup(const kdr_scene *sc, const kdr_ray *r, float inv[3],
+                            float ss[3], float *tn, float *tf, kd_ray_pre *pre,
+                            kd_ntri_pre4 *pre4) {
+    if (!sc || !sc->nodes || !kd_ray_valid(r->org, r->dir, r->tmin, r->tmax)) return 0;
+    for (int k = 0; k < 3; k++)
+        inv[k] = 1.0f / r->dir[k];
+    const float slack = kd_ray_slack(sc, r->org);
+    kd_signed_slack(slack, inv, ss);
+    if (!kd_clip_root_slack(sc, r->org, r->dir, inv, slack, r->tmin, r->tmax, tn, tf))
+        return 0;
+    kd_ray_precompute(r->org, r->dir, pre);
+    kd_ntri_pre_init4(pre, pre4);
+    return 1;
+}
+
+static int cmp_u32(const void *a, const void *b) {
+    const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Sorts the prims of a ray: by insertion when there are few (the common
+ * case, where qsort's calls through a comparison pointer cost more than
+ * the walk's hit collection), else qsort. */
+static void sort_prims(uint32_t *p, size_t n) {
+    if (n > 32) {
+        qsort(p, n, sizeof *p, cmp_u32);
+        return;
+    }
+    for (size_t i = 1; i < n; i++) {
+        const uint32_t x = p[i];
+        size_t j = i;
+        for (; j > 0 && p[j - 1] > x; j--)
+            p[j] = p[j - 1];
+        p[j] = x;
+    }
+}
+
+/* count: the number of distinct prims the sink holds (sorting them);
+ * frees a heap buffer. */
+static uint32_t all_distinct(all_sink *s) {
+    if (!s->oom) sort_prims(s->prims, s->np);
+    uint32_t distinct = 0;
+    for (size_t i = 0; i < s->np; i++)
+        distinct += i == 0 || s->prims[i] != s->prims[i - 1];
+    if (s->heap) free(s->prims);
+    return distinct;
+}
+
+static void add_stats(kdr_trav_stats *st, const all_sink *s) {
+    if (!st) return;
+    st->rays++;
+    st->nodes_visited += s->nodes;
+    st->tri_tests += s->tests;
+}
+
+/* The ray i of a batch (kd_batch.c reads batches the same way). */
+static void all_batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
+    const float *o = b->org + (b->org_stride ? 3 * i : 0);
+    for (int k = 0; k < 3; k++) {
+        r->org[k] = o[k];
+        r->dir[k] = b->dir[3 * i + k];
+    }
+    r->tmin = b->tmin ? b->tmin[b->tmin_stride ? i : 0] : 0.0f;
+    r->tmax = b->tmax ? b->tmax[b->tmax_stride ? i : 0] : INFINITY;
+}
+
+#endif /* KD_ALL_H */

@@ -1,0 +1,37 @@
+/*
+ * kd_all_stream.h — the entry point of the interleaved walk of all hits and
+ * counts (kd_all_stream.c) and its tuning, apart from kd_all.h's walk
+ * pieces so that tests can call it directly. Internal to core/.
+ */
+#ifndef KD_ALL_STREAM_H
+#define KD_ALL_STREAM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "kd_tune.h"
+#include "kdray.h"
+
+/* Rays in flight in the interleaved walk. */
+#define KD_ALL_RAYS 8
+/* kdr_all_batch and kdr_count_batch take the interleaved walk on scenes
+ * of at least this many bytes (kdr_tree_stats.bytes), the closest-hit
+ * walk's staging threshold. */
+#define KD_ALL_STREAM_MIN_BYTES KD_STREAM_STAGE_MIN_BYTES
+/* Leaves staged (references, then triangles requested a turn ahead of the
+ * test) on every scene, not only on those of KD_STREAM_STAGE_MIN_BYTES and
+ * more (tests put small scenes through that path with it). */
+#define KD_ALL_STAGE 1
+
+/* The interleaved walk of rays [first, first + count) of a batch
+ * (arguments checked by the caller): with max_hits > 0 each ray's hits, as
+ * kdr_intersect_all1 finds them, into out (buf: KD_ALL_RAYS * max_hits
+ * entries of scratch); else each ray's count, as kdr_count1 finds it, into
+ * counts[i]. Stats as the one-ray calls sum them. flags: KD_ALL_STAGE or
+ * 0. Returns KDR_OK, or KDR_ENOMEM when a count's list could not grow
+ * (that ray's count is 0; the other rays are answered). */
+int kd_all_stream(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
+                  size_t count, uint32_t max_hits, kdr_hit *buf, kdr_all_hits *out,
+                  uint32_t *counts, int flags, kdr_trav_stats *stats);
+
+#endif /* KD_ALL_STREAM_H */
