@@ -59,7 +59,11 @@
     int P##kdr_count1(const kdr_scene *, const kdr_ray *, uint32_t *,           \
                       kdr_trav_stats *);                                        \
     int P##kdr_closest_point1(const kdr_scene *, const float *, float,          \
-                              kdr_closest *, kdr_trav_stats *);
+                              kdr_closest *, kdr_trav_stats *);                  \
+    int P##kdr_all_batch(const kdr_scene *, const kdr_ray_batch *, size_t,      \
+                         size_t, uint32_t, kdr_all_hits *, kdr_trav_stats *);   \
+    int P##kdr_count_batch(const kdr_scene *, const kdr_ray_batch *, size_t,    \
+                           size_t, uint32_t *, kdr_trav_stats *);
 AB_DECLARE(A_)
 AB_DECLARE(B_)
 
@@ -84,13 +88,18 @@ typedef struct core_api {
     int (*count1)(const kdr_scene *, const kdr_ray *, uint32_t *, kdr_trav_stats *);
     int (*closest1)(const kdr_scene *, const float *, float, kdr_closest *,
                     kdr_trav_stats *);
+    int (*all_batch)(const kdr_scene *, const kdr_ray_batch *, size_t, size_t,
+                     uint32_t, kdr_all_hits *, kdr_trav_stats *);
+    int (*count_batch)(const kdr_scene *, const kdr_ray_batch *, size_t, size_t,
+                       uint32_t *, kdr_trav_stats *);
 } core_api;
 
 #define AB_API(P)                                                               \
     {P##kdr_scene_build,  P##kdr_scene_free,    P##kdr_scene_tree_stats,        \
      P##kdr_intersect1,   P##kdr_occluded1,     P##kdr_trace_batch,             \
      P##kdr_frustum_trace, P##kdr_frustum_tile_count, P##kdr_shadow_trace,     \
-     P##kdr_intersect_all1, P##kdr_count1, P##kdr_closest_point1}
+     P##kdr_intersect_all1, P##kdr_count1, P##kdr_closest_point1,               \
+     P##kdr_all_batch, P##kdr_count_batch}
 static const core_api cores[2] = {AB_API(A_), AB_API(B_)};
 
 /* ---- clocks ------------------------------------------------------------------ */
@@ -130,11 +139,60 @@ static uint32_t hits_hash(const kdr_hit *h, uint32_t n) {
     return x;
 }
 
+/* Rays per kdr_all_batch / kdr_count_batch call in the ball16, ball and
+ * bcount sets: the daemon's calls for these queries (exec/ chunks of 256). */
+#define AB_QUERY_BATCH 256
+
+/* The batch forms of issue 15's sets: the same columns as trace_query
+ * (prim = number of hits, t = a hash of the hits), the hash taken over
+ * the batch's t, prim, u, v arrays of each ray. */
+static void trace_query_batch(const core_api *c, const kdr_scene *s, const job *j,
+                              result *o, kdr_trav_stats *st) {
+    const uint32_t cap = j->set == SET_BALL16 ? 16 : KDR_MAX_HITS_LIMIT;
+    static uint32_t nh[AB_QUERY_BATCH];
+    static float t[AB_QUERY_BATCH * KDR_MAX_HITS_LIMIT];
+    static float u[AB_QUERY_BATCH * KDR_MAX_HITS_LIMIT];
+    static float v[AB_QUERY_BATCH * KDR_MAX_HITS_LIMIT];
+    static int32_t prim[AB_QUERY_BATCH * KDR_MAX_HITS_LIMIT];
+    for (size_t first = 0; first < j->n; first += AB_QUERY_BATCH) {
+        const size_t g = j->n - first < AB_QUERY_BATCH ? j->n - first : AB_QUERY_BATCH;
+        /* a batch of this call's rays alone: answers go to slot i of ray
+         * first + i, so the buffers hold one call */
+        kdr_ray_batch b = {g,           j->borg + 3 * first, 3, j->bdir + 3 * first,
+                           j->btmin + first, 1, j->btmax + first, 1};
+        if (j->set == SET_BCOUNT) {
+            c->count_batch(s, &b, 0, g, nh, st);
+        } else {
+            kdr_all_hits h = {nh, t, u, v, prim};
+            c->all_batch(s, &b, 0, g, cap, &h, st);
+        }
+        for (size_t i = 0; i < g; i++) {
+            uint32_t x = 2166136261u;
+            if (j->set != SET_BCOUNT) {
+                const float *cols[3] = {t + i * cap, u + i * cap, v + i * cap};
+                for (int k = 0; k < 4; k++) {
+                    const unsigned char *p =
+                        k < 3 ? (const unsigned char *)cols[k]
+                              : (const unsigned char *)(prim + i * cap);
+                    for (size_t q = 0; q < 4 * (size_t)nh[i]; q++)
+                        x = (x ^ p[q]) * 16777619u;
+                }
+            }
+            o->prim[first + i] = (int32_t)nh[i];
+            memcpy(&o->t[first + i], &x, 4);
+        }
+    }
+}
+
 /* Issue 15's sets: per query, prim = number of hits (closest: the prim) and
  * t = the hash of the hits (closest: the distance). */
 static void trace_query(const core_api *c, const kdr_scene *s, const job *j,
                         result *o, kdr_trav_stats *st) {
     static kdr_hit buf[KDR_MAX_HITS_LIMIT];
+    if (j->set >= SET_BALL16) {
+        trace_query_batch(c, s, j, o, st);
+        return;
+    }
     for (size_t i = 0; i < j->n; i++) {
         uint32_t n = 0, h = 0;
         if (j->set == SET_CLOSEST) {
@@ -391,9 +449,12 @@ static int run_scene(const opts *o, const ladder_entry *e) {
         case SET_BRANDOM:
         case SET_ALL:
         case SET_COUNT:
+        case SET_BALL:
+        case SET_BCOUNT:
             random_rays(&si, n, rays);
             break;
         case SET_ALL16:
+        case SET_BALL16:
             j.n = camera_rays(&cam, 0, rays);
             break;
         case SET_CLOSEST:
@@ -489,7 +550,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
                         "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam|all16|all|"
-                        "count|closest]...\n", argv[0]);
+                        "count|closest|ball16|ball|bcount]...\n", argv[0]);
         return 2;
     }
     ladder_entry *v;

@@ -15,9 +15,11 @@
 const char *const set_names[NSETS] = {"camera",  "random",  "ao",     "ao64",   "b8ao",
                                       "b8cam",   "frustum", "cone16", "cone64", "shadow",
                                       "brandom", "bao",     "baoc",   "bshadow", "conecam",
-                                      "all16",   "all",     "count",  "closest"};
+                                      "all16",   "all",     "count",  "closest", "ball16",
+                                      "ball",    "bcount"};
 const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0, 1,
-                                         1, 1, 1, 1, 0, 0, 0, 0, 0};
+                                         1, 1, 1, 1, 0, 0, 0, 0, 0,
+                                         0, 0, 0};
 
 void scene_bounds(scene_in *s) {
     for (int k = 0; k < 3; k++)

@@ -38,6 +38,10 @@
  *   closest  kdr_closest_point1 without a distance limit; bench_queries'
  *            points (alternately near a random triangle, offset up to
  *            1e-3 of the diagonal, and uniform in the box)
+ *   ball16, ball, bcount
+ *            all16, all and count through kdr_all_batch / kdr_count_batch
+ *            in calls of AB_QUERY_BATCH rays (the daemon's calls), so the
+ *            batch walk (kd_all_stream.c on large scenes) is A/B'd too
  *   For these, "diff" counts queries whose answer differs between A and B:
  */
 #ifndef KDRAY_BENCH_AB_SETS_H
@@ -51,7 +55,8 @@
 enum {
     SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
     SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
-    SET_BSHADOW, SET_CONECAM, SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST, NSETS
+    SET_BSHADOW, SET_CONECAM, SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
+    SET_BALL16, SET_BALL, SET_BCOUNT, NSETS
 };
 /* The sets run when no --set is given (issue 15's only on request). */
 #define DEFAULT_SETS ((1 << SET_ALL16) - 1)
