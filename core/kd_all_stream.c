@@ -102,20 +102,6 @@ static int ka_start(ka_src *c, ka_ray *r, int k, size_t id) {
     return 1;
 }
 
-/* c ? a : b for c in {0, 1}, without a branch. */
-static inline uint32_t ka_sel(uint32_t c, uint32_t a, uint32_t b) {
-    const uint32_t m = 0u - c;
-    return (a & m) | (b & ~m);
-}
-static inline float ka_self(uint32_t c, float a, float b) {
-    uint32_t x, y;
-    memcpy(&x, &a, 4);
-    memcpy(&y, &b, 4);
-    x = ka_sel(c, x, y);
-    memcpy(&a, &x, 4);
-    return a;
-}
-
 /* One turn of ray r: a node step, or (a stage of) a leaf and the pop after
  * it. Returns 1 while the ray goes on, 0 when it is done. */
 static inline int ka_turn(const ka_src *c, ka_ray *r) {
@@ -139,7 +125,7 @@ static inline int ka_turn(const ka_src *c, ka_ray *r) {
         const float t_hi = (a + r->ss[axis]) * r->inv[axis];
         const uint32_t bits = n->bits, neg = r->neg[axis];
         const uint32_t below = (uint32_t)(n - nodes) + 1, above = bits >> 4;
-        const uint32_t nearc = ka_sel(neg, above, below);
+        const uint32_t nearc = kd_sel_u32(neg, above, below);
         const uint32_t farc = nearc ^ above ^ below;
         const uint32_t go_near = (uint32_t) !(t_hi < r->tn) & ~(bits >> (2 + neg)) & 1u;
         const uint32_t go_far = (uint32_t) !(t_lo > r->tf) & ~(bits >> (3 - neg)) & 1u;
@@ -150,9 +136,9 @@ static inline int ka_turn(const ka_src *c, ka_ray *r) {
         e->tn = far_tn;
         e->tf = r->tf;
         r->sp += (int)(go_near & go_far);
-        const kd_node *next = nodes + ka_sel(go_near, nearc, farc);
-        r->tn = ka_self(go_near, r->tn, far_tn);
-        r->tf = ka_self(go_near, near_tf, r->tf);
+        const kd_node *next = nodes + kd_sel_u32(go_near, nearc, farc);
+        r->tn = kd_sel_f32(go_near, r->tn, far_tn);
+        r->tf = kd_sel_f32(go_near, near_tf, r->tf);
         if (go_near | go_far) {
             __builtin_prefetch(next);
             r->n = next;

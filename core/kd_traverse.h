@@ -32,6 +32,8 @@
 #define KD_TRAVERSE_H
 
 #include <math.h>
+#include <stdint.h>
+#include <string.h>
 
 #include "kd_internal.h"
 
@@ -126,6 +128,22 @@ static inline int kd_tri_degenerate(const float *tri) {
     double cy = e1[2] * e2[0] - e1[0] * e2[2];
     double cz = e1[0] * e2[1] - e1[1] * e2[0];
     return cx == 0.0 && cy == 0.0 && cz == 0.0;
+}
+
+/* c ? a : b for c in {0, 1}, without a branch: the interleaved walks'
+ * node steps (kd_traverse_stream.c, kd_all_stream.c), where the next
+ * address may wait for a compare because other rays fill the wait. */
+static inline uint32_t kd_sel_u32(uint32_t c, uint32_t a, uint32_t b) {
+    const uint32_t m = 0u - c;
+    return (a & m) | (b & ~m);
+}
+static inline float kd_sel_f32(uint32_t c, float a, float b) {
+    uint32_t x, y;
+    memcpy(&x, &a, 4);
+    memcpy(&y, &b, 4);
+    x = kd_sel_u32(c, x, y);
+    memcpy(&a, &x, 4);
+    return a;
 }
 
 #endif /* KD_TRAVERSE_H */

@@ -82,20 +82,6 @@ static void ks_finish(const ks_ray *r, int found, kdr_query q, kdr_hits *out,
     out->v[i] = found ? r->o.v : 0.0f;
 }
 
-/* c ? a : b for c in {0, 1}, without a branch. */
-static inline uint32_t ks_sel(uint32_t c, uint32_t a, uint32_t b) {
-    const uint32_t m = 0u - c;
-    return (a & m) | (b & ~m);
-}
-static inline float ks_self(uint32_t c, float a, float b) {
-    uint32_t x, y;
-    memcpy(&x, &a, 4);
-    memcpy(&y, &b, 4);
-    x = ks_sel(c, x, y);
-    memcpy(&a, &x, 4);
-    return a;
-}
-
 /* One turn of ray r: a node step, or a leaf and the pop after it (on
  * large scenes (stage != 0) a leaf's reference list is requested on the
  * turn that reaches it, its triangles on the next, the test on the one
@@ -121,7 +107,7 @@ static inline int ks_turn(const kdr_scene *s, ks_ray *r, const int any, const in
         /* selects as masks: a compiler's branch here would mispredict as
          * often as the single walk's */
         const uint32_t below = (uint32_t)(n - s->nodes) + 1, above = bits >> 4;
-        const uint32_t nearc = ks_sel(neg, above, below);
+        const uint32_t nearc = kd_sel_u32(neg, above, below);
         const uint32_t farc = nearc ^ above ^ below;
         const uint32_t go_near = (uint32_t) !(t_hi < r->tn) & ~(bits >> (2 + neg)) & 1u;
         const uint32_t go_far = (uint32_t) !(t_lo > r->tf) & ~(bits >> (3 - neg)) & 1u;
@@ -132,9 +118,9 @@ static inline int ks_turn(const kdr_scene *s, ks_ray *r, const int any, const in
         e->tn = far_tn;
         e->tf = r->tf;
         r->sp += (int)(go_near & go_far);
-        const kd_node *next = s->nodes + ks_sel(go_near, nearc, farc);
-        r->tn = ks_self(go_near, r->tn, far_tn);
-        r->tf = ks_self(go_near, near_tf, r->tf);
+        const kd_node *next = s->nodes + kd_sel_u32(go_near, nearc, farc);
+        r->tn = kd_sel_f32(go_near, r->tn, far_tn);
+        r->tf = kd_sel_f32(go_near, near_tf, r->tf);
         if (go_near | go_far) {
             __builtin_prefetch(next);
             r->n = next;

@@ -154,13 +154,9 @@ static void check_scene(const scene_src *src, int integer) {
     }
     kdr_bounds bb;
     kdr_scene_bounds(s, &bb);
-    rayset sets[] = {rays_camera(&bb),          rays_omni(&bb),
-                     rays_distinct(&bb),        rays_nearby(&bb),
-                     rays_zeros(&bb, integer),  rays_on_splits(s, &bb, 0),
-                     rays_on_splits(s, &bb, 1), rays_intervals(&bb, 0),
-                     rays_intervals(&bb, 1),    rays_aimed(src, &bb, 0),
-                     rays_aimed(src, &bb, 1),   rays_slack_planes(s, &bb)};
-    for (size_t k = 0; k < sizeof sets / sizeof sets[0]; k++) {
+    rayset sets[RAYS_NSETS];
+    rays_every_set(src, s, &bb, integer, sets);
+    for (size_t k = 0; k < RAYS_NSETS; k++) {
         check_set(src->name, s, &sets[k]);
         rays_free(&sets[k]);
     }

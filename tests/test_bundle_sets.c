@@ -331,3 +331,20 @@ rayset rays_intervals(const kdr_bounds *b, int shared) {
     }
     return r;
 }
+
+void rays_every_set(const scene_src *src, const kdr_scene *s, const kdr_bounds *b,
+                    int integer_org, rayset out[RAYS_NSETS]) {
+    int k = 0;
+    out[k++] = rays_camera(b);
+    out[k++] = rays_omni(b);
+    out[k++] = rays_distinct(b);
+    out[k++] = rays_nearby(b);
+    out[k++] = rays_zeros(b, integer_org);
+    out[k++] = rays_on_splits(s, b, 0);
+    out[k++] = rays_on_splits(s, b, 1);
+    out[k++] = rays_intervals(b, 0);
+    out[k++] = rays_intervals(b, 1);
+    out[k++] = rays_aimed(src, b, 0);
+    out[k++] = rays_aimed(src, b, 1);
+    out[k++] = rays_slack_planes(s, b);
+}

@@ -44,5 +44,10 @@ rayset rays_on_splits(const kdr_scene *s, const kdr_bounds *b, int shared);
 rayset rays_slack_planes(const kdr_scene *s, const kdr_bounds *b);
 rayset rays_aimed(const scene_src *src, const kdr_bounds *b, int shared);
 rayset rays_intervals(const kdr_bounds *b, int shared);
+/* Every set above for one scene, in a fixed order (the exactness tests
+ * of test_bundle and test_all_stream run all of them): out[0..RAYS_NSETS). */
+#define RAYS_NSETS 12
+void rays_every_set(const scene_src *src, const kdr_scene *s, const kdr_bounds *b,
+                    int integer_org, rayset out[RAYS_NSETS]);
 
 #endif
