@@ -24,11 +24,6 @@
 
 #define KD_COUNT_STACK 256
 
-typedef struct all_todo {
-    const kd_node *node;
-    float tn, tf;
-} all_todo;
-
 /* Where accepted hits go: a sorted, prim-unique list of at most cap hits
  * (all), or a growing list of prims (count). */
 typedef struct all_sink {

@@ -39,7 +39,7 @@ typedef struct ka_ray {
     kd_ntri_pre4 pre4;
     all_sink s;
     uint32_t local[KD_COUNT_STACK];
-    all_todo stack[KD_MAX_DEPTH];
+    kd_todo stack[KD_MAX_DEPTH];
 } ka_ray;
 
 typedef struct ka_src {
@@ -108,38 +108,11 @@ static inline int ka_turn(const ka_src *c, ka_ray *r) {
     const kdr_scene *sc = c->sc;
     const kd_node *nodes = sc->nodes, *n = r->n;
     if (!kd_is_leaf(n)) {
-        /* walk()'s node step, one node per turn, without its branches (a
-         * mispredicted branch here would stall every ray in flight): with
-         * t_lo <= t_hi, or a NaN, its five cases are "near needed unless
-         * t_hi < tn" and "far needed unless t_lo > tf", minus an empty
-         * child (bit 2 of bits: below empty, bit 3: above); the far entry
-         * is always written (sp < KD_MAX_DEPTH at an interior node) and
-         * kept only when both children are taken. When only the near child
-         * is taken because t_lo > tf, min(t_hi, tf) is tf; when only the
-         * far one because t_hi < tn, max(t_lo, tn) is tn: the intervals are
-         * walk()'s. */
+        /* walk()'s node step, one node per turn, without its branches */
         r->s.nodes++;
-        const int axis = kd_axis(n);
-        const float a = n->u.split - r->org[axis];
-        const float t_lo = (a - r->ss[axis]) * r->inv[axis];
-        const float t_hi = (a + r->ss[axis]) * r->inv[axis];
-        const uint32_t bits = n->bits, neg = r->neg[axis];
-        const uint32_t below = (uint32_t)(n - nodes) + 1, above = bits >> 4;
-        const uint32_t nearc = kd_sel_u32(neg, above, below);
-        const uint32_t farc = nearc ^ above ^ below;
-        const uint32_t go_near = (uint32_t) !(t_hi < r->tn) & ~(bits >> (2 + neg)) & 1u;
-        const uint32_t go_far = (uint32_t) !(t_lo > r->tf) & ~(bits >> (3 - neg)) & 1u;
-        const float far_tn = t_lo > r->tn ? t_lo : r->tn;
-        const float near_tf = t_hi < r->tf ? t_hi : r->tf;
-        all_todo *e = &r->stack[r->sp];
-        e->node = nodes + farc;
-        e->tn = far_tn;
-        e->tf = r->tf;
-        r->sp += (int)(go_near & go_far);
-        const kd_node *next = nodes + kd_sel_u32(go_near, nearc, farc);
-        r->tn = kd_sel_f32(go_near, r->tn, far_tn);
-        r->tf = kd_sel_f32(go_near, near_tf, r->tf);
-        if (go_near | go_far) {
+        const kd_node *next = kd_step_nobranch(nodes, n, r->org, r->inv, r->ss, r->neg,
+                                               &r->tn, &r->tf, r->stack, &r->sp);
+        if (next) {
             __builtin_prefetch(next);
             r->n = next;
             return 1;

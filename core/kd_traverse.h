@@ -130,9 +130,15 @@ static inline int kd_tri_degenerate(const float *tri) {
     return cx == 0.0 && cy == 0.0 && cz == 0.0;
 }
 
+/* A subtree still to visit over [tn, tf]: the walks' stack entry. */
+typedef struct kd_todo {
+    const kd_node *node;
+    float tn, tf;
+} kd_todo;
+
 /* c ? a : b for c in {0, 1}, without a branch: the interleaved walks'
- * node steps (kd_traverse_stream.c, kd_all_stream.c), where the next
- * address may wait for a compare because other rays fill the wait. */
+ * node steps (kd_step_nobranch), where the next address may wait for a
+ * compare because other rays fill the wait. */
 static inline uint32_t kd_sel_u32(uint32_t c, uint32_t a, uint32_t b) {
     const uint32_t m = 0u - c;
     return (a & m) | (b & ~m);
@@ -144,6 +150,47 @@ static inline float kd_sel_f32(uint32_t c, float a, float b) {
     x = kd_sel_u32(c, x, y);
     memcpy(&a, &x, 4);
     return a;
+}
+
+/* The interleaved walks' node step (kd_traverse_stream.c, kd_all_stream.c):
+ * the single walk's descent at interior node n, one node per turn, without
+ * its branches (a mispredicted branch would stall every ray in flight).
+ * With t_lo <= t_hi, or a NaN, its five cases are "near needed unless t_hi
+ * < tn" and "far needed unless t_lo > tf", minus an empty child (bit 2 of
+ * bits: below empty, bit 3: above; at most one child of a node is empty).
+ * The far entry is always written to stack[*sp] (sp < KD_MAX_DEPTH at an
+ * interior node: the build splits only above depth KD_MAX_DEPTH) and kept
+ * only when both children are taken. When only the near child is taken
+ * because t_lo > tf, min(t_hi, tf) is tf; when only the far one because
+ * t_hi < tn, max(t_lo, tn) is tn: the intervals are the single walk's, its
+ * float operations in its order. Returns the child to visit next with its
+ * interval in *tn, *tf, or NULL when neither child is needed (pop). */
+static inline const kd_node *kd_step_nobranch(const kd_node *nodes, const kd_node *n,
+                                              const float org[3], const float inv[3],
+                                              const float ss[3], const uint32_t neg[3],
+                                              float *tn, float *tf, kd_todo *stack,
+                                              int *sp) {
+    const int axis = kd_axis(n);
+    const float a = n->u.split - org[axis];
+    const float t_lo = (a - ss[axis]) * inv[axis];
+    const float t_hi = (a + ss[axis]) * inv[axis];
+    const uint32_t bits = n->bits, ng = neg[axis];
+    const uint32_t below = (uint32_t)(n - nodes) + 1, above = bits >> 4;
+    const uint32_t nearc = kd_sel_u32(ng, above, below);
+    const uint32_t farc = nearc ^ above ^ below;
+    const uint32_t go_near = (uint32_t) !(t_hi < *tn) & ~(bits >> (2 + ng)) & 1u;
+    const uint32_t go_far = (uint32_t) !(t_lo > *tf) & ~(bits >> (3 - ng)) & 1u;
+    const float far_tn = t_lo > *tn ? t_lo : *tn;
+    const float near_tf = t_hi < *tf ? t_hi : *tf;
+    kd_todo *e = &stack[*sp];
+    e->node = nodes + farc;
+    e->tn = far_tn;
+    e->tf = *tf;
+    *sp += (int)(go_near & go_far);
+    const kd_node *next = nodes + kd_sel_u32(go_near, nearc, farc);
+    *tn = kd_sel_f32(go_near, *tn, far_tn);
+    *tf = kd_sel_f32(go_near, near_tf, *tf);
+    return (go_near | go_far) ? next : NULL;
 }
 
 #endif /* KD_TRAVERSE_H */

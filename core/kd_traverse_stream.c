@@ -92,36 +92,10 @@ static inline int ks_turn(const kdr_scene *s, ks_ray *r, const int any, const in
     const kd_node *n = r->n;
     r->o.nodes += (uint64_t)(r->pend == 0);
     if (!kd_is_leaf(n)) {
-        /* descend()'s step without its branches: with t_lo <= t_hi (or
-         * NaN) its five cases are "near needed unless t_hi < tn", "far
-         * needed unless t_lo > tf", minus the empty child (at most one
-         * child of a node is empty: a split node holds references); the
-         * far entry is always written (sp < KD_MAX_DEPTH at an interior
-         * node: the build splits only above depth KD_MAX_DEPTH) and kept
-         * only when both are taken */
-        const int axis = kd_axis(n);
-        const float a = n->u.split - r->org[axis];
-        const float t_lo = (a - r->ss[axis]) * r->inv[axis];
-        const float t_hi = (a + r->ss[axis]) * r->inv[axis];
-        const uint32_t bits = n->bits, neg = r->neg[axis];
-        /* selects as masks: a compiler's branch here would mispredict as
-         * often as the single walk's */
-        const uint32_t below = (uint32_t)(n - s->nodes) + 1, above = bits >> 4;
-        const uint32_t nearc = kd_sel_u32(neg, above, below);
-        const uint32_t farc = nearc ^ above ^ below;
-        const uint32_t go_near = (uint32_t) !(t_hi < r->tn) & ~(bits >> (2 + neg)) & 1u;
-        const uint32_t go_far = (uint32_t) !(t_lo > r->tf) & ~(bits >> (3 - neg)) & 1u;
-        const float far_tn = t_lo > r->tn ? t_lo : r->tn;
-        const float near_tf = t_hi < r->tf ? t_hi : r->tf;
-        kd_todo *e = &r->stack[r->sp];
-        e->node = s->nodes + farc;
-        e->tn = far_tn;
-        e->tf = r->tf;
-        r->sp += (int)(go_near & go_far);
-        const kd_node *next = s->nodes + kd_sel_u32(go_near, nearc, farc);
-        r->tn = kd_sel_f32(go_near, r->tn, far_tn);
-        r->tf = kd_sel_f32(go_near, near_tf, r->tf);
-        if (go_near | go_far) {
+        /* descend()'s step, one node per turn, without its branches */
+        const kd_node *next = kd_step_nobranch(s->nodes, n, r->org, r->inv, r->ss,
+                                               r->neg, &r->tn, &r->tf, r->stack, &r->sp);
+        if (next) {
             __builtin_prefetch(next);
             r->n = next;
             return 1;

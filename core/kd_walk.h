@@ -18,11 +18,6 @@
 #include "kd_tri.h"
 #include "kd_tri_ntri.h"
 
-typedef struct kd_todo {
-    const kd_node *node;
-    float tn, tf;
-} kd_todo;
-
 typedef struct kd_walk_out {
     float t, u, v;
     int32_t prim;
