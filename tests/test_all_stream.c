@@ -107,7 +107,7 @@ static void compare(const char *scene, const rayset *rs, const kdr_scene *s, uin
     free(h);
 }
 
-static void check_set(const char *scene, const kdr_scene *s, const rayset *rs) {
+static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
     static const uint32_t caps[] = {1, 3, 16, KDR_MAX_HITS_LIMIT};
     const kdr_ray_batch b = {rs->n, rs->org, rs->shared_org ? 0 : 3, rs->dir,
                              rs->tmin, 1, rs->tmax, 1};
@@ -146,21 +146,7 @@ static void check_set(const char *scene, const kdr_scene *s, const rayset *rs) {
 }
 
 static void check_scene(const scene_src *src, int integer) {
-    kdr_scene *s = NULL;
-    if (kdr_scene_build(src->tris, src->ntris, NULL, NULL, NULL, &s) != KDR_OK) {
-        fprintf(stderr, "FAIL: building %s\n", src->name);
-        failures++;
-        return;
-    }
-    kdr_bounds bb;
-    kdr_scene_bounds(s, &bb);
-    rayset sets[RAYS_NSETS];
-    rays_every_set(src, s, &bb, integer, sets);
-    for (size_t k = 0; k < RAYS_NSETS; k++) {
-        check_set(src->name, s, &sets[k]);
-        rays_free(&sets[k]);
-    }
-    kdr_scene_free(s);
+    failures += rays_check_every_set(src, integer, check_set);
 }
 
 /* A soup of n small triangles in [-1, 1]^3 (edges up to 0.06): about 50

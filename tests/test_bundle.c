@@ -228,21 +228,7 @@ static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
 }
 
 static void check_scene(const scene_src *src, int integer) {
-    kdr_scene *s = NULL;
-    if (kdr_scene_build(src->tris, src->ntris, NULL, NULL, NULL, &s) != KDR_OK) {
-        fprintf(stderr, "FAIL: building %s\n", src->name);
-        failures++;
-        return;
-    }
-    kdr_bounds bb;
-    kdr_scene_bounds(s, &bb);
-    rayset sets[RAYS_NSETS];
-    rays_every_set(src, s, &bb, integer, sets);
-    for (size_t k = 0; k < RAYS_NSETS; k++) {
-        check_set(src->name, s, &sets[k]);
-        rays_free(&sets[k]);
-    }
-    kdr_scene_free(s);
+    failures += rays_check_every_set(src, integer, check_set);
 }
 
 /* Stride-0 tmin/tmax: one interval shared by every ray. */

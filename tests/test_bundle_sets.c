@@ -5,6 +5,7 @@
  * a run is the same rays every time.
  */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -347,4 +348,22 @@ void rays_every_set(const scene_src *src, const kdr_scene *s, const kdr_bounds *
     out[k++] = rays_aimed(src, b, 0);
     out[k++] = rays_aimed(src, b, 1);
     out[k++] = rays_slack_planes(s, b);
+}
+
+int rays_check_every_set(const scene_src *src, int integer_org, rays_check_fn check) {
+    kdr_scene *s = NULL;
+    if (kdr_scene_build(src->tris, src->ntris, NULL, NULL, NULL, &s) != KDR_OK) {
+        fprintf(stderr, "FAIL: building %s\n", src->name);
+        return 1;
+    }
+    kdr_bounds bb;
+    kdr_scene_bounds(s, &bb);
+    rayset sets[RAYS_NSETS];
+    rays_every_set(src, s, &bb, integer_org, sets);
+    for (size_t k = 0; k < RAYS_NSETS; k++) {
+        check(src->name, s, &sets[k]);
+        rays_free(&sets[k]);
+    }
+    kdr_scene_free(s);
+    return 0;
 }

@@ -49,5 +49,10 @@ rayset rays_intervals(const kdr_bounds *b, int shared);
 #define RAYS_NSETS 12
 void rays_every_set(const scene_src *src, const kdr_scene *s, const kdr_bounds *b,
                     int integer_org, rayset out[RAYS_NSETS]);
+/* Builds src's tree and hands every set of rays_every_set() to check, one
+ * at a time (freed after). Returns 1 if the build failed (after saying
+ * so on stderr), else 0. */
+typedef void (*rays_check_fn)(const char *scene, const kdr_scene *s, rayset *rs);
+int rays_check_every_set(const scene_src *src, int integer_org, rays_check_fn check);
 
 #endif
