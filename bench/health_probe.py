@@ -110,23 +110,8 @@ def probe(port, n, gap, keep):
     return sorted(lat)
 
 
-def pct(lat, p):
-    return lat[min(len(lat) - 1, int(p / 100.0 * len(lat)))]
-
-
 def summary(lat):
-    return (pct(lat, 50), pct(lat, 90), pct(lat, 99), lat[-1])
-
-
-LOAD = r'''
-import http.client, sys
-c = http.client.HTTPConnection(sys.argv[1], int(sys.argv[2]), timeout=3600)
-body = open(sys.argv[3], "rb").read()
-while True:
-    c.request("POST", "/v1/scenes/default/cone-shadow", body,
-              {"Content-Type": "application/json"})
-    c.getresponse().read()
-'''
+    return (lib.pct(lat, 50), lib.pct(lat, 90), lib.pct(lat, 99), lat[-1])
 
 
 def main():
@@ -154,7 +139,7 @@ def main():
             tmp = tempfile.NamedTemporaryFile("w", suffix=".json", delete=False)
             json.dump(lib.long_shadow_payload(10000), tmp)
             tmp.close()
-            loads = [subprocess.Popen([sys.executable, "-c", LOAD, "127.0.0.1",
+            loads = [subprocess.Popen([sys.executable, "-c", lib.BUSY_CLIENT, "127.0.0.1",
                                        str(port), tmp.name])
                      for _, port in servers for _ in range(2)]
             time.sleep(2.0)

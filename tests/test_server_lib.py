@@ -217,6 +217,26 @@ def long_shadow_payload(points, seed=5):
     return {"points": pts, "lights": lights, "samples": 4096}
 
 
+# A client that posts one cone-shadow body (argv[3]) to kdrayd at
+# argv[1]:argv[2] in a loop, run as its own process (`python3 -c
+# BUSY_CLIENT host port body`): the health tests keep every worker busy
+# with it without this process's GIL in the probes' way.
+BUSY_CLIENT = r'''
+import http.client, sys
+c = http.client.HTTPConnection(sys.argv[1], int(sys.argv[2]), timeout=3600)
+body = open(sys.argv[3], "rb").read()
+while True:
+    c.request("POST", "/v1/scenes/default/cone-shadow", body,
+              {"Content-Type": "application/json"})
+    c.getresponse().read()
+'''
+
+
+def pct(lat, p):
+    """The p-th percentile of a sorted list (nearest rank, no interpolation)."""
+    return lat[min(len(lat) - 1, int(p / 100.0 * len(lat)))]
+
+
 def add_client_path(clients_dir):
     if clients_dir not in sys.path:
         sys.path.insert(0, clients_dir)

@@ -499,17 +499,6 @@ def test_flags(t):
 
 # ---- health latency while every worker traces -----------------------------------
 
-LOAD = r'''
-import http.client, sys
-c = http.client.HTTPConnection(sys.argv[1], int(sys.argv[2]), timeout=3600)
-body = open(sys.argv[3], "rb").read()
-while True:
-    c.request("POST", "/v1/scenes/default/cone-shadow", body,
-              {"Content-Type": "application/json"})
-    c.getresponse().read()
-'''
-
-
 def probe_health(host, port, n, limit_ms=None):
     """n probes, each on a new connection (as a balancer or a kubelet does),
     5 ms apart; latencies in ms, sorted. With limit_ms, stops early once
@@ -536,10 +525,6 @@ def probe_health(host, port, n, limit_ms=None):
     return sorted(lat)
 
 
-def pct(lat, p):
-    return lat[min(len(lat) - 1, int(p / 100.0 * len(lat)))]
-
-
 def test_health_latency(t):
     """p99 of GET /v1/health on new connections while both workers trace a
     query that takes ~20 s. The load runs in separate processes (a client
@@ -562,8 +547,8 @@ def test_health_latency(t):
         host, port = d.url.split("//")[1].split(":")
         port = int(port)
         idle = probe_health(host, port, HEALTH_PROBES)
-        loads = [subprocess.Popen([sys.executable, "-c", LOAD, host, str(port), body_path])
-                 for _ in range(2)]
+        loads = [subprocess.Popen([sys.executable, "-c", lib.BUSY_CLIENT, host, str(port),
+                                   body_path]) for _ in range(2)]
         t.eq(wait_metric(c, "kdray_workers_busy", 2), 2.0, "both workers trace")
         # Issue 13's figure is 5 ms, but on a virtual machine whose own wake-up
         # jitter puts even the idle daemon's p99 above it (seen: 5.5-11.8 ms,
@@ -571,17 +556,18 @@ def test_health_latency(t):
         # machine. What the test must catch is probes that wait behind
         # queries (seconds): the bound is the larger of 5 ms and 1.5 x the
         # idle p99. The absolute figure is reported in the output.
-        limit = max(HEALTH_P99_MS, HEALTH_IDLE_FACTOR * pct(idle, 99))
+        limit = max(HEALTH_P99_MS, HEALTH_IDLE_FACTOR * lib.pct(idle, 99))
         ok = False
         for rnd in range(HEALTH_ROUNDS):
             busy = probe_health(host, port, HEALTH_PROBES, limit)
             still = lib.metric(metrics(c), "kdray_workers_busy")
             print("  round %d: %d probes, health p50 %.2f p90 %.2f p99 %.2f max %.2f ms "
                   "with %d of 2 workers busy (idle: p50 %.2f p99 %.2f ms)"
-                  % (rnd + 1, len(busy), pct(busy, 50), pct(busy, 90), pct(busy, 99),
-                     busy[-1], still, pct(idle, 50), pct(idle, 99)), flush=True)
+                  % (rnd + 1, len(busy), lib.pct(busy, 50), lib.pct(busy, 90),
+                     lib.pct(busy, 99), busy[-1], still, lib.pct(idle, 50),
+                     lib.pct(idle, 99)), flush=True)
             t.eq(still, 2.0, "every worker still busy after the probes")
-            if len(busy) == HEALTH_PROBES and pct(busy, 99) < limit:
+            if len(busy) == HEALTH_PROBES and lib.pct(busy, 99) < limit:
                 ok = True
                 break
         t.check(ok, "health p99 < %.1f ms (the larger of %.0f ms and %.1f x the idle "
