@@ -54,9 +54,9 @@ int daemon_start(daemon_proc *d, const char *kdrayd, unsigned threads,
     if (d->pid == 0) {
         dup2(p[1], 2);
         close(p[0]), close(p[1]);
-        execl(kdrayd, kdrayd, "--listen", "127.0.0.1:0", "--threads", nthreads,
-              "--scene", scene, "--max-body-mb", "128", "--max-rays", "16777216",
-              "--worker-nice", "0", (char *)NULL);
+        execl(kdrayd, kdrayd, "--listen", "127.0.0.1:0", "--threads", nthreads, "--scene",
+              scene, "--max-body-mb", "128", "--max-rays", "16777216", "--worker-nice",
+              "0", (char *)NULL);
         perror(kdrayd);
         _exit(127);
     }
@@ -131,8 +131,8 @@ static int fill(int fd, inbuf *b, size_t want) { /* until len - pos >= want */
     return 0;
 }
 
-int http_post(int fd, const char *path, const unsigned char *body, size_t len,
-              inbuf *in, unsigned char **ans, size_t *anslen, times *tm) {
+int http_post(int fd, const char *path, const unsigned char *body, size_t len, inbuf *in,
+              unsigned char **ans, size_t *anslen, times *tm) {
     const double t0 = wall_ms();
     char head[512];
     const int hn = snprintf(head, sizeof head,
@@ -186,19 +186,7 @@ static void put(obuf *b, const void *p, size_t n) {
 
 static void head(obuf *b, int major, uint64_t n) {
     unsigned char h[9];
-    int k = 0;
-    if (n < 24) {
-        h[k++] = (unsigned char)(major << 5 | (int)n);
-    } else {
-        const int size = n < 256 ? 1 : n < 65536 ? 2 : n < 1ull << 32 ? 4 : 8;
-        h[k++] = (unsigned char)(major << 5 | (size == 1   ? 24
-                                               : size == 2 ? 25
-                                               : size == 4 ? 26
-                                                           : 27));
-        for (int i = size - 1; i >= 0; i--)
-            h[k++] = (unsigned char)(n >> (8 * i));
-    }
-    put(b, h, (size_t)k);
+    put(b, h, cbor_head(h, (unsigned)major, n));
 }
 
 static void text(obuf *b, const char *s) {
@@ -329,4 +317,3 @@ long answer_hits(const unsigned char *p, size_t len, size_t n) {
     }
     return -1;
 }
-

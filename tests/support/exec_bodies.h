@@ -15,8 +15,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "kdr_exec.h"
 #include "check.h"
+#include "kdr_exec.h"
+#include "test_util.h"
 
 static uint64_t rng_state = 0x9e3779b97f4a7c15ull;
 static double frand(void) {
@@ -125,19 +126,7 @@ static void raw(body *b, const void *p, size_t n) {
 
 static void head(body *b, unsigned major, uint64_t v) {
     unsigned char h[9];
-    size_t n = 1;
-    if (v < 24) {
-        h[0] = (unsigned char)(major << 5 | v);
-    } else {
-        int bytes = v < 256 ? 1 : v < 65536 ? 2 : v < (1ull << 32) ? 4 : 8;
-        h[0] = (unsigned char)(major << 5 | (bytes == 1   ? 24
-                                             : bytes == 2 ? 25
-                                             : bytes == 4 ? 26
-                                                          : 27));
-        for (int k = bytes - 1; k >= 0; k--)
-            h[n++] = (unsigned char)(v >> (8 * k));
-    }
-    raw(b, h, n);
+    raw(b, h, cbor_head(h, major, v));
 }
 
 static void text(body *b, const char *t) {
