@@ -3,7 +3,8 @@
  * against Embree's BVH builds (HIGH quality, the one the rival traces, and
  * the default MEDIUM), memory per triangle, and kdray's single-ray walk
  * (kdr_intersect1 / kdr_occluded1) against every rival API on camera,
- * random and AO any-hit rays, and the batch API (kdr_trace_batch AUTO in
+ * random, AO any-hit and shadow rays (16 per point toward a sphere light,
+ * bench.h), and the batch API (kdr_trace_batch AUTO in
  * calls of BENCH_BATCH_RAYS rays with their own origins: bundles or the
  * interleaved walk, as the daemon traces a request) beside it. At the end,
  * one table of kd against the strongest Embree API per workload, read back
@@ -15,7 +16,7 @@
 #include "bench.h"
 #include "rival.h"
 
-static const char *const core_workloads[] = {"camera", "random", "ao_any"};
+static const char *const core_workloads[] = {"camera", "random", "ao_any", "shadow"};
 #define NWORK (sizeof core_workloads / sizeof *core_workloads)
 
 /* Scenes in run order with the numbers only this section knows. */

@@ -116,7 +116,9 @@ def core_tables(core, bpt):
                        "rtcIntersect8_coherent", "rtcIntersect16_coherent"],
             "random": ["rtcIntersect1", "rtcIntersect1M", "rtcIntersect8",
                        "rtcIntersect16"],
-            "ao_any": ["rtcOccluded1", "rtcOccluded1M", "rtcOccluded8", "rtcOccluded16"]}
+            "ao_any": ["rtcOccluded1", "rtcOccluded1M", "rtcOccluded8", "rtcOccluded16"],
+            "shadow": ["rtcOccluded1", "rtcOccluded1M_coherent", "rtcOccluded8_coherent",
+                       "rtcOccluded16_coherent"]}
     for w, names in apis.items():
         print("%s:\n" % w)
         print("| scene | kd Mrays/s | best Embree Mrays/s (API) | kd / best | " +
@@ -226,7 +228,7 @@ def targets(core, bun, fru, cone):
         rng([ms(r, "build", "kd_build") / ms(r, "build", "embree_build_medium")
              for _, r in L if ms(r, "build", "embree_build_medium")])))
     for w, one in (("random", "embree_rtcIntersect1"), ("camera", "embree_rtcIntersect1"),
-                   ("ao_any", "embree_rtcOccluded1")):
+                   ("ao_any", "embree_rtcOccluded1"), ("shadow", "embree_rtcOccluded1")):
         print("- single %s: vs strongest %s (APIs: %s); vs %s %s" % (
             w, rng([vs_best(r, w, "kd_single")[0] for _, r in L]),
             ", ".join(sorted({short(best(r, w)[0]) for _, r in L})), one[7:],
