@@ -83,6 +83,11 @@ struct kdr_scene {
  * kd_image.c refuses to compile until they do. */
 #define KD_SCENE_STRUCT_SIZE 192
 
+/* A scene's large read-mostly array (core/kd_mem.c): at least
+ * KD_HUGE_MIN_BYTES gets 2 MiB alignment and MADV_HUGEPAGE on Linux, the
+ * rest plain malloc (never NULL for 0 bytes). Freed with free(). */
+void *kd_mem_alloc(size_t bytes);
+
 /* Requests the rows of triangles refs[0..count) (two lines may hold a
  * 36-byte row); walks call it at a leaf when scene->prefetch_leaves. Kept
  * out of line so that leaf loops of small scenes keep their shape. */
