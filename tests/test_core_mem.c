@@ -76,10 +76,10 @@ static void test_scene(void) {
     free(t);
 }
 
-/* The allocator's own edges: 0 and small sizes are plain malloc, the
- * threshold is 2 MiB-aligned and advised, and all of it is writable to
- * its last byte (ASan checks that the rounding beyond it is poisoned:
- * reading it would be reported, not tested here). */
+/* The allocator's own edges: 0 and small sizes are malloc'd, the threshold
+ * and above 2 MiB-aligned and advised, and all of it is writable to its
+ * last byte (ASan checks that the rounding beyond it is poisoned: reading
+ * it would be reported, not tested here). */
 static void test_alloc(void) {
     const size_t sizes[] = {0, 1, 4096, KD_HUGE_MIN_BYTES - 1, KD_HUGE_MIN_BYTES,
                             (size_t)5 << 20};
@@ -91,8 +91,38 @@ static void test_alloc(void) {
         if (sizes[i])
             memset(p, 0xa5, sizes[i]);
         check_array("kd_mem_alloc", p, sizes[i]);
-        free(p);
+        kd_mem_free(p);
     }
+    kd_mem_free(NULL);
+}
+
+/* Memory the process touched and freed back to malloc is backed by 4 KiB
+ * pages already, and advice does not change pages that exist: a large
+ * array must come untouched (no resident page in its mapping) even right
+ * after such a free, as the final arrays come after a build's scratch. */
+static void test_fresh(void) {
+    /* a 16 MiB mmap'd block freed raises malloc's mmap threshold to 16 MiB,
+     * so the 12 MiB block after it comes from the heap and stays there */
+    /* (through a volatile pointer: a compiler may drop an unused malloc) */
+    static unsigned char *volatile junk;
+    junk = malloc((size_t)16 << 20);
+    free(junk);
+    junk = malloc((size_t)12 << 20);
+    if (!junk)
+        abort();
+    memset(junk, 1, (size_t)12 << 20);
+    free(junk);
+    const size_t bytes = (size_t)8 << 20;
+    unsigned char *p = kd_mem_alloc(bytes);
+    CHECK(p != NULL, "kd_mem_alloc(%zu) failed", bytes);
+    if (!p)
+        return;
+    const thp_vma v = thp_vma_of(p);
+    CHECK(v.found && v.rss_kb == 0, "a new %zu-byte array at %p already has %ld kB "
+          "resident: it reuses touched memory, which stays in 4 KiB pages", bytes, (void *)p,
+          v.rss_kb);
+    check_array("after a heap free", p, bytes);
+    kd_mem_free(p);
 }
 
 int main(void) {
@@ -102,6 +132,7 @@ int main(void) {
         return check_exit("test_core_mem");
     }
     test_alloc();
+    test_fresh();
     test_scene();
     return check_exit("test_core_mem");
 }

@@ -19,11 +19,12 @@ typedef struct thp_vma {
     int eligible;   /* THPeligible value, -1 when the kernel does not print it */
     int advised;    /* "hg" in VmFlags */
     char perms[5];  /* "r--p" and so on */
+    long rss_kb;    /* resident kB of the whole mapping */
 } thp_vma;
 
 /* The smaps entry of the mapping holding addr. */
 static inline thp_vma thp_vma_of(const void *addr) {
-    thp_vma v = {0, -1, 0, ""};
+    thp_vma v = {0, -1, 0, "", -1};
     FILE *f = fopen("/proc/self/smaps", "r");
     if (!f)
         return v;
@@ -46,8 +47,11 @@ static inline thp_vma thp_vma_of(const void *addr) {
         if (!inside)
             continue;
         int e;
+        long kb;
         if (sscanf(line, "THPeligible: %d", &e) == 1)
             v.eligible = e;
+        else if (sscanf(line, "Rss: %ld kB", &kb) == 1)
+            v.rss_kb = kb;
         else if (strncmp(line, "VmFlags:", 8) == 0)
             v.advised = strstr(line, " hg") != NULL;
     }
