@@ -15,3 +15,10 @@ if(TARGET kdray_server)
   set_target_properties(kdray_bench_cache_mem PROPERTIES OUTPUT_NAME kdray-bench-cache-mem)
   target_link_libraries(kdray_bench_cache_mem PRIVATE kdray_server)
 endif()
+
+# The rival's memory: which of Embree's allocations are in huge pages and
+# whether its traversal reads the vertex and index buffers (issue 11's
+# fairness check). Prints only.
+add_executable(kdray_bench_rival_mem ${CMAKE_CURRENT_SOURCE_DIR}/bench_rival_mem.c)
+set_target_properties(kdray_bench_rival_mem PROPERTIES OUTPUT_NAME kdray-bench-rival-mem)
+target_link_libraries(kdray_bench_rival_mem PRIVATE kdray_bench_lib kdray_scenes)
