@@ -6,3 +6,19 @@
 # programs.cmake and linked by name. Not a test.
 add_executable(kdray_bench_build ${CMAKE_CURRENT_SOURCE_DIR}/bench_build.c)
 target_link_libraries(kdray_bench_build PRIVATE kdray_bench_lib)
+
+# A cached tree read into huge-page memory (kdrayd's load, server/
+# tree_cache.c) against the same file mapped shared: load time, huge pages
+# and single-ray speed in one process (issue 11). Prints only.
+if(TARGET kdray_server)
+  add_executable(kdray_bench_cache_mem ${CMAKE_CURRENT_SOURCE_DIR}/bench_cache_mem.c)
+  set_target_properties(kdray_bench_cache_mem PROPERTIES OUTPUT_NAME kdray-bench-cache-mem)
+  target_link_libraries(kdray_bench_cache_mem PRIVATE kdray_server)
+endif()
+
+# The rival's memory: which of Embree's allocations are in huge pages and
+# whether its traversal reads the vertex and index buffers (issue 11's
+# fairness check). Prints only.
+add_executable(kdray_bench_rival_mem ${CMAKE_CURRENT_SOURCE_DIR}/bench_rival_mem.c)
+set_target_properties(kdray_bench_rival_mem PROPERTIES OUTPUT_NAME kdray-bench-rival-mem)
+target_link_libraries(kdray_bench_rival_mem PRIVATE kdray_bench_lib kdray_scenes)

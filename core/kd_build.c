@@ -558,7 +558,7 @@ int kdr_scene_build(const float *tris, size_t ntris, const kdr_build_opts *opts,
         return err;
     const double t0 = now_ms();
     kdr_scene *s = calloc(1, sizeof *s);
-    if (!s || !(s->tris = malloc(9 * ntris * sizeof(float) + 1))) {
+    if (!s || !(s->tris = kd_mem_alloc(9 * ntris * sizeof(float) + 1))) {
         free(s);
         return KDR_ENOMEM;
     }

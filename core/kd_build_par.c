@@ -323,11 +323,11 @@ int kd_stitch(kd_frag **frags, size_t nfrags, const kdr_build_opts *o,
     stitcher st;
     memset(&st, 0, sizeof st);
     st.frags = frags;
-    st.nodes = malloc((nn ? nn : 1) * sizeof *st.nodes);
-    st.refs = malloc((nr ? nr : 1) * sizeof *st.refs);
+    st.nodes = kd_mem_alloc(nn * sizeof *st.nodes);
+    st.refs = kd_mem_alloc(nr * sizeof *st.refs);
     if (!st.nodes || !st.refs) {
-        free(st.nodes);
-        free(st.refs);
+        kd_mem_free(st.nodes);
+        kd_mem_free(st.refs);
         return KDR_ENOMEM;
     }
     const double area = box_area(&s->bounds);

@@ -83,6 +83,13 @@ struct kdr_scene {
  * kd_image.c refuses to compile until they do. */
 #define KD_SCENE_STRUCT_SIZE 192
 
+/* A scene's large read-mostly array (core/kd_mem.c): at least
+ * KD_HUGE_MIN_BYTES gets a mapping of its own, 2 MiB-aligned and advised
+ * with MADV_HUGEPAGE on Linux, the rest malloc (never NULL for 0 bytes
+ * unless out of memory). Freed only with kd_mem_free (NULL is a no-op). */
+void *kd_mem_alloc(size_t bytes);
+void kd_mem_free(void *p);
+
 /* Requests the rows of triangles refs[0..count) (two lines may hold a
  * 36-byte row); walks call it at a leaf when scene->prefetch_leaves. Kept
  * out of line so that leaf loops of small scenes keep their shape. */

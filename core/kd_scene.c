@@ -42,9 +42,9 @@ void kdr_scene_free(kdr_scene *scene) {
     if (!scene)
         return;
     if (!scene->borrowed) {
-        free(scene->tris);
-        free(scene->nodes);
-        free(scene->refs);
+        kd_mem_free(scene->tris);
+        kd_mem_free(scene->nodes);
+        kd_mem_free(scene->refs);
     }
     free(scene);
 }

@@ -104,6 +104,13 @@
  * lives in L2 anyway, hence the threshold (a core's L2 is 1 MiB here). */
 #define KD_PREFETCH_MIN_BYTES ((size_t)1 << 20)
 
+/* ---- scene memory (kd_mem.c) ------------------------------------------------
+ * Arrays of a scene (triangles, nodes, references) of at least this many
+ * bytes are 2 MiB-aligned and advised for transparent huge pages; smaller
+ * ones stay plain malloc, where rounding up to a 2 MiB page would waste
+ * more than it saves (a 1 MiB array fits a core's L2 TLB reach anyway). */
+#define KD_HUGE_MIN_BYTES ((size_t)1 << 20)
+
 /* ---- bundles (kd_batch.c, kd_traverse_bundle_run.h) ------------------------
  * Rays are bundled in chunks of KB_CHUNK; a chunk whose mean direction
  * spread per 8 rays exceeds KB_SORT_SPREAD is regrouped by direction first. */

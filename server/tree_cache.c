@@ -8,10 +8,16 @@
  * here (checksum, and that they tile the scene's triangles).
  *
  * Files are mapped read-only and shared (MAP_SHARED): replicas on one
- * machine that share the directory share the tree's pages. A file is never
- * changed in place once published (writers rename a new file over it), so
- * a mapping stays valid; only someone truncating a cache file by hand under
- * a running daemon could fault it.
+ * machine that share the directory share the tree's pages. The mapping is
+ * placed at a 2 MiB boundary and advised for transparent huge pages
+ * (MADV_HUGEPAGE) before the validation reads it (map_huge): then the
+ * page cache reads the file in 2 MiB folios and the walks' TLB misses on
+ * large trees drop, as for a built tree's arrays (core/kd_mem.c, issue 11;
+ * docs/TRAVERSAL.md, docs/OPERATIONS.md). Pages already cached in small
+ * pieces (the file read by another program first) stay small. A file is
+ * never changed in place once published (writers rename a new file over
+ * it), so a mapping stays valid; only someone truncating a cache file by
+ * hand under a running daemon could fault it.
  */
 #define _GNU_SOURCE
 #include "tree_cache.h"
@@ -19,6 +25,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <stdatomic.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -122,6 +129,35 @@ static int ranges_tile(const kdr_mesh_range *r, size_t n, size_t ntris) {
     return next == ntris;
 }
 
+#define HUGE_PAGE ((size_t)2 << 20)
+
+/* fd mapped read-only and shared at a 2 MiB boundary (file offset 0 there,
+ * so the file's 2 MiB pieces line up with huge pages), advised for huge
+ * pages before anything touches it; MAP_FAILED on error. The mapping is
+ * exactly len bytes (page-rounded): kdr_tree_cache_unmap(map, len) frees
+ * it. */
+static void *map_huge(int fd, size_t len) {
+    /* reserve room to align in, then map the file over the aligned part */
+    unsigned char *raw = mmap(NULL, len + HUGE_PAGE, PROT_NONE,
+                              MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+    if (raw == MAP_FAILED) return MAP_FAILED;
+    const size_t page = (size_t)sysconf(_SC_PAGESIZE);
+    const size_t body = (len + page - 1) & ~(page - 1);
+    unsigned char *p =
+        (unsigned char *)(((uintptr_t)raw + HUGE_PAGE - 1) & ~(uintptr_t)(HUGE_PAGE - 1));
+    if (mmap(p, len, PROT_READ, MAP_SHARED | MAP_FIXED, fd, 0) == MAP_FAILED) {
+        const int err = errno;
+        munmap(raw, len + HUGE_PAGE);
+        errno = err;
+        return MAP_FAILED;
+    }
+    /* the reservation was [raw, raw + body + HUGE_PAGE); keep [p, p + body) */
+    if (p > raw) munmap(raw, (size_t)(p - raw));
+    munmap(p + body, (size_t)(raw + HUGE_PAGE - p));
+    (void)madvise(p, body, MADV_HUGEPAGE); /* a hint: without THP, small pages */
+    return p;
+}
+
 void kdr_tree_cache_unmap(void *map, size_t len) {
     if (map) munmap(map, len);
 }
@@ -176,7 +212,7 @@ int kdr_tree_cache_load(const char *dir, const kdr_tree_key *key,
         return 0;
     }
     size_t len = (size_t)st.st_size;
-    void *map = mmap(NULL, len, PROT_READ, MAP_SHARED, fd, 0);
+    void *map = map_huge(fd, len);
     close(fd);
     if (map == MAP_FAILED) {
         *refused = 1;

@@ -3,9 +3,10 @@
  * a later start (or another replica sharing the directory) maps them
  * instead of building. The core owns the tree bytes and their validation
  * (kdr_scene_image_*, core/kd_image.c); this file owns the files: the key,
- * the file format around the image (the scene's mesh ranges), mmap, and
- * atomic publication (temp file, fsync, rename, fsync of the directory),
- * so a reader never sees a half-written file.
+ * the file format around the image (the scene's mesh ranges), mmap (at a
+ * 2 MiB boundary, advised for huge pages), and atomic publication (temp
+ * file, fsync, rename, fsync of the directory), so a reader never sees a
+ * half-written file.
  *
  * Key: two 64-bit hashes (different seeds) of the scene file's bytes, mixed
  * with the build options and the cache format version; the file is

@@ -22,6 +22,13 @@ if(TARGET kdray_scenes AND TARGET embree)
   target_link_libraries(test_core_perf PRIVATE kdray_core kdray_scenes embree)
 endif()
 
+# The scene's large arrays are 2 MiB-aligned and advised for transparent
+# huge pages (core/kd_mem.c); fails where THP is off (mode never).
+add_executable(test_core_mem ${CMAKE_CURRENT_SOURCE_DIR}/test_core_mem.c)
+target_include_directories(test_core_mem PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
+target_link_libraries(test_core_mem PRIVATE kdray_core)
+add_test(NAME test_core_mem COMMAND test_core_mem)
+
 # The binned and parallel build: same tree for every thread count, binned
 # trees against brute force.
 add_executable(test_core_build ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c)

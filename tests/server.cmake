@@ -76,6 +76,13 @@ add_test(NAME server_cache
                  ${PROJECT_SOURCE_DIR}/scenes/default.glb)
 set_tests_properties(server_cache PROPERTIES TIMEOUT 600)
 
+# A tree loaded from the cache is read into 2 MiB-aligned memory advised
+# for transparent huge pages (fails where THP is off).
+add_executable(test_tree_cache_mem ${CMAKE_CURRENT_SOURCE_DIR}/test_tree_cache_mem.c)
+target_include_directories(test_tree_cache_mem PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
+target_link_libraries(test_tree_cache_mem PRIVATE kdray_server)
+add_test(NAME test_tree_cache_mem COMMAND test_tree_cache_mem)
+
 # render.png against the daemon's own frustum and cone-shadow answers,
 # decoded by Pillow. Debian's python3 (python3-pil, scripts/dev): the test
 # fails, never skips, when Pillow is missing.
