@@ -16,13 +16,6 @@
 
 #include "kd_build.h"
 
-void kd_ev_free(ev_list *l) {
-    for (int k = 0; k < 3; k++) {
-        free(l->e[k]);
-        l->e[k] = NULL;
-    }
-}
-
 /* LSD radix sort on bits 30..63 (position and type); stable, so events
  * generated in triangle order end up in full key order. */
 void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
@@ -57,7 +50,7 @@ static int grow(void **p, size_t *cap, size_t need, size_t elem) {
     while (c < need)
         c *= 2;
     free(*p);
-    *p = malloc(c * elem);
+    *p = kd_scratch_alloc(c * elem);
     *cap = *p ? c : 0;
     return *p ? KDR_OK : KDR_ENOMEM;
 }
