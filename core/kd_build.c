@@ -467,6 +467,11 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     proto.max_depth = max_depth_for(o, nvalid);
     proto.spawn_min = spawn_min_for(nvalid, threads);
     proto.avx512 = kd_cpu_has_avx512();
+    /* Huge-page scratch won where the whole tree is exact (haus, clearcoat:
+     * 0.88-0.93x CPU at 1 and 2 threads) and lost on binned tops at 2
+     * threads (engine, engine3: 1.09-1.18x median, single rounds up to
+     * 2.7x): bench/ab_build, docs/BUILD.md round 4. */
+    proto.huge = nvalid <= (size_t)o->exact_max;
     const int phases = nvalid > KD_LOG_PHASES;
     double t0 = now_ms();
     kd_task root, sort[3];

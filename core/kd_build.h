@@ -109,6 +109,8 @@ typedef struct builder {
     uint32_t *groups; /* the split search's event groups (kd_groups) */
     size_t groups_cap;
     int avx512; /* the AVX-512 kernels of kd_build_avx512.c may run */
+    int huge;   /* scratch of at least KD_SCRATCH_HUGE_MIN bytes in huge
+                   pages (kd_scratch_alloc): exact-from-the-root builds */
     kd_frag *frag;
     int err;
     double cpu_ms; /* this worker's thread CPU time in the build */
