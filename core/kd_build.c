@@ -307,7 +307,7 @@ static void build_binned(builder *b, const kdr_bounds *box, kd_prims *p,
 void kd_run_task(builder *b, kd_task *t) {
     switch (t->kind) {
     case KD_TASK_SORT:
-        kd_radix_sort(t->ev.e[0], t->block, t->ev.n[0]);
+        kd_radix_sort(t->ev.e[0], t->ev.e[1], t->ev.n[0]);
         break;
     case KD_TASK_EXACT:
         b->frag = t->frag;
@@ -398,17 +398,21 @@ static void pad_root(kdr_scene *s) {
 
 /* The root's sorted event lists (exact build from the root): made in
  * triangle order, each axis sorted on its own (SORT tasks, in parallel when
- * there are threads). */
+ * there are threads). The three lists and the three sorts' scratch are one
+ * block (the root task's, freed when it is done): one allocation, in huge
+ * pages (kd_build_mem.c), instead of six fresh ones. */
 static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev,
-                       kd_task sort[3]) {
-    int err = KDR_OK;
+                       kd_event **block, kd_task sort[3]) {
+    const size_t per = 2 * nvalid + 1;
     memset(ev, 0, sizeof *ev);
     memset(sort, 0, 3 * sizeof *sort);
-    for (int k = 0; k < 3 && err == KDR_OK; k++)
-        if (!(ev->e[k] = malloc((2 * nvalid + 1) * sizeof(kd_event))) ||
-            !(sort[k].block = malloc((2 * nvalid + 1) * sizeof(kd_event))))
-            err = KDR_ENOMEM;
-    for (size_t i = 0; i < s->ntris && err == KDR_OK; i++) {
+    kd_event *m = kd_scratch_alloc(6 * per * sizeof *m);
+    *block = m;
+    if (!m)
+        return KDR_ENOMEM;
+    for (int k = 0; k < 3; k++)
+        ev->e[k] = m + (size_t)k * per;
+    for (size_t i = 0; i < s->ntris; i++) {
         const float *t = s->tris + 9 * i;
         if (kd_tri_degenerate(t))
             continue;
@@ -424,13 +428,9 @@ static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev,
         sort[k].kind = KD_TASK_SORT;
         sort[k].ev.e[0] = ev->e[k];
         sort[k].ev.n[0] = ev->n[k];
+        sort[k].ev.e[1] = m + (size_t)(3 + k) * per;
     }
-    if (err != KDR_OK) {
-        kd_ev_free(ev);
-        for (int k = 0; k < 3; k++)
-            free(sort[k].block);
-    }
-    return err;
+    return KDR_OK;
 }
 
 static int max_depth_for(const kdr_build_opts *o, size_t n) {
@@ -467,6 +467,11 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     proto.max_depth = max_depth_for(o, nvalid);
     proto.spawn_min = spawn_min_for(nvalid, threads);
     proto.avx512 = kd_cpu_has_avx512();
+    /* Huge-page scratch won where the whole tree is exact (haus, clearcoat:
+     * 0.88-0.93x CPU at 1 and 2 threads) and lost on binned tops at 2
+     * threads (engine, engine3: 1.09-1.18x median, single rounds up to
+     * 2.7x): bench/ab_build, docs/BUILD.md round 4. */
+    proto.huge = nvalid <= (size_t)o->exact_max;
     const int phases = nvalid > KD_LOG_PHASES;
     double t0 = now_ms();
     kd_task root, sort[3];
@@ -478,7 +483,7 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
         err = kd_root_prims(s->tris, s->ntris, nvalid, &root.prims);
     } else {
         root.kind = KD_TASK_EXACT;
-        err = root_events(s, nvalid, &root.ev, sort);
+        err = root_events(s, nvalid, &root.ev, &root.block, sort);
         nsort = 3;
     }
     kd_frag **frags = NULL;
@@ -486,9 +491,10 @@ static int build_tree(kdr_scene *s, size_t nvalid, const kdr_build_opts *o,
     double cpu_ms[2] = {0.0, 0.0};
     if (err == KDR_OK)
         err = kd_build_run(&proto, threads, sort, nsort, &root, &frags, &nfrags, cpu_ms);
-    else
+    else {
         free(root.prims.p);
-    kd_ev_free(&root.ev);
+        free(root.block);
+    }
     if (err == KDR_OK) {
         /* the busiest thread's CPU time bounds the wall time an idle
          * machine would take for this phase */

@@ -109,6 +109,8 @@ typedef struct builder {
     uint32_t *groups; /* the split search's event groups (kd_groups) */
     size_t groups_cap;
     int avx512; /* the AVX-512 kernels of kd_build_avx512.c may run */
+    int huge;   /* scratch of at least KD_SCRATCH_HUGE_MIN bytes in huge
+                   pages (kd_scratch_alloc): exact-from-the-root builds */
     kd_frag *frag;
     int err;
     double cpu_ms; /* this worker's thread CPU time in the build */
@@ -168,9 +170,14 @@ static inline void ev_add(kd_event *dst[3], size_t n[3], const kdr_bounds *bb,
     }
 }
 
+/* ---- kd_build_mem.c ---------------------------------------------------------- */
+
+/* Scratch memory of at least KD_SCRATCH_HUGE_MIN bytes in transparent huge
+ * pages where the system has them (malloc otherwise); free() it. */
+void *kd_scratch_alloc(size_t bytes);
+
 /* ---- kd_build_events.c ----------------------------------------------------- */
 
-void kd_ev_free(ev_list *l);
 /* LSD radix sort of n events by key (tmp holds n events). */
 void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n);
 /* Sorts a few events (keys are unique); avx512: with kd_rank_sort_avx512. */
@@ -269,7 +276,8 @@ typedef struct kd_task {
     kdr_bounds box;
     int depth, bad;
     kd_prims prims;  /* BINNED */
-    ev_list ev;      /* EXACT: lists in block; SORT: e[0], n[0] to sort */
+    ev_list ev;      /* EXACT: lists in block; SORT: e[0], n[0] to sort,
+                        e[1] room for n[0] more (the radix sort's) */
     kd_event *block; /* owned, freed when the task is done (may be NULL) */
     kd_frag *frag;   /* where BINNED and EXACT tasks write */
 } kd_task;

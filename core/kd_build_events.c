@@ -16,13 +16,6 @@
 
 #include "kd_build.h"
 
-void kd_ev_free(ev_list *l) {
-    for (int k = 0; k < 3; k++) {
-        free(l->e[k]);
-        l->e[k] = NULL;
-    }
-}
-
 /* LSD radix sort on bits 30..63 (position and type); stable, so events
  * generated in triangle order end up in full key order. */
 void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
@@ -49,15 +42,16 @@ void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
 
 /* ---- splitting the event lists ------------------------------------------------ */
 
-/* Makes *p hold at least need elements; the old contents are dead. */
-static int grow(void **p, size_t *cap, size_t need, size_t elem) {
+/* Makes *p hold at least need elements; the old contents are dead. In
+ * huge pages where the builder says so (kd_build_mem.c, builder.huge). */
+static int grow(const builder *b, void **p, size_t *cap, size_t need, size_t elem) {
     if (need <= *cap)
         return KDR_OK;
     size_t c = *cap ? *cap : 4096;
     while (c < need)
         c *= 2;
     free(*p);
-    *p = malloc(c * elem);
+    *p = b->huge ? kd_scratch_alloc(c * elem) : malloc(c * elem);
     *cap = *p ? c : 0;
     return *p ? KDR_OK : KDR_ENOMEM;
 }
@@ -72,7 +66,7 @@ static int grow(void **p, size_t *cap, size_t need, size_t elem) {
  * defined even though it is not used). */
 static size_t classify(builder *b, const ev_list *ev, const kd_split *s,
                        size_t *nleft) {
-    if (grow((void **)&b->both, &b->both_cap, ev->ntri + 1, sizeof *b->both))
+    if (grow(b, (void **)&b->both, &b->both_cap, ev->ntri + 1, sizeof *b->both))
         return (size_t)-1;
     const kd_event *e = ev->e[s->axis];
     const uint32_t split_key = float_key(s->pos + 0.0f);
@@ -249,7 +243,7 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         return KDR_ENOMEM;
     /* each list of new events has a sentinel slot before and after it */
     const size_t stride = 2 * nboth + 2;
-    if (grow((void **)&b->add, &b->add_cap, 6 * stride, sizeof *b->add))
+    if (grow(b, (void **)&b->add, &b->add_cap, 6 * stride, sizeof *b->add))
         return KDR_ENOMEM;
     kd_event *add[6];
     /* the straddlers kept on each side are added by kd_clip_both */
@@ -264,8 +258,8 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
         most = ev->n[k] > most ? ev->n[k] : most;
     }
-    if (grow((void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)) ||
-        grow((void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event)))
+    if (grow(b, (void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)) ||
+        grow(b, (void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event)))
         return KDR_ENOMEM;
     kd_event *base = b->lvl[depth];
     for (int k = 0; k < 3; k++) {

@@ -122,7 +122,8 @@ int kd_find_split(builder *b, const kdr_bounds *box, const ev_list *ev,
         while (cap < need)
             cap *= 2;
         free(b->groups);
-        b->groups = malloc(4 * (cap + KD_GROUP_PAD) * sizeof *b->groups);
+        const size_t bytes = 4 * (cap + KD_GROUP_PAD) * sizeof *b->groups;
+        b->groups = b->huge ? kd_scratch_alloc(bytes) : malloc(bytes);
         b->groups_cap = b->groups ? cap : 0;
         if (!b->groups) {
             b->err = KDR_ENOMEM;

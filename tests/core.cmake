@@ -35,6 +35,13 @@ add_executable(test_core_build ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c)
 target_link_libraries(test_core_build PRIVATE kdray_core)
 add_test(NAME test_core_build COMMAND test_core_build)
 
+# The build's scratch memory: large arrays 2 MiB-aligned and advised for
+# transparent huge pages.
+add_executable(test_core_build_mem ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build_mem.c)
+target_include_directories(test_core_build_mem PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
+target_link_libraries(test_core_build_mem PRIVATE kdray_core)
+add_test(NAME test_core_build_mem COMMAND test_core_build_mem)
+
 # The build's split-search kernels (scalar and AVX-512) against a plain sweep.
 add_executable(test_core_build_simd ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build_simd.c)
 target_include_directories(test_core_build_simd PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
