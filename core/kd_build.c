@@ -400,7 +400,7 @@ static void pad_root(kdr_scene *s) {
  * triangle order, each axis sorted on its own (SORT tasks, in parallel when
  * there are threads). The three lists and the three sorts' scratch are one
  * block (the root task's, freed when it is done): one allocation, in huge
- * pages (kd_build_mem.c), instead of six fresh ones. */
+ * pages (kd_scratch_alloc, kd_mem.c), instead of six fresh ones. */
 static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev,
                        kd_event **block, kd_task sort[3]) {
     const size_t per = 2 * nvalid + 1;

@@ -170,7 +170,7 @@ static inline void ev_add(kd_event *dst[3], size_t n[3], const kdr_bounds *bb,
     }
 }
 
-/* ---- kd_build_mem.c ---------------------------------------------------------- */
+/* ---- kd_mem.c (build scratch) ------------------------------------------------- */
 
 /* Scratch memory of at least KD_SCRATCH_HUGE_MIN bytes in transparent huge
  * pages where the system has them (malloc otherwise); free() it. */

@@ -43,7 +43,7 @@ void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
 /* ---- splitting the event lists ------------------------------------------------ */
 
 /* Makes *p hold at least need elements; the old contents are dead. In
- * huge pages where the builder says so (kd_build_mem.c, builder.huge). */
+ * huge pages where the builder says so (kd_scratch_alloc in kd_mem.c, builder.huge). */
 static int grow(const builder *b, void **p, size_t *cap, size_t need, size_t elem) {
     if (need <= *cap)
         return KDR_OK;

@@ -18,18 +18,29 @@
  * just below the array says how it was allocated, so kd_mem_free needs no
  * size.
  *
- * This is the core's only OS call, kept here behind __linux__: elsewhere,
- * for small arrays, or when the mapping fails, it is plain malloc. A failed
- * madvise (a kernel without THP) leaves ordinary pages, only slower.
+ * The builder's large scratch arrays (kd_scratch_alloc, at the end) are
+ * written once each into fresh memory, so on small scenes their first-touch
+ * faults were a cost of their own: on haus (36K triangles) a one-thread
+ * build touched ~13.6 MB in 3400 4 KiB faults, and the kernel took ~19 % of
+ * its samples (perf -e cpu-clock). They take huge pages too, but from the
+ * heap (posix_memalign, freed with free): they live only as long as a
+ * build step, and a mapping per array cost more at 2 threads than it saved
+ * (docs/BUILD.md, round 4).
+ *
+ * These are the core's only OS calls, kept here behind __linux__:
+ * elsewhere, for small arrays, or when the mapping fails, it is plain
+ * malloc. A failed madvise (a kernel without THP) leaves ordinary pages,
+ * only slower.
  */
 #if defined(__linux__)
-#define _DEFAULT_SOURCE /* mmap, MAP_ANONYMOUS, madvise, MADV_HUGEPAGE */
+#define _DEFAULT_SOURCE /* mmap, MAP_ANONYMOUS, madvise, MADV_HUGEPAGE, posix_memalign */
 #include <sys/mman.h>
 #include <unistd.h>
 #endif
 #include <stdint.h>
 #include <stdlib.h>
 
+#include "kd_build.h"
 #include "kd_internal.h"
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -115,4 +126,22 @@ void kd_mem_free(void *p) {
 #endif
     munmap(h->base, h->len);
 #endif
+}
+
+void *kd_scratch_alloc(size_t bytes) {
+#if defined(__linux__)
+    if (bytes >= KD_SCRATCH_HUGE_MIN && bytes <= SIZE_MAX - KD_HUGE_PAGE) {
+        const size_t rounded = (bytes + KD_HUGE_PAGE - 1) & ~(KD_HUGE_PAGE - 1);
+        void *p = NULL;
+        if (posix_memalign(&p, KD_HUGE_PAGE, rounded) == 0) {
+            (void)madvise(p, rounded, MADV_HUGEPAGE);
+#ifdef KD_MEM_ASAN
+            /* the rounding is not the caller's to use */
+            ASAN_POISON_MEMORY_REGION((char *)p + bytes, rounded - bytes);
+#endif
+            return p;
+        }
+    }
+#endif
+    return malloc(bytes ? bytes : 1);
 }

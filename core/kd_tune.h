@@ -59,7 +59,7 @@
 #define KD_BINS 256
 #define KD_SPAWN_MIN 4096
 #define KD_TASKS_PER_THREAD 16
-/* Build scratch arrays (kd_build_mem.c) of at least this many bytes go to
+/* Build scratch arrays (kd_scratch_alloc, kd_mem.c) of at least this many bytes go to
  * 2 MiB transparent huge pages. */
 #define KD_SCRATCH_HUGE_MIN ((size_t)1 << 20)
 

@@ -1,5 +1,5 @@
 /*
- * test_core_build_mem.c — the build's scratch allocator (core/kd_build_mem.c).
+ * test_core_build_mem.c — the build's scratch allocator (kd_scratch_alloc, core/kd_mem.c).
  *
  * An array of at least KD_SCRATCH_HUGE_MIN bytes must come 2 MiB-aligned,
  * in a mapping advised for transparent huge pages ('hg' among the VmFlags
