@@ -24,7 +24,7 @@ static int g_nscenes;
 
 static int bundle_run(const bench_scene *s, const bench_opts *o) {
     static const bench_kd all[] = {BENCH_KD_SINGLE, BENCH_KD_BUNDLE4, BENCH_KD_BUNDLE8,
-                                   BENCH_KD_SORT8, BENCH_KD_RAW8};
+                                   BENCH_KD_SORT8, BENCH_KD_RAW8, BENCH_KD_BUNDLE16};
     static const bench_kd quick[] = {BENCH_KD_SINGLE, BENCH_KD_BUNDLE8};
     if (g_nscenes < MAX_SCENES)
         snprintf(g_scene[g_nscenes++], sizeof g_scene[0], "%s", s->name);
@@ -35,7 +35,7 @@ static int bundle_run(const bench_scene *s, const bench_opts *o) {
         if (bench_workload_make(&w, s->kd, bundle_workloads[k], o->rays) != 0)
             return -1;
         const int rc = o->quick ? bench_run_workload(s, &w, quick, 2, o)
-                                : bench_run_workload(s, &w, all, 5, o);
+                                : bench_run_workload(s, &w, all, 6, o);
         bench_workload_free(&w);
         if (rc)
             return -1;

@@ -335,10 +335,17 @@ int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
         return KDR_EINVAL;
     if (mode < KDR_TRAV_AUTO || mode > KDR_TRAV_BUNDLE8)
         return KDR_EINVAL;
+    /* AUTO: 16-wide bundles with AVX-512 (docs/TRAVERSAL.md, Bundles) */
+    const int wide16 = mode == KDR_TRAV_AUTO && kd_cpu_has_avx512();
     if (mode == KDR_TRAV_AUTO || mode == KDR_TRAV_BUNDLE8)
         mode = kdr_cpu_has_avx2() ? KDR_TRAV_BUNDLE8 : KDR_TRAV_BUNDLE4;
     if (!scene->nodes)
         mode = KDR_TRAV_SINGLE; /* nothing to bundle over */
+    if (wide16 && mode != KDR_TRAV_SINGLE) {
+        kd_bundle16_trace(scene, batch, first, count, query,
+                          KB_FALLBACK | KB_SORT | KB_LIVE, out, stats);
+        return KDR_OK;
+    }
     switch (mode) {
     case KDR_TRAV_BUNDLE8:
         kd_bundle8_trace(scene, batch, first, count, query,
