@@ -322,10 +322,11 @@ int bench_run_workload(const bench_scene *s, const bench_workload *w,
     for (size_t i = nk; i < nm; i++)
         if (!isnan(m[i].best_ms) && (!best || m[i].best_ms < best_ms))
             best = m[i].name, best_ms = m[i].best_ms;
+    char origins[32];
+    snprintf(origins, sizeof origins, "%zu per origin", w->group);
     printf("\n%s: %s, %zu rays (%s, %s)\n", s->name, w->name, w->n,
            w->query == KDR_ANY ? "any hit" : "closest hit",
-           w->group == 0 ? "one origin" : w->group == 1 ? "own origins"
-                                                        : "64 per origin");
+           w->group == 0 ? "one origin" : w->group == 1 ? "own origins" : origins);
     printf("  %-32s %9s %9s %8s %9s %9s\n", "method", "Mrays/s", "ms", "x best",
            "hits", "nodes/ray");
     for (size_t i = 0; rc == 0 && hit && i < nm; i++) {
