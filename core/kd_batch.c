@@ -1,6 +1,7 @@
 /*
  * kd_batch.c — the batch API (kdr_trace_batch): checks the arguments, picks
- * the bundle width (8 lanes with AVX2, else 4, or one ray at a time) and
+ * the bundle width (AUTO: 16 lanes with AVX-512, 8 with AVX2, else 4; or
+ * one ray at a time) and
  * owns the per-ray helpers the bundle drivers share: reading ray i of an
  * AoS batch with stride-0 sharing, tracing one ray alone (rays a bundle
  * cannot take), answering a chunk's rays that cannot be traced before it
