@@ -234,16 +234,7 @@ static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
                    &h, st);
         return;
     }
-    if (j->set >= SET_BRANDOM) {
-        for (size_t first = 0; first < j->n; first += AB_BATCH) {
-            const size_t g = j->n - first < AB_BATCH ? j->n - first : AB_BATCH;
-            kdr_ray_batch b = {j->n, j->borg, 3, j->bdir, j->btmin, 1, j->btmax, 1};
-            kdr_hits h = {o->t, o->prim, o->u, o->v, o->hit};
-            c->trace_batch(s, &b, first, g, j->q, KDR_TRAV_AUTO, &h, st);
-        }
-        return;
-    }
-    if (j->set == SET_B8AO || j->set == SET_B8CAM) {
+    if (j->set == SET_B8AO || j->set == SET_B8CAM || j->set == SET_B16CAM) {
         for (size_t first = 0; first < j->n; first += j->group) {
             const size_t g = j->n - first < j->group ? j->n - first : j->group;
             const kdr_ray *r0 = &j->rays[first];
@@ -252,6 +243,15 @@ static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
             kdr_hits h = {o->t + first, o->prim + first, o->u + first,
                           o->v + first, o->hit + first};
             c->trace_batch(s, &b, 0, g, j->q, KDR_TRAV_AUTO, &h, st);
+        }
+        return;
+    }
+    if (j->set >= SET_BRANDOM) {
+        for (size_t first = 0; first < j->n; first += AB_BATCH) {
+            const size_t g = j->n - first < AB_BATCH ? j->n - first : AB_BATCH;
+            kdr_ray_batch b = {j->n, j->borg, 3, j->bdir, j->btmin, 1, j->btmax, 1};
+            kdr_hits h = {o->t, o->prim, o->u, o->v, o->hit};
+            c->trace_batch(s, &b, first, g, j->q, KDR_TRAV_AUTO, &h, st);
         }
         return;
     }
@@ -445,6 +445,9 @@ static int run_scene(const opts *o, const ladder_entry *e) {
         case SET_B8CAM:
             j.n = camera_rays(&cam, 1, rays);
             break;
+        case SET_B16CAM:
+            j.n = camera_rays(&cam, 2, rays);
+            break;
         case SET_RANDOM:
         case SET_BRANDOM:
         case SET_ALL:
@@ -469,7 +472,11 @@ static int run_scene(const opts *o, const ladder_entry *e) {
         case SET_SHADOW:
         case SET_BSHADOW:
             light_of(&si, 0, &li);
-            shadow_rays(&si, n, &li, rays), j.q = KDR_ANY;
+            shadow_rays(&si, n, 1, &li, rays), j.q = KDR_ANY;
+            break;
+        case SET_BSHADOW16:
+            light_of(&si, 0, &li);
+            shadow_rays(&si, n, 16, &li, rays), j.q = KDR_ANY;
             break;
         default: /* ao64, b8ao */
             ao_rays(&si, n, 64, rays), j.q = KDR_ANY, j.group = 64;

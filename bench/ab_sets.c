@@ -14,11 +14,12 @@
 
 const char *const set_names[NSETS] = {"camera",  "random",  "ao",     "ao64",   "b8ao",
                                       "b8cam",   "frustum", "cone16", "cone64", "shadow",
-                                      "brandom", "bao",     "baoc",   "bshadow", "conecam",
+                                      "brandom", "bao",     "baoc",   "bshadow", "bshadow16",
+                                      "b16cam",  "conecam",
                                       "all16",   "all",     "count",  "closest", "ball16",
                                       "ball",    "bcount"};
 const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0, 1,
-                                         1, 1, 1, 1, 0, 0, 0, 0, 0,
+                                         1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0,
                                          0, 0, 0};
 
 void scene_bounds(scene_in *s) {
@@ -58,11 +59,13 @@ size_t camera_rays(const kdr_camera *cam, int tiled, kdr_ray *out) {
                 kdr_camera_ray(cam, x, y, &out[i++]);
         return i;
     }
-    for (uint32_t ty = 0; ty < cam->height; ty += 2)
+    const uint32_t th = tiled == 2 ? 4 : 2; /* block height */
+    for (uint32_t ty = 0; ty < cam->height; ty += th)
         for (uint32_t tx = 0; tx < cam->width; tx += 4)
-            for (uint32_t k = 0; k < 8; k++) {
-                const uint32_t px = tx + (k & 1) + 2 * (k >> 2);
-                const uint32_t py = ty + ((k >> 1) & 1);
+            for (uint32_t k = 0; k < 4 * th; k++) {
+                /* 4x2: two 2x2 quads side by side; 4x4: rows of 4 */
+                const uint32_t px = th == 4 ? tx + (k & 3) : tx + (k & 1) + 2 * (k >> 2);
+                const uint32_t py = th == 4 ? ty + (k >> 2) : ty + ((k >> 1) & 1);
                 if (px < cam->width && py < cam->height)
                     kdr_camera_ray(cam, px, py, &out[i++]);
             }
@@ -109,9 +112,9 @@ void light_of(const scene_in *s, int large, kdr_sphere_light *li) {
     li->radius = (large ? 0.25f : 0.03f) * s->diag;
 }
 
-void shadow_rays(const scene_in *s, size_t n, const kdr_sphere_light *li,
-                        kdr_ray *out) {
-    ao_rays(s, n, 1, out);
+void shadow_rays(const scene_in *s, size_t n, size_t per_point,
+                 const kdr_sphere_light *li, kdr_ray *out) {
+    ao_rays(s, n, per_point, out);
     stress_rng r;
     stress_rng_seed(&r, 11);
     for (size_t i = 0; i < n; i++) {

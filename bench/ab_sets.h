@@ -13,6 +13,8 @@
  *   ao64     any hit, 64 rays per point, per ray (the bundles' baseline)
  *   b8ao     ao64 through kdr_trace_batch(AUTO): 8-wide bundles per point
  *   b8cam    camera rays in 4x2 pixel blocks through kdr_trace_batch(AUTO)
+ *   b16cam   camera rays in 4x4 pixel blocks (a 16-wide bundle's tile)
+ *            through kdr_trace_batch(AUTO)
  *   frustum  the camera through kdr_frustum_trace(MULTI4, tile 8)
  *   cone16   kdr_shadow_trace(CONE), 16 samples per point toward a small
  *            light (bench_cone's, r = 0.03 diagonal), points and normals
@@ -30,6 +32,10 @@
  *            intervals, in the order the single sets trace them; Embree
  *            traces them with rtcIntersect1 / rtcOccluded1 as in the single
  *            sets
+ *   bshadow16
+ *            any hit, 16 rays per surface point (ao_rays' points) toward
+ *            the small light, as bshadow (kdray_bench's shadow workload:
+ *            runs of 16 rays sharing an origin in calls of 4096)
  * Issue 15's queries (only when named with --set; no Embree here, its
  * rivals are in kdray_bench --section queries):
  *   all16    camera rays, kdr_intersect_all1 capped at 16 hits
@@ -55,7 +61,7 @@
 enum {
     SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
     SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
-    SET_BSHADOW, SET_CONECAM, SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
+    SET_BSHADOW, SET_BSHADOW16, SET_B16CAM, SET_CONECAM, SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
     SET_BALL16, SET_BALL, SET_BCOUNT, NSETS
 };
 /* The sets run when no --set is given (issue 15's only on request). */
@@ -80,8 +86,8 @@ void scene_bounds(scene_in *s);
  * square image of at most n pixels. */
 void camera_of(const scene_in *s, size_t n, kdr_camera *cam);
 
-/* Camera rays, row-major (tiled != 0: in 4x2 pixel blocks); returns how
- * many were written. */
+/* Camera rays, row-major (tiled 1: in 4x2 pixel blocks, 2: in 4x4);
+ * returns how many were written. */
 size_t camera_rays(const kdr_camera *cam, int tiled, kdr_ray *out);
 
 /* Origins in the bounds, uniform directions, t in [0, inf). */
@@ -94,9 +100,10 @@ void ao_rays(const scene_in *s, size_t n, size_t per_point, kdr_ray *out);
 /* bench_cone's lights: small (r = 0.03 diagonal) or large (0.25). */
 void light_of(const scene_in *s, int large, kdr_sphere_light *li);
 
-/* One shadow ray per surface point (ao_rays' points) toward a random point
- * of the sphere light li: dir = target - point, t in [1e-4, 1]. */
-void shadow_rays(const scene_in *s, size_t n, const kdr_sphere_light *li, kdr_ray *out);
+/* per_point shadow rays per surface point (ao_rays' points) toward random
+ * points of the sphere light li: dir = target - point, t in [1e-4, 1]. */
+void shadow_rays(const scene_in *s, size_t n, size_t per_point,
+                 const kdr_sphere_light *li, kdr_ray *out);
 
 /* cone16 / cone64's query: up to npts surface points (ao_rays' points)
  * outside the light, spp samples each; scratch holds npts rays, pts 6 *

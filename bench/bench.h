@@ -196,6 +196,7 @@ typedef enum bench_kd {
     BENCH_KD_BATCH,   /* kdr_trace_batch KDR_TRAV_AUTO in calls of
                        * BENCH_BATCH_RAYS, every ray with its own origin
                        * (stride 3), as a client's large request arrives */
+    BENCH_KD_BUNDLE16, /* the 16-wide (AVX-512) driver, kdr_trace_batch's flags */
 } bench_kd;
 
 #define BENCH_BATCH_RAYS 4096

@@ -178,7 +178,7 @@ void bench_workload_free(bench_workload *w) {
 
 static const char *const kd_names[] = {"kd_single", "kd_bundle4", "kd_bundle8",
                                        "kd_sort8_nofallback", "kd_raw8_nofallback",
-                                       "kd_batch"};
+                                       "kd_batch", "kd_bundle16"};
 
 typedef struct kd_job {
     const kdr_scene *kd;
@@ -244,6 +244,10 @@ static void kd_run(void *ctx) {
         case BENCH_KD_BUNDLE8:
             kdr_trace_batch(j->kd, &b, 0, cnt, w->query, KDR_TRAV_BUNDLE8, &h, j->stats);
             break;
+        case BENCH_KD_BUNDLE16:
+            kd_bundle16_trace(j->kd, &b, 0, cnt, w->query, KB_FALLBACK | KB_SORT | KB_LIVE,
+                              &h, j->stats);
+            break;
         default:
             kd_bundle8_trace(j->kd, &b, 0, cnt, w->query,
                              j->mode == BENCH_KD_SORT8 ? KB_SORT : 0, &h, j->stats);
@@ -297,6 +301,8 @@ int bench_run_workload(const bench_scene *s, const bench_workload *w,
     for (size_t i = 0; i < nmodes && nk < 8 && rc == 0; i++) {
         if (modes[i] >= BENCH_KD_BUNDLE8 && modes[i] <= BENCH_KD_RAW8 && !kdr_cpu_has_avx2())
             continue; /* 8-wide needs AVX2: AUTO is 4-wide on this CPU */
+        if (modes[i] == BENCH_KD_BUNDLE16 && !kd_cpu_has_avx512())
+            continue;
         rc = kd_job_init(&kj[nk], s, w, modes[i]);
         m[nm++] = (bench_method){kd_names[modes[i]], 0, NULL, kd_run, &kj[nk++], 0.0};
     }
@@ -316,10 +322,11 @@ int bench_run_workload(const bench_scene *s, const bench_workload *w,
     for (size_t i = nk; i < nm; i++)
         if (!isnan(m[i].best_ms) && (!best || m[i].best_ms < best_ms))
             best = m[i].name, best_ms = m[i].best_ms;
+    char origins[32];
+    snprintf(origins, sizeof origins, "%zu per origin", w->group);
     printf("\n%s: %s, %zu rays (%s, %s)\n", s->name, w->name, w->n,
            w->query == KDR_ANY ? "any hit" : "closest hit",
-           w->group == 0 ? "one origin" : w->group == 1 ? "own origins"
-                                                        : "64 per origin");
+           w->group == 0 ? "one origin" : w->group == 1 ? "own origins" : origins);
     printf("  %-32s %9s %9s %8s %9s %9s\n", "method", "Mrays/s", "ms", "x best",
            "hits", "nodes/ray");
     for (size_t i = 0; rc == 0 && hit && i < nm; i++) {

@@ -242,6 +242,14 @@ def targets(core, bun, fru, cone):
             w, rng([over(r, w, "kd_bundle8", "kd_single") for _, r in B]),
             rng([vs_best(r, w, "kd_bundle8")[0] for _, r in B]),
             ", ".join(sorted({short(best(r, w)[0]) for _, r in B}))))
+    # AUTO's width on an AVX-512 CPU (absent from runs on other CPUs)
+    for w in ("camera", "ao_any", "ao_closest", "random", "shadow"):
+        B16 = [(s, r) for s, r in B if (w, "kd_bundle16") in r]
+        if B16:
+            print("- bundle16 %s: ×single %s; ×bundle8 %s; ×best %s" % (
+                w, rng([over(r, w, "kd_bundle16", "kd_single") for _, r in B16]),
+                rng([over(r, w, "kd_bundle16", "kd_bundle8") for _, r in B16]),
+                rng([vs_best(r, w, "kd_bundle16")[0] for _, r in B16])))
     print("- bundle8 camera ×I8c %s ×I1 %s; bundle4 camera ×single %s" % (
         rng([over(r, "camera", "kd_bundle8", "embree_rtcIntersect8_coherent") for _, r in B]),
         rng([over(r, "camera", "kd_bundle8", "embree_rtcIntersect1") for _, r in B]),

@@ -1,6 +1,7 @@
 /*
  * kd_batch.c — the batch API (kdr_trace_batch): checks the arguments, picks
- * the bundle width (8 lanes with AVX2, else 4, or one ray at a time) and
+ * the bundle width (AUTO: 16 lanes with AVX-512, 8 with AVX2, else 4; or
+ * one ray at a time) and
  * owns the per-ray helpers the bundle drivers share: reading ray i of an
  * AoS batch with stride-0 sharing, tracing one ray alone (rays a bundle
  * cannot take), answering a chunk's rays that cannot be traced before it
@@ -335,10 +336,17 @@ int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
         return KDR_EINVAL;
     if (mode < KDR_TRAV_AUTO || mode > KDR_TRAV_BUNDLE8)
         return KDR_EINVAL;
+    /* AUTO: 16-wide bundles with AVX-512 (docs/TRAVERSAL.md, Bundles) */
+    const int wide16 = mode == KDR_TRAV_AUTO && kd_cpu_has_avx512();
     if (mode == KDR_TRAV_AUTO || mode == KDR_TRAV_BUNDLE8)
         mode = kdr_cpu_has_avx2() ? KDR_TRAV_BUNDLE8 : KDR_TRAV_BUNDLE4;
     if (!scene->nodes)
         mode = KDR_TRAV_SINGLE; /* nothing to bundle over */
+    if (wide16 && mode != KDR_TRAV_SINGLE) {
+        kd_bundle16_trace(scene, batch, first, count, query,
+                          KB_FALLBACK | KB_SORT | KB_LIVE, out, stats);
+        return KDR_OK;
+    }
     switch (mode) {
     case KDR_TRAV_BUNDLE8:
         kd_bundle8_trace(scene, batch, first, count, query,

@@ -8,9 +8,9 @@
  * root clipping, the node steps, the leaf test); the batch driver that
  * fills bundles from a ray batch, stores their answers and falls back to
  * the interleaved walk on incoherent rays is kd_traverse_bundle_run.h.
- * kd_traverse_bundle4.c and kd_traverse_bundle8.c define KD_W, include
- * simd_width.h, then this file once more and kd_traverse_bundle_run.h to
- * instantiate both (kb_run4, kb_run8, ...).
+ * kd_traverse_bundle4.c, kd_traverse_bundle8.c and kd_traverse_bundle16.c
+ * define KD_W, include simd_width.h, then this file once more and
+ * kd_traverse_bundle_run.h to instantiate each (kb_run4, kb_run8, ...).
  *
  * The paper's two changes to packet traversal are what let rays of any
  * direction signs share a bundle:
@@ -66,6 +66,11 @@ void kd_bundle4_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
 void kd_bundle8_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                       size_t count, kdr_query q, int flags, kdr_hits *out,
                       kdr_trav_stats *stats);
+/* The 16-lane instance (kd_traverse_bundle16.c); needs AVX-512
+ * (kd_cpu_has_avx512). */
+void kd_bundle16_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                       size_t count, kdr_query q, int flags, kdr_hits *out,
+                       kdr_trav_stats *stats);
 
 /* Ray i of the batch, stride-0 fields shared; absent tmin/tmax mean 0 /
  * +inf (kd_batch.c). */
@@ -119,9 +124,9 @@ void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids)
 
 /* One bundle: the lanes' rays in SoA and their best hits. */
 typedef struct KD_WN(kb_bundle) {
-    _Alignas(32) float org[3][KD_W], dir[3][KD_W], tmin[KD_W];
-    _Alignas(32) float best_t[KD_W], best_u[KD_W], best_v[KD_W];
-    _Alignas(32) int32_t best_prim[KD_W];
+    _Alignas(KD_VALIGN) float org[3][KD_W], dir[3][KD_W], tmin[KD_W];
+    _Alignas(KD_VALIGN) float best_t[KD_W], best_u[KD_W], best_v[KD_W];
+    _Alignas(KD_VALIGN) int32_t best_prim[KD_W];
     float scene_mag;  /* largest root-box coordinate magnitude */
     int lanes;        /* lanes traced by the bundle */
     int hit;          /* any-hit: lanes that hit */
@@ -165,7 +170,7 @@ KD_FN VF KD_WN(kb_active)(const KD_WN(kb_state) *st, VF t_near, VF t_far) {
 
 /* Smallest-prim tie rule for lanes whose hit t equals best_t exactly. */
 KD_FN VF KD_WN(kb_ties)(const KD_WN(kb_state) *st, VF eq, int32_t prim) {
-    _Alignas(32) int32_t best[KD_W];
+    _Alignas(KD_VALIGN) int32_t best[KD_W];
     V(store)((float *)best, st->best_prim);
     int bits = V(bits)(eq), win = 0;
     for (int j = 0; j < KD_W; j++)

@@ -1,9 +1,10 @@
 /*
  * kd_traverse_bundle_run.h — the batch driver of the omni-directional
  * bundle traversal, a template included after kd_traverse_bundle.h's (same
- * KD_W, simd_width.h convention) by kd_traverse_bundle4.c and
- * kd_traverse_bundle8.c. It cuts a batch into chunks of KB_CHUNK rays
- * (answering first the rays that cannot hit, regrouping by direction),
+ * KD_W, simd_width.h convention) by kd_traverse_bundle4.c,
+ * kd_traverse_bundle8.c and kd_traverse_bundle16.c. It cuts a batch into
+ * chunks of KB_CHUNK rays (answering first the rays that cannot hit,
+ * regrouping by direction),
  * gathers each KD_W of them into a bundle's lanes (rays a bundle cannot
  * take go alone through the single-ray walk), traces the bundle
  * (kb_trace), stores the lanes' answers, and sends incoherent stretches

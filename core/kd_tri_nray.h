@@ -13,7 +13,7 @@
  * along different axes (a hemisphere of directions has several dominant
  * axes), so each lane picks its own vertex components with masks; picking
  * is exact, so only the arithmetic that follows has to match (4 lanes:
- * masked selects; 8 lanes: one AVX2 permute per component). The rare
+ * masked selects; 8 and 16 lanes: one permute per component). The rare
  * double-precision fallback (an edge function exactly 0) runs per lane in
  * scalar code, as in kd_tri.h.
  */
@@ -25,7 +25,7 @@ typedef struct KD_WN(kd_nray_pre) {
     VF ox, oy, oz;                    /* org[kx], org[ky], org[kz] */
     VF sx, sy, sz;
     VF kx0, kx1, ky0, ky1, kz0, kz1;  /* lane masks: kx == 0, kx == 1, ... */
-#if KD_W == 8
+#if KD_W >= 8
     VF idx[9]; /* int32 indices of A, B, C's x, y, z in tri[0..7] / tri[1..8] */
 #endif
     int uniform;                      /* every used lane shears alike */
@@ -36,7 +36,7 @@ typedef struct KD_WN(kd_nray_pre) {
  * lanes copy lane `ref` so they compute harmless numbers. */
 KD_FN void KD_WN(kd_nray_pre_init)(KD_WN(kd_nray_pre) *p, const kd_ray_pre *pre, int used,
                             int ref) {
-    _Alignas(32) float f[12][KD_W];
+    _Alignas(KD_VALIGN) float f[12][KD_W];
     int uniform = 1;
     for (int j = 0; j < KD_W; j++) {
         const kd_ray_pre *r = &pre[(used >> j) & 1 ? j : ref];
@@ -59,8 +59,8 @@ KD_FN void KD_WN(kd_nray_pre_init)(KD_WN(kd_nray_pre) *p, const kd_ray_pre *pre,
         *dst[k] = V(load)(f[k]);
     for (int k = 6; k < 12; k++) /* -1.0f has the sign bit: make full masks */
         *dst[k] = V(signmask)(*dst[k]);
-#if KD_W == 8
-    _Alignas(32) int32_t ix[9][KD_W];
+#if KD_W >= 8
+    _Alignas(KD_VALIGN) int32_t ix[9][KD_W];
     for (int j = 0; j < KD_W; j++) {
         const kd_ray_pre *r = &pre[(used >> j) & 1 ? j : ref];
         const int k[3] = {r->kx, r->ky, r->kz};
@@ -111,7 +111,7 @@ KD_FN void KD_WN(kd_nray_setup)(KD_WN(kd_nray_pre) *p, const VF org[3], const VF
     p->sx = V(div)(KD_WN(kd_nray_axis)(p->kx0, p->kx1, dir[0], dir[1], dir[2]), dkz);
     p->sy = V(div)(KD_WN(kd_nray_axis)(p->ky0, p->ky1, dir[0], dir[1], dir[2]), dkz);
     p->sz = V(div)(V(set1)(1.0f), dkz);
-#if KD_W == 8
+#if KD_W >= 8
     for (int c = 0; c < 3; c++) {
         const VF m0 = c == 0 ? p->kx0 : c == 1 ? p->ky0 : z0;
         const VF m1 = c == 0 ? p->kx1 : c == 1 ? p->ky1 : z1;
@@ -139,7 +139,7 @@ KD_FN VF KD_WN(kd_nray_pick)(VF m0, VF m1, const float *v) {
 /* The scalar double-precision recomputation, for the lanes in `lanes`. */
 KD_FN void KD_WN(kd_nray_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF cy,
                          VF *U, VF *Vv, VF *W) {
-    _Alignas(32) float s[9][KD_W];
+    _Alignas(KD_VALIGN) float s[9][KD_W];
     const VF in[9] = {ax, ay, bx, by, cx, cy, *U, *Vv, *W};
     for (int k = 0; k < 9; k++)
         V(store)(s[k], in[k]);
@@ -175,17 +175,21 @@ KD_FN VF KD_WN(kd_nray_test_raw)(const KD_WN(kd_nray_pre) *p, const float *tri, 
         Cy = V(sub)(V(set1)(tri[6 + p->ky]), p->oy);
         Cz0 = V(sub)(V(set1)(tri[6 + p->kz]), p->oz);
     } else {
+#if KD_W >= 8
 #if KD_W == 8
         const VF lo = f8_loadu(tri), hi = f8_loadu(tri + 1);
-        Ax = V(sub)(f8_permute(lo, p->idx[0]), p->ox);
-        Ay = V(sub)(f8_permute(lo, p->idx[1]), p->oy);
-        Az0 = V(sub)(f8_permute(lo, p->idx[2]), p->oz);
-        Bx = V(sub)(f8_permute(lo, p->idx[3]), p->ox);
-        By = V(sub)(f8_permute(lo, p->idx[4]), p->oy);
-        Bz0 = V(sub)(f8_permute(lo, p->idx[5]), p->oz);
-        Cx = V(sub)(f8_permute(hi, p->idx[6]), p->ox);
-        Cy = V(sub)(f8_permute(hi, p->idx[7]), p->oy);
-        Cz0 = V(sub)(f8_permute(hi, p->idx[8]), p->oz);
+#else /* the same 8 floats in the low lanes; indices stay below 8 */
+        const VF lo = f16_load8u(tri), hi = f16_load8u(tri + 1);
+#endif
+        Ax = V(sub)(V(permute)(lo, p->idx[0]), p->ox);
+        Ay = V(sub)(V(permute)(lo, p->idx[1]), p->oy);
+        Az0 = V(sub)(V(permute)(lo, p->idx[2]), p->oz);
+        Bx = V(sub)(V(permute)(lo, p->idx[3]), p->ox);
+        By = V(sub)(V(permute)(lo, p->idx[4]), p->oy);
+        Bz0 = V(sub)(V(permute)(lo, p->idx[5]), p->oz);
+        Cx = V(sub)(V(permute)(hi, p->idx[6]), p->ox);
+        Cy = V(sub)(V(permute)(hi, p->idx[7]), p->oy);
+        Cz0 = V(sub)(V(permute)(hi, p->idx[8]), p->oz);
 #else
         Ax = V(sub)(KD_WN(kd_nray_pick)(p->kx0, p->kx1, tri + 0), p->ox);
         Ay = V(sub)(KD_WN(kd_nray_pick)(p->ky0, p->ky1, tri + 0), p->oy);

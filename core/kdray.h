@@ -166,7 +166,7 @@ typedef struct kdr_hits {
 } kdr_hits;
 
 typedef enum kdr_trav_mode {
-    KDR_TRAV_AUTO = 0,   /* best available: bundles of 8 (AVX2) or 4 */
+    KDR_TRAV_AUTO = 0,   /* best available: bundles of 16 (AVX-512), 8 (AVX2) or 4 */
     KDR_TRAV_SINGLE = 1, /* one ray at a time */
     KDR_TRAV_BUNDLE4 = 2,
     KDR_TRAV_BUNDLE8 = 3, /* falls back to 4 without AVX2 */

@@ -384,4 +384,71 @@ KD_AVX512 static inline void i16_scatter(int32_t *base, unsigned m, i16 idx, i16
     _mm512_mask_i32scatter_epi32(base, (__mmask16)m, idx, a, 4);
 }
 
+/* ---- 16 lanes as whole-vector masks (the bundle template) ---------------
+ * The bundle traversal (kd_traverse_bundle.h) and the N-rays triangle test
+ * (kd_tri_nray.h) are written for masks held in float vectors (all-ones or
+ * all-zero lanes, the SSE/AVX compare results). These give the 16-lane
+ * instance the same helpers: a compare's k-mask becomes a vector with
+ * vpmovm2d and a vector mask a k-mask with vpmovd2m (one cheap
+ * instruction each), so the template needs no second mask convention. */
+KD_AVX512 static inline f16 f16_load(const float *p) { return _mm512_load_ps(p); }
+KD_AVX512 static inline f16 f16_loadu(const float *p) { return _mm512_loadu_ps(p); }
+KD_AVX512 static inline f16 f16_div(f16 a, f16 b) { return _mm512_div_ps(a, b); }
+KD_AVX512 static inline f16 f16_kmask(__mmask16 k) {
+    return _mm512_castsi512_ps(_mm512_movm_epi32(k));
+}
+KD_AVX512 static inline __mmask16 f16_kbits(f16 m) {
+    return _mm512_movepi32_mask(_mm512_castps_si512(m));
+}
+KD_AVX512 static inline f16 f16_lt(f16 a, f16 b) {
+    return f16_kmask(_mm512_cmp_ps_mask(a, b, _CMP_LT_OQ));
+}
+KD_AVX512 static inline f16 f16_le(f16 a, f16 b) {
+    return f16_kmask(_mm512_cmp_ps_mask(a, b, _CMP_LE_OQ));
+}
+KD_AVX512 static inline f16 f16_gt(f16 a, f16 b) {
+    return f16_kmask(_mm512_cmp_ps_mask(a, b, _CMP_GT_OQ));
+}
+KD_AVX512 static inline f16 f16_eq(f16 a, f16 b) {
+    return f16_kmask(_mm512_cmp_ps_mask(a, b, _CMP_EQ_OQ));
+}
+KD_AVX512 static inline f16 f16_and(f16 a, f16 b) { return _mm512_and_ps(a, b); }
+KD_AVX512 static inline f16 f16_or(f16 a, f16 b) { return _mm512_or_ps(a, b); }
+KD_AVX512 static inline f16 f16_andnot(f16 m, f16 a) { return _mm512_andnot_ps(m, a); }
+KD_AVX512 static inline f16 f16_xor(f16 a, f16 b) { return _mm512_xor_ps(a, b); }
+/* lanes of vector mask m: a, others b */
+KD_AVX512 static inline f16 f16_sel(f16 m, f16 a, f16 b) {
+    return _mm512_mask_blend_ps(f16_kbits(m), b, a);
+}
+KD_AVX512 static inline int f16_bits(f16 m) { return (int)f16_kbits(m); }
+KD_AVX512 static inline f16 f16_signmask(f16 a) {
+    return _mm512_castsi512_ps(_mm512_srai_epi32(_mm512_castps_si512(a), 31));
+}
+KD_AVX512 static inline f16 f16_bitmask(int bits) { return f16_kmask((__mmask16)bits); }
+KD_AVX512 static inline f16 f16_seti(int32_t x) {
+    return _mm512_castsi512_ps(_mm512_set1_epi32(x));
+}
+/* per-lane counters: acc - m adds 1 where m is all-ones (-1) */
+KD_AVX512 static inline f16 f16_count(f16 acc, f16 m) {
+    return _mm512_castsi512_ps(
+        _mm512_sub_epi32(_mm512_castps_si512(acc), _mm512_castps_si512(m)));
+}
+KD_AVX512 static inline uint64_t f16_count_sum(f16 acc) {
+    _Alignas(64) int32_t v[16];
+    _mm512_store_si512(v, _mm512_castps_si512(acc));
+    uint64_t sum = 0;
+    for (int j = 0; j < 16; j++)
+        sum += (uint64_t)v[j];
+    return sum;
+}
+/* Lane j gets v[idx[j]] (idx: int32 lane indices 0..15 as bits). */
+KD_AVX512 static inline f16 f16_permute(f16 v, f16 idx) {
+    return _mm512_permutexvar_ps(_mm512_castps_si512(idx), v);
+}
+/* Floats p[0..7] in lanes 0..7, the upper lanes undefined (for
+ * f16_permute with indices below 8: reads no more than the 8-wide load). */
+KD_AVX512 static inline f16 f16_load8u(const float *p) {
+    return _mm512_castps256_ps512(_mm256_loadu_ps(p));
+}
+
 #endif /* KD_SIMD_H */

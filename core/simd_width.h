@@ -3,7 +3,7 @@
  * (the N-rays triangle test kd_tri_nray.h, the one-ray N-triangles test
  * kd_tri_ntri_lanes.h, bundles, frusta, cone packets, the interleaved walk
  * kd_traverse_stream_lanes.h). A file that instantiates a template defines
- * KD_W (4 or 8; 16 for the interleaved walk), includes this header, then
+ * KD_W (4, 8 or 16), includes this header, then
  * the template; to instantiate again at another width it redefines KD_W and
  * includes this header once more (no include guard: it first undefines what
  * it defined last time). It defines
@@ -17,6 +17,8 @@
  *              function carries it)
  *   KD_FN      the qualifiers of a template's helpers: static inline
  *              KD_TARGET
+ *   KD_VALIGN  the alignment of a lane array that V(load) reads (32; 64
+ *              for 16 lanes)
  * 8-wide code may only run after kdr_cpu_has_avx2() said yes, 16-wide code
  * after kd_cpu_has_avx512().
  */
@@ -29,6 +31,7 @@
 #undef KD_WN__
 #undef KD_TARGET
 #undef KD_FN
+#undef KD_VALIGN
 
 #undef VI
 #undef IV
@@ -37,18 +40,21 @@
 #define VF f4
 #define V(op) f4_##op
 #define KD_TARGET
+#define KD_VALIGN 32
 #elif KD_W == 8
 #define VF f8
 #define V(op) f8_##op
 #define VI i8
 #define IV(op) i8_##op
 #define KD_TARGET KD_AVX2
+#define KD_VALIGN 32
 #elif KD_W == 16
 #define VF f16
 #define V(op) f16_##op
 #define VI i16
 #define IV(op) i16_##op
 #define KD_TARGET KD_AVX512
+#define KD_VALIGN 64
 #else
 #error "define KD_W as 4, 8 or 16 before including simd_width.h"
 #endif

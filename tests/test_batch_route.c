@@ -91,8 +91,9 @@ static void check_route(const char *scene, const kdr_scene *s, const char *what,
     kdr_trav_stats st = {0};
     const int rc =
         kdr_trace_batch(s, &c->b, 0, KB_CHUNK, KDR_CLOSEST, KDR_TRAV_AUTO, &h, &st);
-    /* the walk's groups are the bundle width's (8 with AVX2, else 4) */
-    const uint64_t width = kdr_cpu_has_avx2() ? 8 : 4;
+    /* the walk's groups are AUTO's bundle width's (16 with AVX-512, 8 with
+     * AVX2, else 4) */
+    const uint64_t width = kd_cpu_has_avx512() ? 16 : kdr_cpu_has_avx2() ? 8 : 4;
     /* the walk route traces every group there; bundles trace KB_PROBE
      * bundles at least before a failed probe may send the rest there */
     const uint64_t all = KB_CHUNK / width;

@@ -12,8 +12,10 @@
  * lying in the plane), odd intervals (tmax < tmin, tmin == tmax, finite
  * tmax, negative tmin, NaN/inf inputs), rays aimed at vertices and edge
  * midpoints (test_bundle_sets.c), each cut into calls of 1, 3, 5, 7, 9,
- * 13 and 64 rays. The 4- and 8-wide drivers are also called directly with
- * the incoherence fallback off, so the SIMD path sees every adversarial ray.
+ * 13 and 64 rays. The 4-, 8- and 16-wide drivers are also called directly
+ * with the incoherence fallback off, so the SIMD path sees every
+ * adversarial ray; the 16-wide one also with the fallback, sorting and
+ * early answers on (the flags kdr_trace_batch passes).
  * So does the interleaved walk of incoherent rays (kd_stream.h): its scalar
  * and AVX-512 forms are called directly on every set, each also with its
  * leaves staged (the large-scene path), and through its dispatch with the
@@ -94,19 +96,20 @@ static int differ(const results *a, const results *b, size_t i, kdr_query q) {
  * drivers without the incoherence fallback, 6..9 = the interleaved walk's
  * scalar and AVX-512 forms, plain and with staged leaves, 10 = its
  * dispatch with an id list (the rays in reverse order), 11/12 = its AVX2
- * 8-lane form, plain and staged. */
-#define NWAYS 13
+ * 8-lane form, plain and staged, 13/14 = the 16-wide (AVX-512) bundle
+ * driver without the fallback and with kdr_trace_batch's flags. */
+#define NWAYS 15
 static const char *const way_names[NWAYS] = {
     "auto",   "single",        "bundle4",  "bundle8",          "raw4",      "raw8",
     "stream", "stream-staged", "stream16", "stream16-staged", "stream-ids",
-    "stream8", "stream8-staged"};
+    "stream8", "stream8-staged", "raw16", "bundle16"};
 
 /* 0 when the CPU cannot run that way (8 lanes without AVX2, 16 without
  * AVX-512). */
 static int way_runs(int way) {
     if (way == 3 || way == 5 || way == 11 || way == 12)
         return kdr_cpu_has_avx2(); /* bundle8 would run 4-wide: raw8 must not run */
-    if (way == 8 || way == 9)
+    if (way == 8 || way == 9 || way == 13 || way == 14)
         return kd_cpu_has_avx512();
     return 1;
 }
@@ -119,6 +122,9 @@ static void run_way(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
         kd_bundle4_trace(s, b, first, count, q, 0, &h, NULL);
     } else if (way == 5) {
         kd_bundle8_trace(s, b, first, count, q, 0, &h, NULL);
+    } else if (way == 13 || way == 14) {
+        kd_bundle16_trace(s, b, first, count, q,
+                          way == 14 ? KB_FALLBACK | KB_SORT | KB_LIVE : 0, &h, NULL);
     } else if (way == 6 || way == 7) {
         if (s->nodes)
             kd_stream_scalar_trace(s, b, NULL, first, count, q,
@@ -313,8 +319,8 @@ static int check_ladder(const char *dir) {
 int main(int argc, char **argv) {
     printf("AVX2: %s\n", kdr_cpu_has_avx2() ? "yes (4- and 8-wide tested)"
                                             : "no (8-wide skipped)");
-    printf("AVX-512: %s\n", kd_cpu_has_avx512() ? "yes (16-lane interleaved walk tested)"
-                                               : "no (16-lane interleaved walk skipped)");
+    printf("AVX-512: %s\n", kd_cpu_has_avx512() ? "yes (16-lane bundles and interleaved walk tested)"
+                                               : "no (16-lane bundles and interleaved walk skipped)");
     if (argc > 1)
         return check_ladder(argv[1]);
     check_api();
