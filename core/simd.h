@@ -346,6 +346,7 @@ KD_AVX512 static inline f16 f16_put(f16 v, unsigned m, float x) {
     return _mm512_mask_broadcastss_ps(v, (__mmask16)m, _mm_set_ss(x));
 }
 KD_AVX512 static inline void f16_store(float *p, f16 a) { _mm512_store_ps(p, a); }
+KD_AVX512 static inline f16 f16_loadu(const float *p) { return _mm512_loadu_ps(p); }
 KD_AVX512 static inline f16 f16_gather8(f16 src, unsigned m, i16 idx, const void *base) {
     return _mm512_mask_i32gather_ps(src, (__mmask16)m, idx, base, 8);
 }

@@ -1,0 +1,151 @@
+/*
+ * kd_entry.h — entry points for rays that share an origin (AO rays of one
+ * surface point, shadow samples of one point): the top of the tree that all
+ * of them descend is walked once per origin (kd_entry_path_init), and each
+ * ray then replays that path with the single walk's own node rule, float
+ * operations and interval updates (kd_entry_start) for as long as the walk
+ * would take ONLY the path's child. Where it would do anything else (take
+ * both children, the other child, or none) the ray's ordinary walk starts,
+ * at that node with that interval and an empty stack: the state the full
+ * walk reaches there, since every step above it pushed nothing. So the
+ * answer, and every node and leaf the walk visits below the entry, are the
+ * single walk's exactly, for closest and any hit alike; only the replayed
+ * steps are cheaper (path nodes held in a small array, one well-predicted
+ * branch per level instead of a near/far coin flip). Internal to core/.
+ */
+#ifndef KD_ENTRY_H
+#define KD_ENTRY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "kd_internal.h"
+#include "kd_traverse.h"
+
+/* The origin's path from the root: node[i + 1] is the child of node[i]
+ * holding the origin (above[i] says which), i < depth; node[depth] is a
+ * leaf, or the node where the path stopped (origin in its split plane, or
+ * its child there flagged empty). Each level keeps the split, the axis and
+ * the empty flags, the only fields kd_entry_start reads. */
+typedef struct kd_entry_path {
+    int depth;
+    const kd_node *node[KD_MAX_DEPTH + 1];
+    struct kd_entry_level {
+        float split;
+        uint8_t axis, above; /* above: the origin's child is the above one */
+        uint8_t empty;       /* bit 0: below child empty, bit 1: above */
+    } lv[KD_MAX_DEPTH];
+    /* The same levels for kd_entry_find16 (16 levels per AVX-512
+     * operation): a[i] = split - org[axis] (the walk's first operation,
+     * shared by every ray of the origin), padded for unaligned loads, and
+     * bit i of each mask: axis 1, axis 2, origin above, below child empty,
+     * above child empty. */
+    float a[KD_MAX_DEPTH + 16];
+    uint64_t ax1, ax2, above_m, below_empty_m, above_empty_m;
+    int wide; /* kd_cpu_has_avx512() */
+} kd_entry_path;
+
+/* Fills p for origin org (scene with a tree). */
+void kd_entry_path_init(const kdr_scene *s, const float org[3], kd_entry_path *p);
+
+/*
+ * The single walk's descent along the path for a ray with the path's origin
+ * after kd_walk_setup (inv, ss, neg, interval *tn, *tf): at level i the
+ * crossings t_lo, t_hi as descend() computes them; the walk needs the near
+ * child unless t_hi < tn and the far child unless t_lo > tf, minus an empty
+ * child (kd_step_nobranch's form of descend's five cases). While exactly
+ * the path's child is needed the ray follows it, with descend's interval
+ * update (near only: tf = min(t_hi, tf); far only: tn = max(t_lo, tn),
+ * which leave the interval as it is when t_lo > tf or t_hi < tn); at the
+ * first level where not, the walk must start there. Returns that node and
+ * its level in *level; *tn, *tf are the walk's interval at it.
+ */
+static inline const kd_node *kd_entry_start_scalar(const kd_entry_path *p, const float org[3],
+                                            const float inv[3], const float ss[3],
+                                            const unsigned neg[3], float *tn, float *tf,
+                                            int *level) {
+    float n0 = *tn, f0 = *tf;
+    int i = 0;
+    for (; i < p->depth; i++) {
+        const struct kd_entry_level *l = &p->lv[i];
+        const int axis = l->axis;
+        const float a = l->split - org[axis];
+        const float t_lo = (a - ss[axis]) * inv[axis];
+        const float t_hi = (a + ss[axis]) * inv[axis];
+        const unsigned ng = neg[axis];
+        /* near is the above child when the direction is negative */
+        const unsigned near_empty = (unsigned)l->empty >> ng;
+        const unsigned far_empty = (unsigned)l->empty >> (ng ^ 1u);
+        const unsigned go_near = (unsigned)!(t_hi < n0) & ~near_empty & 1u;
+        const unsigned go_far = (unsigned)!(t_lo > f0) & ~far_empty & 1u;
+        const unsigned path_near = (unsigned)l->above == ng;
+        /* exactly one child needed, and it is the path's: without a
+         * branch on the direction's sign (a coin flip per level for AO
+         * rays), so the loop's one branch predicts until the entry */
+        const unsigned only = (go_near ^ go_far) & ~(go_near ^ path_near) & 1u;
+        if (!only)
+            break;
+        const float nf = t_hi < f0 ? t_hi : f0;
+        const float nn = t_lo > n0 ? t_lo : n0;
+        f0 = kd_sel_f32(path_near, nf, f0);
+        n0 = kd_sel_f32(path_near, n0, nn);
+    }
+    *tn = n0;
+    *tf = f0;
+    *level = i;
+    return p->node[i];
+}
+
+/* kd_entry_start_scalar's answer, 16 levels at a time with AVX-512
+ * (kd_entry.c); bit for bit the same node, level and interval (tested by
+ * test_entry). */
+const kd_node *kd_entry_find16(const kd_entry_path *p, const float inv[3],
+                               const float ss[3], float *tn, float *tf, int *level);
+
+/* The entry of a ray: kd_entry_find16 on AVX-512 CPUs, else the scalar
+ * replay. */
+static inline const kd_node *kd_entry_start(const kd_entry_path *p, const float org[3],
+                                            const float inv[3], const float ss[3],
+                                            const unsigned neg[3], float *tn, float *tf,
+                                            int *level) {
+    if (p->wide)
+        return kd_entry_find16(p, inv, ss, tn, tf, level);
+    return kd_entry_start_scalar(p, org, inv, ss, neg, tn, tf, level);
+}
+
+/* One ray with the path's origin through the single walk from its entry
+ * (kd_traverse_single.c): the answer of kdr_occluded1 (any != 0) or
+ * kdr_intersect1, bit for bit, and the same stats (the replayed levels
+ * count as the nodes the single walk enters there). */
+int kd_entry_occluded1(const kdr_scene *s, const kd_entry_path *p, const kdr_ray *r,
+                       kdr_trav_stats *stats);
+int kd_entry_intersect1(const kdr_scene *s, const kd_entry_path *p, const kdr_ray *r,
+                        kdr_hit *hit, kdr_trav_stats *stats);
+
+/* A walk over a batch that starts its rays one by one (the interleaved
+ * walk's refill) keeps one path: rays whose origin is the path's start
+ * from their entry; a ray with the previous ray's origin (a run begins)
+ * builds the path for that origin first; any other ray starts at the root,
+ * so scattered origins pay a compare, not a path. */
+typedef struct kd_entry_cache {
+    kd_entry_path path;
+    float path_org[3], prev_org[3];
+    int have_path, have_prev;
+} kd_entry_cache;
+
+/* The start of a ray with origin org after kd_walk_setup (inv, ss, neg,
+ * interval *tn, *tf): its entry node and interval, or the root and the
+ * interval as they are; *level is the number of interior nodes the single
+ * walk steps through above the start (the stats count them as visited, so
+ * work sums equal the single walk's). Cache zeroed before the first ray. */
+const kd_node *kd_entry_for(const kdr_scene *s, kd_entry_cache *ec, const float org[3],
+                            const float inv[3], const float ss[3], const unsigned neg[3],
+                            float *tn, float *tf, int *level);
+
+/* Rays [first, first + count) of the batch (arguments checked by the
+ * caller, scene with a tree), each run of equal origins (bitwise) through
+ * one path and kd_entry_*1, results at each ray's own index. */
+void kd_entry_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                    size_t count, kdr_query q, kdr_hits *out, kdr_trav_stats *stats);
+
+#endif /* KD_ENTRY_H */
