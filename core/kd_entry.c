@@ -26,6 +26,7 @@ void kd_entry_path_init(const kdr_scene *s, const float org[3], kd_entry_path *p
         if (above ? kd_above_empty(n) : kd_below_empty(n))
             break;
         p->node[d] = n;
+        p->sib[d] = above ? n + 1 : nodes + kd_above(n);
         p->lv[d].split = split;
         p->lv[d].axis = (uint8_t)axis;
         p->lv[d].above = (uint8_t)above;
@@ -50,26 +51,25 @@ void kd_entry_path_init(const kdr_scene *s, const float org[3], kd_entry_path *p
     p->wide = kd_cpu_has_avx512();
 }
 
-/* Levels [i, i + 16) at once, each lane with kd_entry_start_scalar's
- * operations: a from the path, ss and inv of the level's axis (blends of
- * broadcasts), t_lo = (a - ss) * inv, t_hi = (a + ss) * inv, the near
- * child is above where inv is negative (its sign is dir's, which is what
- * kd_walk_setup's neg holds), go_near = !(t_hi < tn) minus an empty near
- * child, go_far = !(t_lo > tf) minus an empty far child. A level stops the
- * vector scan when the walk needs anything but the path's child there (the
- * entry), or when the interval reaches the path's sibling but the sibling
- * is empty: only there does the walk clip its interval (near only with the
- * far child empty: tf = min(t_hi, tf); far only with the near child empty:
- * tn = max(t_lo, tn); elsewhere a single child means t_lo > tf or t_hi <
- * tn, and the same min / max leave the interval as it is). Such
- * a level is applied as the scalar replay does and the scan goes on after
- * it with the new interval. */
-/* Levels [i, i + 16) against interval [n0, f0]: bit j of the result set
- * where level i + j stops the scan (kd_entry_find16), bit j of *clip where
- * that is an interval update rather than the entry. */
-KD_AVX512 static inline unsigned stops16(const kd_entry_path *p, int i, const f16 inv[3],
+/* One block of levels [i, i + 16) for kd_entry_descend16, each lane with
+ * kd_entry_descend_scalar's operations for its level, given the interval
+ * [n0, f0] at level i. tn changes along the path only where the path's
+ * child is the far one and the empty near child is reached (tn = max(t_lo,
+ * tn)): such a level ends the block's scan (*clip) and is replayed alone.
+ * Below it, tf at level j is the scalar loop's running min(t_hi, tf) over
+ * the levels before j that take their near child: an exclusive scan of
+ * min_ps(later, earlier), which is the ternary t_hi < tf ? t_hi : tf
+ * (a NaN t_hi, which leaves tf as it is, enters as +inf, which does too;
+ * on equal values the earlier one stays, so the bits are the loop's, -0
+ * and +0 included, and the combination is associative), in 4 steps.
+ * Returns the levels where the replay stops (path child not needed, or the
+ * near sibling needed first) or clips; writes per lane the far entry's tn
+ * and tf (*ftn, *ftf), the levels that push (*push) and tf after each
+ * level (*after). */
+KD_AVX512 static inline unsigned block16(const kd_entry_path *p, int i, const f16 inv[3],
                                          const f16 ssv[3], float n0, float f0,
-                                         unsigned *clip, unsigned *path_near_out) {
+                                         unsigned *clip, unsigned *push, f16 *ftn,
+                                         f16 *ftf, f16 *after) {
     const int left = p->depth - i;
     const unsigned valid = left >= 16 ? 0xffffu : (1u << left) - 1u;
     const unsigned m1 = (unsigned)(p->ax1 >> i) & 0xffffu;
@@ -79,82 +79,97 @@ KD_AVX512 static inline unsigned stops16(const kd_entry_path *p, int i, const f1
     const f16 a = f16_loadu(p->a + i);
     const f16 t_lo = f16_mul(f16_sub(a, sv), iv);
     const f16 t_hi = f16_mul(f16_add(a, sv), iv);
-    const unsigned ng = f16_signs(iv);
+    const unsigned ng = f16_signs(iv); /* dir's signs: kd_walk_setup's neg */
     const unsigned be = (unsigned)(p->below_empty_m >> i) & 0xffffu;
     const unsigned ae = (unsigned)(p->above_empty_m >> i) & 0xffffu;
     const unsigned near_empty = (ng & ae) | (~ng & be);
     const unsigned far_empty = (ng & be) | (~ng & ae);
+    const unsigned path_near = ~((unsigned)(p->above_m >> i) ^ ng) & valid;
     const unsigned raw_near = f16_nlt(valid, t_hi, f16_set1(n0));
-    const unsigned raw_far = f16_ngt(valid, t_lo, f16_set1(f0));
     const unsigned go_near = raw_near & ~near_empty;
-    const unsigned go_far = raw_far & ~far_empty;
-    const unsigned path_near = ~((unsigned)(p->above_m >> i) ^ ng) & 0xffffu;
-    const unsigned only = (go_near ^ go_far) & ~(go_near ^ path_near);
-    /* the interval reaches the path's sibling but the sibling is empty:
-     * the only levels where the walk's interval changes */
-    *clip = only & ((path_near & raw_far) | (~path_near & raw_near)) & valid;
-    *path_near_out = path_near;
-    return (~only & valid) | *clip;
+    /* tf before each level: the exclusive scan of the near levels' t_hi */
+    const f16 inf = f16_set1(INFINITY);
+    f16 y = f16_selm(f16_ord(path_near, t_hi), t_hi, inf); /* a NaN: +inf */
+    y = f16_min(y, f16_up(y, inf, 1));
+    y = f16_min(y, f16_up(y, inf, 2));
+    y = f16_min(y, f16_up(y, inf, 4));
+    y = f16_min(y, f16_up(y, inf, 8));
+    const f16 f0v = f16_set1(f0);
+    const f16 tfv = f16_min(f16_up(y, inf, 1), f0v);
+    const unsigned go_far = f16_ngt(valid, t_lo, tfv) & ~far_empty;
+    *clip = ~path_near & raw_near & near_empty & go_far & valid;
+    *push = path_near & go_near & go_far;
+    *ftn = f16_max(t_lo, f16_set1(n0));
+    *ftf = tfv;
+    *after = f16_min(y, f0v);
+    return ((path_near & ~go_near) | (~path_near & (go_near | ~go_far)) | *clip) & valid;
 }
 
-KD_AVX512 const kd_node *kd_entry_find16(const kd_entry_path *p, const float inv[3],
-                                         const float ss[3], float *tn, float *tf,
-                                         int *level) {
+KD_AVX512 const kd_node *kd_entry_descend16(const kd_entry_path *p, const float inv[3],
+                                            const float ss[3], float *tn, float *tf,
+                                            int *level, kd_todo *stack, int *sp) {
     const f16 iv[3] = {f16_set1(inv[0]), f16_set1(inv[1]), f16_set1(inv[2])};
     const f16 sv[3] = {f16_set1(ss[0]), f16_set1(ss[1]), f16_set1(ss[2])};
+    _Alignas(64) float ftn[16], ftf[16], aft[16];
     float n0 = *tn, f0 = *tf;
-    int i = 0;
-    for (;;) {
-        /* every block from level i, without a branch between them; the
-         * first stop is the entry unless it is an interval update */
-        uint64_t stop = 0, clip = 0, near = 0;
-        for (int b = i; b < p->depth; b += 16) {
-            unsigned c, pn;
-            const unsigned st = stops16(p, b, iv, sv, n0, f0, &c, &pn);
-            stop |= (uint64_t)st << (b - i);
-            clip |= (uint64_t)c << (b - i);
-            near |= (uint64_t)pn << (b - i);
+    int i = 0, k = 0;
+    while (i < p->depth) {
+        unsigned clip, push;
+        f16 vtn, vtf, vaf;
+        const unsigned stop = block16(p, i, iv, sv, n0, f0, &clip, &push, &vtn, &vtf, &vaf);
+        const int left = p->depth - i;
+        const int f = stop ? __builtin_ctz(stop) : (left < 16 ? left : 16);
+        push &= (unsigned)((1u << f) - 1u); /* f <= 16: 1u << 16 is defined */
+        if (push) {
+            f16_store(ftn, vtn);
+            f16_store(ftf, vtf);
+            for (unsigned m = push; m; m &= m - 1) {
+                const int j = __builtin_ctz(m);
+                stack[k].node = p->sib[i + j];
+                stack[k].tn = ftn[j];
+                stack[k].tf = ftf[j];
+                k++;
+            }
         }
-        if (!stop) {
-            i = p->depth;
-            break;
+        if (f > 0) {
+            f16_store(aft, vaf);
+            f0 = aft[f - 1];
         }
-        const int f = __builtin_ctzll(stop);
         i += f;
+        if (!stop)
+            continue;
         if (!((clip >> f) & 1u))
             break;
+        /* the far child, its empty near sibling reached: tn moves */
         const struct kd_entry_level *l = &p->lv[i];
-        const float th = (p->a[i] + ss[l->axis]) * inv[l->axis];
         const float tl = (p->a[i] - ss[l->axis]) * inv[l->axis];
-        if ((near >> f) & 1u)
-            f0 = th < f0 ? th : f0;
-        else
-            n0 = tl > n0 ? tl : n0;
+        n0 = tl > n0 ? tl : n0;
         i++;
     }
     *tn = n0;
     *tf = f0;
     *level = i;
+    *sp = k;
     return p->node[i];
 }
 
 const kd_node *kd_entry_for(const kdr_scene *s, kd_entry_cache *ec, const float org[3],
                             const float inv[3], const float ss[3], const unsigned neg[3],
-                            float *tn, float *tf, int *level) {
+                            float *tn, float *tf, int *level, kd_todo *stack, int *sp) {
     const size_t sz = 3 * sizeof(float);
     if (!(ec->have_path && memcmp(org, ec->path_org, sz) == 0)) {
         const int run = ec->have_prev && memcmp(org, ec->prev_org, sz) == 0;
         memcpy(ec->prev_org, org, sz);
         ec->have_prev = 1;
         if (!run) {
-            *level = 0;
+            *level = *sp = 0;
             return s->nodes;
         }
         kd_entry_path_init(s, org, &ec->path);
         memcpy(ec->path_org, org, sz);
         ec->have_path = 1;
     }
-    return kd_entry_start(&ec->path, org, inv, ss, neg, tn, tf, level);
+    return kd_entry_descend(&ec->path, org, inv, ss, neg, tn, tf, level, stack, sp);
 }
 
 /* Origin of ray i (stride 0: every ray shares b->org). */

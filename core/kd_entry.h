@@ -30,6 +30,7 @@
 typedef struct kd_entry_path {
     int depth;
     const kd_node *node[KD_MAX_DEPTH + 1];
+    const kd_node *sib[KD_MAX_DEPTH]; /* node[i]'s other child */
     struct kd_entry_level {
         float split;
         uint8_t axis, above; /* above: the origin's child is the above one */
@@ -49,23 +50,28 @@ typedef struct kd_entry_path {
 void kd_entry_path_init(const kdr_scene *s, const float org[3], kd_entry_path *p);
 
 /*
- * The single walk's descent along the path for a ray with the path's origin
- * after kd_walk_setup (inv, ss, neg, interval *tn, *tf): at level i the
- * crossings t_lo, t_hi as descend() computes them; the walk needs the near
- * child unless t_hi < tn and the far child unless t_lo > tf, minus an empty
- * child (kd_step_nobranch's form of descend's five cases). While exactly
- * the path's child is needed the ray follows it, with descend's interval
- * update (near only: tf = min(t_hi, tf); far only: tn = max(t_lo, tn),
- * which leave the interval as it is when t_lo > tf or t_hi < tn); at the
- * first level where not, the walk must start there. Returns that node and
- * its level in *level; *tn, *tf are the walk's interval at it.
+ * The single walk's descent along the path for a ray with the path's
+ * origin after kd_walk_setup (inv, ss, neg, interval *tn, *tf), descend()'s
+ * cases in kd_step_nobranch's form: at level i the crossings t_lo, t_hi;
+ * the walk needs the near child unless t_hi < tn and the far child unless
+ * t_lo > tf, minus an empty child. Where the path's child is the near one
+ * and needed, the walk takes it, first pushing the sibling (the far child)
+ * with [max(t_lo, tn), tf] when that is needed too, and clips tf to
+ * min(t_hi, tf); where the path's child is the far one, needed, and the
+ * near child is not, it takes it with tn = max(t_lo, tn). Anywhere else
+ * (the path's child not needed, or the near sibling needed first) the walk
+ * leaves the path: the replay stops there. Returns that node (the origin's
+ * leaf when the ray follows the whole path), its level in *level and the
+ * walk's state at it: interval *tn, *tf and the sp entries it pushed on
+ * the way, in stack[0..*sp), in the walk's order.
  */
-static inline const kd_node *kd_entry_start_scalar(const kd_entry_path *p, const float org[3],
-                                            const float inv[3], const float ss[3],
-                                            const unsigned neg[3], float *tn, float *tf,
-                                            int *level) {
+static inline const kd_node *kd_entry_descend_scalar(const kd_entry_path *p,
+                                                     const float org[3], const float inv[3],
+                                                     const float ss[3], const unsigned neg[3],
+                                                     float *tn, float *tf, int *level,
+                                                     kd_todo *stack, int *sp) {
     float n0 = *tn, f0 = *tf;
-    int i = 0;
+    int i = 0, k = 0;
     for (; i < p->depth; i++) {
         const struct kd_entry_level *l = &p->lv[i];
         const int axis = l->axis;
@@ -74,43 +80,48 @@ static inline const kd_node *kd_entry_start_scalar(const kd_entry_path *p, const
         const float t_hi = (a + ss[axis]) * inv[axis];
         const unsigned ng = neg[axis];
         /* near is the above child when the direction is negative */
-        const unsigned near_empty = (unsigned)l->empty >> ng;
-        const unsigned far_empty = (unsigned)l->empty >> (ng ^ 1u);
+        const unsigned near_empty = ((unsigned)l->empty >> ng) & 1u;
+        const unsigned far_empty = ((unsigned)l->empty >> (ng ^ 1u)) & 1u;
         const unsigned go_near = (unsigned)!(t_hi < n0) & ~near_empty & 1u;
         const unsigned go_far = (unsigned)!(t_lo > f0) & ~far_empty & 1u;
-        const unsigned path_near = (unsigned)l->above == ng;
-        /* exactly one child needed, and it is the path's: without a
-         * branch on the direction's sign (a coin flip per level for AO
-         * rays), so the loop's one branch predicts until the entry */
-        const unsigned only = (go_near ^ go_far) & ~(go_near ^ path_near) & 1u;
-        if (!only)
-            break;
-        const float nf = t_hi < f0 ? t_hi : f0;
-        const float nn = t_lo > n0 ? t_lo : n0;
-        f0 = kd_sel_f32(path_near, nf, f0);
-        n0 = kd_sel_f32(path_near, n0, nn);
+        if ((unsigned)l->above == ng) { /* the path's child is the near one */
+            if (!go_near)
+                break;
+            if (go_far) {
+                stack[k].node = p->sib[i];
+                stack[k].tn = t_lo > n0 ? t_lo : n0;
+                stack[k].tf = f0;
+                k++;
+            }
+            f0 = t_hi < f0 ? t_hi : f0;
+        } else {
+            if (go_near || !go_far)
+                break;
+            n0 = t_lo > n0 ? t_lo : n0;
+        }
     }
     *tn = n0;
     *tf = f0;
     *level = i;
+    *sp = k;
     return p->node[i];
 }
 
-/* kd_entry_start_scalar's answer, 16 levels at a time with AVX-512
- * (kd_entry.c); bit for bit the same node, level and interval (tested by
- * test_entry). */
-const kd_node *kd_entry_find16(const kd_entry_path *p, const float inv[3],
-                               const float ss[3], float *tn, float *tf, int *level);
+/* kd_entry_descend_scalar's answer, 16 levels at a time with AVX-512
+ * (kd_entry.c); bit for bit the same node, level, interval and stack
+ * (tested by test_entry). */
+const kd_node *kd_entry_descend16(const kd_entry_path *p, const float inv[3],
+                                  const float ss[3], float *tn, float *tf, int *level,
+                                  kd_todo *stack, int *sp);
 
-/* The entry of a ray: kd_entry_find16 on AVX-512 CPUs, else the scalar
- * replay. */
-static inline const kd_node *kd_entry_start(const kd_entry_path *p, const float org[3],
-                                            const float inv[3], const float ss[3],
-                                            const unsigned neg[3], float *tn, float *tf,
-                                            int *level) {
+/* The replay: kd_entry_descend16 on AVX-512 CPUs, else the scalar one. */
+static inline const kd_node *kd_entry_descend(const kd_entry_path *p, const float org[3],
+                                              const float inv[3], const float ss[3],
+                                              const unsigned neg[3], float *tn, float *tf,
+                                              int *level, kd_todo *stack, int *sp) {
     if (p->wide)
-        return kd_entry_find16(p, inv, ss, tn, tf, level);
-    return kd_entry_start_scalar(p, org, inv, ss, neg, tn, tf, level);
+        return kd_entry_descend16(p, inv, ss, tn, tf, level, stack, sp);
+    return kd_entry_descend_scalar(p, org, inv, ss, neg, tn, tf, level, stack, sp);
 }
 
 /* One ray with the path's origin through the single walk from its entry
@@ -134,13 +145,13 @@ typedef struct kd_entry_cache {
 } kd_entry_cache;
 
 /* The start of a ray with origin org after kd_walk_setup (inv, ss, neg,
- * interval *tn, *tf): its entry node and interval, or the root and the
- * interval as they are; *level is the number of interior nodes the single
+ * interval *tn, *tf): its entry node, interval and stack
+ * (kd_entry_descend), or the root, the interval as it is and no stack; *level is the number of interior nodes the single
  * walk steps through above the start (the stats count them as visited, so
  * work sums equal the single walk's). Cache zeroed before the first ray. */
 const kd_node *kd_entry_for(const kdr_scene *s, kd_entry_cache *ec, const float org[3],
                             const float inv[3], const float ss[3], const unsigned neg[3],
-                            float *tn, float *tf, int *level);
+                            float *tn, float *tf, int *level, kd_todo *stack, int *sp);
 
 /* Rays [first, first + count) of the batch (arguments checked by the
  * caller, scene with a tree), each run of equal origins (bitwise) through

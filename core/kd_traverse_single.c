@@ -67,20 +67,19 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
     return n;
 }
 
-/* The walk from node n over [tn, tf] with an empty stack (the root and
- * the root-clipped interval, or an entry point of kd_entry.h); any != 0
- * stops at the first hit. */
+/* The walk from node n over [tn, tf] with stack[0..sp) pending (the root,
+ * the root-clipped interval and nothing, or an entry point of kd_entry.h
+ * and the entries pushed above it); any != 0 stops at the first hit. */
 static inline int walk_from(const kdr_scene *s, const kdr_ray *r, const int any,
                             const kd_node *n, float tn, float tf, const float inv[3],
-                            const float ss[3], const unsigned neg[3], kd_walk_out *o) {
+                            const float ss[3], const unsigned neg[3], kd_todo *stack,
+                            int sp, kd_walk_out *o) {
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
     kd_ntri_pre4 pre4;
     kd_ntri_pre_init4(&pre, &pre4);
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     const kd_node *nodes = s->nodes;
-    kd_todo stack[KD_MAX_DEPTH];
-    int sp = 0;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
         if (n && kd_walk_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
@@ -104,7 +103,8 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     unsigned neg[3];
     if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
         return 0;
-    return walk_from(s, r, any, s->nodes, tn, tf, inv, ss, neg, o);
+    kd_todo stack[KD_MAX_DEPTH];
+    return walk_from(s, r, any, s->nodes, tn, tf, inv, ss, neg, stack, 0, o);
 }
 
 /* The same from the ray's entry on the path of its origin (kd_entry.h). */
@@ -114,10 +114,12 @@ static inline int walk_entry(const kdr_scene *s, const kd_entry_path *p,
     unsigned neg[3];
     if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
         return 0;
-    int level;
-    const kd_node *n = kd_entry_start(p, r->org, inv, ss, neg, &tn, &tf, &level);
+    kd_todo stack[KD_MAX_DEPTH];
+    int level, sp;
+    const kd_node *n =
+        kd_entry_descend(p, r->org, inv, ss, neg, &tn, &tf, &level, stack, &sp);
     o->nodes += (uint64_t)level; /* the single walk steps through them */
-    return walk_from(s, r, any, n, tn, tf, inv, ss, neg, o);
+    return walk_from(s, r, any, n, tn, tf, inv, ss, neg, stack, sp, o);
 }
 
 static void add_stats(kdr_trav_stats *st, const kd_walk_out *o) {

@@ -117,14 +117,20 @@ KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
             KD_WN(ks_finish)(l, 0, c);
             continue;
         }
-        int level;
+        kd_todo st[KD_MAX_DEPTH];
+        int level, sp;
         const kd_node *n0 = kd_entry_for(c->s, c->entry, ray.org, inv, ss, neg, &tn, &tf,
-                                         &level);
+                                         &level, st, &sp);
+        for (int d = 0; d < sp; d++) { /* the entries pushed above the entry */
+            w->stk_node[d][j] = (int32_t)(st[d].node - c->s->nodes);
+            w->stk_tn[d][j] = st[d].tn;
+            w->stk_tf[d][j] = st[d].tf;
+        }
         l->tmin = ray.tmin;
         kd_ray_precompute(ray.org, ray.dir, &l->pre);
         kd_ntri_pre_init4(&l->pre, &l->pre4);
         w->node = IV(put)(w->node, bit, (int32_t)(n0 - c->s->nodes));
-        w->sp = IV(put)(w->sp, bit, 0);
+        w->sp = IV(put)(w->sp, bit, sp);
         w->visits = IV(put)(w->visits, bit, level);
         w->tn = V(put)(w->tn, bit, tn);
         w->tf = V(put)(w->tf, bit, tf);

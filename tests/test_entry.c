@@ -7,8 +7,8 @@
  * the same work (nodes entered, triangle tests: the replayed levels count
  * as the nodes the single walk steps through, so a walk that starts one
  * level too deep or too shallow, or with another interval, shows here even
- * where the answer survives); kd_entry_find16 (AVX-512) must return the
- * scalar replay's node, level and interval bits; kd_entry_trace and
+ * where the answer survives); kd_entry_descend16 (AVX-512) must return the
+ * scalar replay's node, level, interval and stack bits; kd_entry_trace and
  * kdr_trace_batch (whose interleaved walk starts runs of a shared origin
  * at their entries) must give the single answers for batches of runs.
  *
@@ -34,7 +34,7 @@
 #include "test_bundle_sets.h"
 
 static int failures;
-static size_t rays_checked, deep_entries;
+static size_t rays_checked, deep_entries, pushed;
 
 static uint64_t rng = 0x2545F4914F6CDD1Dull;
 static uint32_t rnd(void) {
@@ -76,14 +76,21 @@ static void check_ray(const char *scene, const char *set, size_t i, const kdr_sc
     if (!kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
         return;
     float tn2 = tn, tf2 = tf;
-    int l1, l2;
-    const kd_node *e1 = kd_entry_start_scalar(p, r->org, inv, ss, neg, &tn, &tf, &l1);
+    int l1, l2, sp1, sp2;
+    kd_todo st1[KD_MAX_DEPTH], st2[KD_MAX_DEPTH];
+    const kd_node *e1 =
+        kd_entry_descend_scalar(p, r->org, inv, ss, neg, &tn, &tf, &l1, st1, &sp1);
     deep_entries += l1 > 0;
+    pushed += (size_t)sp1;
     if (!p->wide)
         return;
-    const kd_node *e2 = kd_entry_find16(p, inv, ss, &tn2, &tf2, &l2);
-    if (e1 != e2 || l1 != l2 || !same_f(tn, tn2) || !same_f(tf, tf2))
-        fail(scene, set, i, "kd_entry_find16 differs from the scalar replay");
+    const kd_node *e2 = kd_entry_descend16(p, inv, ss, &tn2, &tf2, &l2, st2, &sp2);
+    int same = e1 == e2 && l1 == l2 && same_f(tn, tn2) && same_f(tf, tf2) && sp1 == sp2;
+    for (int k = 0; same && k < sp1; k++)
+        same = st1[k].node == st2[k].node && same_f(st1[k].tn, st2[k].tn) &&
+               same_f(st1[k].tf, st2[k].tf);
+    if (!same)
+        fail(scene, set, i, "kd_entry_descend16 differs from the scalar replay");
 }
 
 /* A batch of n rays in runs of one origin: kd_entry_trace and
@@ -262,8 +269,8 @@ int main(void) {
         check_scene(&scenes[k], k == 1);
         free(scenes[k].tris);
     }
-    printf("entry: %zu rays, %zu entered below the root, %d failures\n", rays_checked,
-           deep_entries, failures);
+    printf("entry: %zu rays, %zu entered below the root, %zu entries pushed on the way,"
+           " %d failures\n", rays_checked, deep_entries, pushed, failures);
     /* a test whose rays all start at the root would prove nothing */
     if (deep_entries * 4 < rays_checked) {
         fprintf(stderr, "FAIL: only %zu of %zu rays entered below the root\n",
