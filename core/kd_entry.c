@@ -1,7 +1,8 @@
 /*
- * kd_entry.c — the origin's path (kd_entry_path_init) and the batch driver
- * that traces runs of rays sharing an origin from their entry points
- * (kd_entry_trace). Why it is exact: kd_entry.h.
+ * kd_entry.c — the origin's path (kd_entry_path_init), the AVX-512 replay
+ * of a ray's descent along it (kd_entry_descend16) and the per-batch path
+ * cache of the interleaved walk's refill (kd_entry_for). Why it is exact:
+ * kd_entry.h.
  */
 #include <string.h>
 
@@ -20,11 +21,9 @@ void kd_entry_path_init(const kdr_scene *s, const float org[3], kd_entry_path *p
          * along this axis needs both children there (|a| is 0, under the
          * slack), so the path ends; so it does where the origin's child is
          * empty (a ray's walk never enters it) */
-        if (org[axis] == split)
-            break;
+        if (org[axis] == split) break;
         const int above = org[axis] > split;
-        if (above ? kd_above_empty(n) : kd_below_empty(n))
-            break;
+        if (above ? kd_above_empty(n) : kd_below_empty(n)) break;
         p->node[d] = n;
         p->sib[d] = above ? n + 1 : nodes + kd_above(n);
         p->lv[d].split = split;
@@ -116,7 +115,8 @@ KD_AVX512 const kd_node *kd_entry_descend16(const kd_entry_path *p, const float 
     while (i < p->depth) {
         unsigned clip, push;
         f16 vtn, vtf, vaf;
-        const unsigned stop = block16(p, i, iv, sv, n0, f0, &clip, &push, &vtn, &vtf, &vaf);
+        const unsigned stop =
+            block16(p, i, iv, sv, n0, f0, &clip, &push, &vtn, &vtf, &vaf);
         const int left = p->depth - i;
         const int f = stop ? __builtin_ctz(stop) : (left < 16 ? left : 16);
         push &= (unsigned)((1u << f) - 1u); /* f <= 16: 1u << 16 is defined */
@@ -136,10 +136,8 @@ KD_AVX512 const kd_node *kd_entry_descend16(const kd_entry_path *p, const float 
             f0 = aft[f - 1];
         }
         i += f;
-        if (!stop)
-            continue;
-        if (!((clip >> f) & 1u))
-            break;
+        if (!stop) continue;
+        if (!((clip >> f) & 1u)) break;
         /* the far child, its empty near sibling reached: tn moves */
         const struct kd_entry_level *l = &p->lv[i];
         const float tl = (p->a[i] - ss[l->axis]) * inv[l->axis];
@@ -170,39 +168,4 @@ const kd_node *kd_entry_for(const kdr_scene *s, kd_entry_cache *ec, const float 
         ec->have_path = 1;
     }
     return kd_entry_descend(&ec->path, org, inv, ss, neg, tn, tf, level, stack, sp);
-}
-
-/* Origin of ray i (stride 0: every ray shares b->org). */
-static inline const float *org_of(const kdr_ray_batch *b, size_t i) {
-    return b->org + b->org_stride * i;
-}
-
-void kd_entry_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
-                    size_t count, kdr_query q, kdr_hits *out, kdr_trav_stats *stats) {
-    kd_entry_path path;
-    const float *cur = NULL;
-    for (size_t i = first; i < first + count; i++) {
-        const float *o = org_of(b, i);
-        if (!cur || (o != cur && memcmp(o, cur, 3 * sizeof(float)) != 0)) {
-            kd_entry_path_init(s, o, &path);
-            cur = o;
-        }
-        kdr_ray r;
-        for (int k = 0; k < 3; k++) {
-            r.org[k] = cur[k];
-            r.dir[k] = b->dir[3 * i + k];
-        }
-        r.tmin = b->tmin ? b->tmin[b->tmin_stride * i] : 0.0f;
-        r.tmax = b->tmax ? b->tmax[b->tmax_stride * i] : INFINITY;
-        if (q == KDR_ANY) {
-            out->hit[i] = (uint8_t)kd_entry_occluded1(s, &path, &r, stats);
-            continue;
-        }
-        kdr_hit h;
-        kd_entry_intersect1(s, &path, &r, &h, stats);
-        out->t[i] = h.t;
-        out->prim[i] = h.prim;
-        out->u[i] = h.u;
-        out->v[i] = h.v;
-    }
 }

@@ -65,11 +65,10 @@ void kd_entry_path_init(const kdr_scene *s, const float org[3], kd_entry_path *p
  * walk's state at it: interval *tn, *tf and the sp entries it pushed on
  * the way, in stack[0..*sp), in the walk's order.
  */
-static inline const kd_node *kd_entry_descend_scalar(const kd_entry_path *p,
-                                                     const float org[3], const float inv[3],
-                                                     const float ss[3], const unsigned neg[3],
-                                                     float *tn, float *tf, int *level,
-                                                     kd_todo *stack, int *sp) {
+static inline const kd_node *
+kd_entry_descend_scalar(const kd_entry_path *p, const float org[3], const float inv[3],
+                        const float ss[3], const unsigned neg[3], float *tn, float *tf,
+                        int *level, kd_todo *stack, int *sp) {
     float n0 = *tn, f0 = *tf;
     int i = 0, k = 0;
     for (; i < p->depth; i++) {
@@ -85,8 +84,7 @@ static inline const kd_node *kd_entry_descend_scalar(const kd_entry_path *p,
         const unsigned go_near = (unsigned)!(t_hi < n0) & ~near_empty & 1u;
         const unsigned go_far = (unsigned)!(t_lo > f0) & ~far_empty & 1u;
         if ((unsigned)l->above == ng) { /* the path's child is the near one */
-            if (!go_near)
-                break;
+            if (!go_near) break;
             if (go_far) {
                 stack[k].node = p->sib[i];
                 stack[k].tn = t_lo > n0 ? t_lo : n0;
@@ -95,8 +93,7 @@ static inline const kd_node *kd_entry_descend_scalar(const kd_entry_path *p,
             }
             f0 = t_hi < f0 ? t_hi : f0;
         } else {
-            if (go_near || !go_far)
-                break;
+            if (go_near || !go_far) break;
             n0 = t_lo > n0 ? t_lo : n0;
         }
     }
@@ -119,8 +116,7 @@ static inline const kd_node *kd_entry_descend(const kd_entry_path *p, const floa
                                               const float inv[3], const float ss[3],
                                               const unsigned neg[3], float *tn, float *tf,
                                               int *level, kd_todo *stack, int *sp) {
-    if (p->wide)
-        return kd_entry_descend16(p, inv, ss, tn, tf, level, stack, sp);
+    if (p->wide) return kd_entry_descend16(p, inv, ss, tn, tf, level, stack, sp);
     return kd_entry_descend_scalar(p, org, inv, ss, neg, tn, tf, level, stack, sp);
 }
 
@@ -146,17 +142,12 @@ typedef struct kd_entry_cache {
 
 /* The start of a ray with origin org after kd_walk_setup (inv, ss, neg,
  * interval *tn, *tf): its entry node, interval and stack
- * (kd_entry_descend), or the root, the interval as it is and no stack; *level is the number of interior nodes the single
- * walk steps through above the start (the stats count them as visited, so
- * work sums equal the single walk's). Cache zeroed before the first ray. */
+ * (kd_entry_descend), or the root, the interval as it is and no stack; *level is the
+ * number of interior nodes the single walk steps through above the start (the stats count
+ * them as visited, so work sums equal the single walk's). Cache zeroed before the first
+ * ray. */
 const kd_node *kd_entry_for(const kdr_scene *s, kd_entry_cache *ec, const float org[3],
                             const float inv[3], const float ss[3], const unsigned neg[3],
                             float *tn, float *tf, int *level, kd_todo *stack, int *sp);
-
-/* Rays [first, first + count) of the batch (arguments checked by the
- * caller, scene with a tree), each run of equal origins (bitwise) through
- * one path and kd_entry_*1, results at each ray's own index. */
-void kd_entry_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
-                    size_t count, kdr_query q, kdr_hits *out, kdr_trav_stats *stats);
 
 #endif /* KD_ENTRY_H */

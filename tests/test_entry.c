@@ -8,9 +8,8 @@
  * as the nodes the single walk steps through, so a walk that starts one
  * level too deep or too shallow, or with another interval, shows here even
  * where the answer survives); kd_entry_descend16 (AVX-512) must return the
- * scalar replay's node, level, interval and stack bits; kd_entry_trace and
- * kdr_trace_batch (whose interleaved walk starts runs of a shared origin
- * at their entries) must give the single answers for batches of runs.
+ * scalar replay's node, level, interval and stack bits; kdr_trace_batch
+ * must give the single answers for batches of runs.
  *
  * Rays: test_bundle's twelve sets on its three scenes (random soup;
  * lattice of axis-aligned quads, whose integer split planes hold origins
@@ -29,6 +28,7 @@
 #include <string.h>
 
 #include "kd_entry.h"
+#include "kd_stream.h"
 #include "kd_walk.h"
 #include "kdray.h"
 #include "test_bundle_sets.h"
@@ -46,8 +46,7 @@ static float rnd01(void) { return (float)(rnd() >> 8) * 0x1p-24f; }
 static int same_f(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
 
 static void fail(const char *scene, const char *set, size_t i, const char *what) {
-    if (failures < 20)
-        fprintf(stderr, "FAIL %s/%s ray %zu: %s\n", scene, set, i, what);
+    if (failures < 20) fprintf(stderr, "FAIL %s/%s ray %zu: %s\n", scene, set, i, what);
     failures++;
 }
 
@@ -58,8 +57,7 @@ static void check_ray(const char *scene, const char *set, size_t i, const kdr_sc
     kdr_trav_stats a = {0}, b = {0};
     const int o1 = kdr_occluded1(s, r, &a);
     const int o2 = kd_entry_occluded1(s, p, r, &b);
-    if (o1 != o2)
-        fail(scene, set, i, "occluded differs");
+    if (o1 != o2) fail(scene, set, i, "occluded differs");
     if (a.nodes_visited != b.nodes_visited || a.tri_tests != b.tri_tests)
         fail(scene, set, i, "any-hit work differs");
     kdr_hit h1, h2;
@@ -73,8 +71,7 @@ static void check_ray(const char *scene, const char *set, size_t i, const kdr_sc
         fail(scene, set, i, "closest-hit work differs");
     float inv[3], ss[3], tn, tf;
     unsigned neg[3];
-    if (!kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
-        return;
+    if (!kd_walk_setup(s, r, inv, ss, neg, &tn, &tf)) return;
     float tn2 = tn, tf2 = tf;
     int l1, l2, sp1, sp2;
     kd_todo st1[KD_MAX_DEPTH], st2[KD_MAX_DEPTH];
@@ -82,19 +79,18 @@ static void check_ray(const char *scene, const char *set, size_t i, const kdr_sc
         kd_entry_descend_scalar(p, r->org, inv, ss, neg, &tn, &tf, &l1, st1, &sp1);
     deep_entries += l1 > 0;
     pushed += (size_t)sp1;
-    if (!p->wide)
-        return;
+    if (!p->wide) return;
     const kd_node *e2 = kd_entry_descend16(p, inv, ss, &tn2, &tf2, &l2, st2, &sp2);
     int same = e1 == e2 && l1 == l2 && same_f(tn, tn2) && same_f(tf, tf2) && sp1 == sp2;
     for (int k = 0; same && k < sp1; k++)
         same = st1[k].node == st2[k].node && same_f(st1[k].tn, st2[k].tn) &&
                same_f(st1[k].tf, st2[k].tf);
-    if (!same)
-        fail(scene, set, i, "kd_entry_descend16 differs from the scalar replay");
+    if (!same) fail(scene, set, i, "kd_entry_descend16 differs from the scalar replay");
 }
 
-/* A batch of n rays in runs of one origin: kd_entry_trace and
- * kdr_trace_batch (AUTO) against kdr_occluded1 / kdr_intersect1. */
+/* A batch of n rays in runs of one origin through kdr_trace_batch (AUTO;
+ * its interleaved walk starts runs at their entries) against
+ * kdr_occluded1 / kdr_intersect1. */
 static void check_batch(const char *scene, const char *set, const kdr_scene *s,
                         const kdr_ray *rays, size_t n) {
     float *org = malloc(n * 3 * sizeof(float)), *dir = malloc(n * 3 * sizeof(float));
@@ -113,29 +109,49 @@ static void check_batch(const char *scene, const char *set, const kdr_scene *s,
         tmin[i] = rays[i].tmin;
         tmax[i] = rays[i].tmax;
     }
-    const kdr_ray_batch b = {.n = n, .org = org, .org_stride = 3, .dir = dir,
-                             .tmin = tmin, .tmin_stride = 1, .tmax = tmax,
+    const kdr_ray_batch b = {.n = n,
+                             .org = org,
+                             .org_stride = 3,
+                             .dir = dir,
+                             .tmin = tmin,
+                             .tmin_stride = 1,
+                             .tmax = tmax,
                              .tmax_stride = 1};
     kdr_hits out = {.hit = hit, .t = t, .u = u, .v = v, .prim = prim};
-    for (int way = 0; way < 2; way++)
+    /* ways: kdr_trace_batch, then the interleaved walk's 16- and 8-lane
+     * forms (their refill starts runs at their entries), plain and staged */
+    for (int way = 0; way < 5; way++)
         for (int q = 0; q < 2; q++) {
             const kdr_query query = q ? KDR_CLOSEST : KDR_ANY;
-            if (way == 0)
-                kd_entry_trace(s, &b, 0, n, query, &out, NULL);
-            else if (kdr_trace_batch(s, &b, 0, n, query, KDR_TRAV_AUTO, &out, NULL) != KDR_OK)
-                fail(scene, set, 0, "kdr_trace_batch failed");
+            const int lanes = way == 1 || way == 2 ? 16 : 8;
+            const int flags = way == 2 || way == 4 ? KD_STREAM_STAGE : 0;
+            if (way && !(lanes == 16 ? kd_cpu_has_avx512() : kdr_cpu_has_avx2()))
+                continue;
+            kdr_trav_stats st = {0}, ref = {0};
+            if (way == 0) {
+                if (kdr_trace_batch(s, &b, 0, n, query, KDR_TRAV_AUTO, &out, NULL) !=
+                    KDR_OK)
+                    fail(scene, set, 0, "kdr_trace_batch failed");
+            } else if (lanes == 16) {
+                kd_stream_trace16(s, &b, NULL, 0, n, query, flags, &out, &st);
+            } else {
+                kd_stream_trace8(s, &b, NULL, 0, n, query, flags, &out, &st);
+            }
             for (size_t i = 0; i < n; i++) {
                 if (!q) {
-                    if (hit[i] != (uint8_t)kdr_occluded1(s, &rays[i], NULL))
-                        fail(scene, set, i, way ? "batch any hit" : "kd_entry_trace any hit");
+                    if (hit[i] != (uint8_t)kdr_occluded1(s, &rays[i], &ref))
+                        fail(scene, set, i, way ? "stream any hit" : "batch any hit");
                     continue;
                 }
                 kdr_hit h;
-                kdr_intersect1(s, &rays[i], &h, NULL);
+                kdr_intersect1(s, &rays[i], &h, &ref);
                 if (!same_f(h.t, t[i]) || !same_f(h.u, u[i]) || !same_f(h.v, v[i]) ||
                     h.prim != prim[i])
-                    fail(scene, set, i, way ? "batch closest hit" : "kd_entry_trace closest");
+                    fail(scene, set, i, way ? "stream closest hit" : "batch closest hit");
             }
+            if (way && (st.rays != ref.rays || st.nodes_visited != ref.nodes_visited ||
+                        st.tri_tests != ref.tri_tests))
+                fail(scene, set, 0, "stream work sums differ from the single walk's");
         }
 done:
     free(org), free(dir), free(tmin), free(tmax), free(hit), free(t), free(u), free(v),
@@ -145,14 +161,30 @@ done:
 /* Intervals every entry set cycles through (reach: the AO length). */
 static void interval(kdr_ray *r, size_t i, float reach) {
     switch (i % 8) {
-    case 0: r->tmin = 1e-4f * reach, r->tmax = reach; break;
-    case 1: r->tmin = r->tmax = 0.0f; break;
-    case 2: r->tmin = r->tmax = 0.5f * reach; break;
-    case 3: r->tmin = 0.0f, r->tmax = 1e30f; break;
-    case 4: r->tmin = 0.0f, r->tmax = INFINITY; break;
-    case 5: r->tmin = 0.0f, r->tmax = 1e-6f * reach; break;
-    case 6: r->tmin = 40.0f * reach, r->tmax = INFINITY; break;
-    default: r->tmin = 1e-3f * reach, r->tmax = 0.1f * reach; break;
+    case 0:
+        r->tmin = 1e-4f * reach, r->tmax = reach;
+        break;
+    case 1:
+        r->tmin = r->tmax = 0.0f;
+        break;
+    case 2:
+        r->tmin = r->tmax = 0.5f * reach;
+        break;
+    case 3:
+        r->tmin = 0.0f, r->tmax = 1e30f;
+        break;
+    case 4:
+        r->tmin = 0.0f, r->tmax = INFINITY;
+        break;
+    case 5:
+        r->tmin = 0.0f, r->tmax = 1e-6f * reach;
+        break;
+    case 6:
+        r->tmin = 40.0f * reach, r->tmax = INFINITY;
+        break;
+    default:
+        r->tmin = 1e-3f * reach, r->tmax = 0.1f * reach;
+        break;
     }
 }
 
@@ -161,8 +193,7 @@ static void random_dir(float d[3], int zeros) {
         for (int k = 0; k < 3; k++)
             d[k] = 2.0f * rnd01() - 1.0f;
     } while (d[0] == 0.0f && d[1] == 0.0f && d[2] == 0.0f);
-    if (zeros && rnd() % 3 == 0)
-        d[rnd() % 3] = (rnd() & 1) ? -0.0f : 0.0f;
+    if (zeros && rnd() % 3 == 0) d[rnd() % 3] = (rnd() & 1) ? -0.0f : 0.0f;
 }
 
 /* The walk's slack for an origin (kd_walk_setup's, in its operations). */
@@ -189,8 +220,7 @@ static void entry_set(const char *scene, const scene_src *src, const kdr_scene *
     kd_entry_path p;
     for (size_t g = 0; g < norg; g++) {
         float o[3], w[3] = {rnd01(), rnd01(), 0};
-        if (w[0] + w[1] > 1.0f)
-            w[0] = 1.0f - w[0], w[1] = 1.0f - w[1];
+        if (w[0] + w[1] > 1.0f) w[0] = 1.0f - w[0], w[1] = 1.0f - w[1];
         w[2] = 1.0f - w[0] - w[1];
         const float *tri = src->tris + 9 * (rnd() % src->ntris);
         for (int k = 0; k < 3; k++)
@@ -215,8 +245,7 @@ static void entry_set(const char *scene, const scene_src *src, const kdr_scene *
             kdr_ray *r = &rays[g * per + j];
             memcpy(r->org, o, sizeof o);
             random_dir(r->dir, 1);
-            if (kind == 2 && axis >= 0)
-                r->dir[axis] = (rnd() & 1) ? -0.0f : 0.0f;
+            if (kind == 2 && axis >= 0) r->dir[axis] = (rnd() & 1) ? -0.0f : 0.0f;
             if (r->dir[0] == 0.0f && r->dir[1] == 0.0f && r->dir[2] == 0.0f)
                 r->dir[(axis + 1) % 3] = 1.0f;
             interval(r, j, reach);
@@ -249,12 +278,10 @@ static void check_scene(const scene_src *src, int integer) {
                 r->org[c] = o[c], r->dir[c] = rs->dir[3 * i + c];
             r->tmin = rs->tmin[i];
             r->tmax = rs->tmax[i];
-            if (i == 0 || !rs->shared_org)
-                kd_entry_path_init(s, r->org, &p);
+            if (i == 0 || !rs->shared_org) kd_entry_path_init(s, r->org, &p);
             check_ray(src->name, rs->name, i, s, &p, r);
         }
-        if (rays)
-            check_batch(src->name, rs->name, s, rays, rs->n);
+        if (rays) check_batch(src->name, rs->name, s, rays, rs->n);
         free(rays);
         rays_free(&sets[k]);
     }
@@ -270,7 +297,8 @@ int main(void) {
         free(scenes[k].tris);
     }
     printf("entry: %zu rays, %zu entered below the root, %zu entries pushed on the way,"
-           " %d failures\n", rays_checked, deep_entries, pushed, failures);
+           " %d failures\n",
+           rays_checked, deep_entries, pushed, failures);
     /* a test whose rays all start at the root would prove nothing */
     if (deep_entries * 4 < rays_checked) {
         fprintf(stderr, "FAIL: only %zu of %zu rays entered below the root\n",
