@@ -19,7 +19,11 @@
  *            (walk()'s pop: entries starting after kd_term_bound(best t)
  *            are dropped);
  *   refill   a finished lane writes its answer and takes the batch's next
- *            ray, so the lanes stay full until the batch runs dry.
+ *            ray, so the lanes stay full until the batch runs dry; a ray
+ *            that shares its origin with the ray before it starts at its
+ *            entry on the origin's path, with the single walk's interval
+ *            and pending entries there (kd_entry.h: the replayed levels
+ *            count as visited nodes, so the work sums stay the walk's).
  *
  * Exact: per lane every float operation is the single walk's, in its
  * order (a = split - org, t_lo = (a - ss) * inv, t_hi = (a + ss) * inv,
