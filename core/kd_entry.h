@@ -1,17 +1,18 @@
 /*
  * kd_entry.h — entry points for rays that share an origin (AO rays of one
- * surface point, shadow samples of one point): the top of the tree that all
- * of them descend is walked once per origin (kd_entry_path_init), and each
- * ray then replays that path with the single walk's own node rule, float
- * operations and interval updates (kd_entry_start) for as long as the walk
- * would take ONLY the path's child. Where it would do anything else (take
- * both children, the other child, or none) the ray's ordinary walk starts,
- * at that node with that interval and an empty stack: the state the full
- * walk reaches there, since every step above it pushed nothing. So the
- * answer, and every node and leaf the walk visits below the entry, are the
- * single walk's exactly, for closest and any hit alike; only the replayed
- * steps are cheaper (path nodes held in a small array, one well-predicted
- * branch per level instead of a near/far coin flip). Internal to core/.
+ * surface point, shadow samples of one point). The path from the root to
+ * the origin's leaf, which all of them descend, is built once per origin
+ * (kd_entry_path_init); each ray then replays the single walk along it
+ * (kd_entry_descend) with the walk's own node rule, float operations,
+ * interval updates and pushes, for as long as the walk stays on the path.
+ * Where it would leave it (the path's child not needed, or its near
+ * sibling needed first) the ray's ordinary walk starts, at that node, with
+ * that interval and the entries pushed so far: the state the full walk
+ * reaches there. So the answer, the leaves visited and their order, and
+ * the work (nodes, triangle tests) are the single walk's exactly, for
+ * closest and any hit alike; only the replayed steps are cheaper (levels
+ * held in a small array, 16 per AVX-512 operation, no near/far branch).
+ * Used by the interleaved walk's refill (kd_entry_for). Internal to core/.
  */
 #ifndef KD_ENTRY_H
 #define KD_ENTRY_H
@@ -25,8 +26,8 @@
 /* The origin's path from the root: node[i + 1] is the child of node[i]
  * holding the origin (above[i] says which), i < depth; node[depth] is a
  * leaf, or the node where the path stopped (origin in its split plane, or
- * its child there flagged empty). Each level keeps the split, the axis and
- * the empty flags, the only fields kd_entry_start reads. */
+ * its child there flagged empty). Each level keeps the split, the axis, the
+ * empty flags and the other child, the only fields the replay reads. */
 typedef struct kd_entry_path {
     int depth;
     const kd_node *node[KD_MAX_DEPTH + 1];
@@ -36,7 +37,7 @@ typedef struct kd_entry_path {
         uint8_t axis, above; /* above: the origin's child is the above one */
         uint8_t empty;       /* bit 0: below child empty, bit 1: above */
     } lv[KD_MAX_DEPTH];
-    /* The same levels for kd_entry_find16 (16 levels per AVX-512
+    /* The same levels for kd_entry_descend16 (16 levels per AVX-512
      * operation): a[i] = split - org[axis] (the walk's first operation,
      * shared by every ray of the origin), padded for unaligned loads, and
      * bit i of each mask: axis 1, axis 2, origin above, below child empty,
