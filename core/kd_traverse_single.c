@@ -16,6 +16,7 @@
  * leaves of clustered small triangles, so leaves of 3+ references are tested
  * 4 (SSE2) or 8 (AVX2) triangles at a time, bit-identical to kd_tri.h.
  */
+#include "kd_entry.h"
 #include "kd_walk.h"
 
 /* Descends from n to a non-empty leaf, pushing far children; returns the
@@ -66,22 +67,19 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
     return n;
 }
 
-/* The walk shared by both queries; any != 0 stops at the first hit. */
-static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
-                       kd_walk_out *o) {
-    float inv[3], ss[3], tn, tf;
-    unsigned neg[3];
-    if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
-        return 0;
+/* The walk from node n over [tn, tf] with stack[0..sp) pending (the root,
+ * the root-clipped interval and nothing, or an entry point of kd_entry.h
+ * and the entries pushed above it); any != 0 stops at the first hit. */
+static inline int walk_from(const kdr_scene *s, const kdr_ray *r, const int any,
+                            const kd_node *n, float tn, float tf, const float inv[3],
+                            const float ss[3], const unsigned neg[3], kd_todo *stack,
+                            int sp, kd_walk_out *o) {
     kd_ray_pre pre;
     kd_ray_precompute(r->org, r->dir, &pre);
     kd_ntri_pre4 pre4;
     kd_ntri_pre_init4(&pre, &pre4);
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     const kd_node *nodes = s->nodes;
-    kd_todo stack[KD_MAX_DEPTH];
-    int sp = 0;
-    const kd_node *n = nodes;
     for (;;) {
         n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
         if (n && kd_walk_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
@@ -96,6 +94,32 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
         tn = stack[sp].tn;
         tf = stack[sp].tf;
     }
+}
+
+/* The walk shared by both queries; any != 0 stops at the first hit. */
+static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
+                       kd_walk_out *o) {
+    float inv[3], ss[3], tn, tf;
+    unsigned neg[3];
+    if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
+        return 0;
+    kd_todo stack[KD_MAX_DEPTH];
+    return walk_from(s, r, any, s->nodes, tn, tf, inv, ss, neg, stack, 0, o);
+}
+
+/* The same from the ray's entry on the path of its origin (kd_entry.h). */
+static inline int walk_entry(const kdr_scene *s, const kd_entry_path *p,
+                             const kdr_ray *r, const int any, kd_walk_out *o) {
+    float inv[3], ss[3], tn, tf;
+    unsigned neg[3];
+    if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
+        return 0;
+    kd_todo stack[KD_MAX_DEPTH];
+    int level, sp;
+    const kd_node *n =
+        kd_entry_descend(p, r->org, inv, ss, neg, &tn, &tf, &level, stack, &sp);
+    o->nodes += (uint64_t)level; /* the single walk steps through them */
+    return walk_from(s, r, any, n, tn, tf, inv, ss, neg, stack, sp, o);
 }
 
 static void add_stats(kdr_trav_stats *st, const kd_walk_out *o) {
@@ -125,5 +149,25 @@ int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
     kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
     const int found = ray ? walk(scene, ray, 1, &o) : 0;
     add_stats(stats, &o);
+    return found;
+}
+
+int kd_entry_occluded1(const kdr_scene *s, const kd_entry_path *p, const kdr_ray *r,
+                       kdr_trav_stats *stats) {
+    kd_walk_out o = {r->tmax, 0.0f, 0.0f, -1, 0, 0};
+    const int found = walk_entry(s, p, r, 1, &o);
+    add_stats(stats, &o);
+    return found;
+}
+
+int kd_entry_intersect1(const kdr_scene *s, const kd_entry_path *p, const kdr_ray *r,
+                        kdr_hit *hit, kdr_trav_stats *stats) {
+    kd_walk_out o = {r->tmax, 0.0f, 0.0f, -1, 0, 0};
+    const int found = walk_entry(s, p, r, 0, &o);
+    add_stats(stats, &o);
+    hit->t = found ? o.t : -1.0f;
+    hit->u = found ? o.u : 0.0f;
+    hit->v = found ? o.v : 0.0f;
+    hit->prim = found ? o.prim : -1;
     return found;
 }

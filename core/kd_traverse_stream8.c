@@ -3,6 +3,7 @@
  * (kd_stream_trace8), instantiated from kd_traverse_stream_lanes.h. Runs
  * only after kdr_cpu_has_avx2() said yes.
  */
+#include "kd_entry.h"
 #include "kd_stream.h"
 #include "kd_traverse_bundle.h"
 #include "kd_walk.h"

@@ -19,7 +19,11 @@
  *            (walk()'s pop: entries starting after kd_term_bound(best t)
  *            are dropped);
  *   refill   a finished lane writes its answer and takes the batch's next
- *            ray, so the lanes stay full until the batch runs dry.
+ *            ray, so the lanes stay full until the batch runs dry; a ray
+ *            that shares its origin with the ray before it starts at its
+ *            entry on the origin's path, with the single walk's interval
+ *            and pending entries there (kd_entry.h: the replayed levels
+ *            count as visited nodes, so the work sums stay the walk's).
  *
  * Exact: per lane every float operation is the single walk's, in its
  * order (a = split - org, t_lo = (a - ss) * inv, t_hi = (a + ss) * inv,
@@ -75,6 +79,8 @@ typedef struct KD_WN(ks_src) {
     kdr_hits *out;
     kdr_trav_stats *stats;
     unsigned stage; /* all lanes when leaves are staged (large scenes) */
+    kd_entry_cache *entry; /* rays of a shared origin start at their entry
+                              (kd_entry.h) */
 } KD_WN(ks_src);
 
 /* Writes lane l's answer and adds its stats. */
@@ -115,12 +121,21 @@ KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
             KD_WN(ks_finish)(l, 0, c);
             continue;
         }
+        kd_todo st[KD_MAX_DEPTH];
+        int level, sp;
+        const kd_node *n0 = kd_entry_for(c->s, c->entry, ray.org, inv, ss, neg, &tn, &tf,
+                                         &level, st, &sp);
+        for (int d = 0; d < sp; d++) { /* the entries pushed above the entry */
+            w->stk_node[d][j] = (int32_t)(st[d].node - c->s->nodes);
+            w->stk_tn[d][j] = st[d].tn;
+            w->stk_tf[d][j] = st[d].tf;
+        }
         l->tmin = ray.tmin;
         kd_ray_precompute(ray.org, ray.dir, &l->pre);
         kd_ntri_pre_init4(&l->pre, &l->pre4);
-        w->node = IV(put)(w->node, bit, 0);
-        w->sp = IV(put)(w->sp, bit, 0);
-        w->visits = IV(put)(w->visits, bit, 0);
+        w->node = IV(put)(w->node, bit, (int32_t)(n0 - c->s->nodes));
+        w->sp = IV(put)(w->sp, bit, sp);
+        w->visits = IV(put)(w->visits, bit, level);
         w->tn = V(put)(w->tn, bit, tn);
         w->tf = V(put)(w->tf, bit, tf);
         for (int k = 0; k < 3; k++) {
@@ -264,7 +279,9 @@ KD_TARGET void KD_WN(kd_stream_trace)(const kdr_scene *s, const kdr_ray_batch *b
                                       kdr_trav_stats *stats) {
     const int stage =
         (flags & KD_STREAM_STAGE) || s->stats.bytes >= KD_STREAM_STAGE_MIN_BYTES;
-    KD_WN(ks_src) c = {s, b, ids, first, m, 0, q, out, stats, stage ? KS_ALL : 0};
+    kd_entry_cache ec;
+    ec.have_path = ec.have_prev = 0;
+    KD_WN(ks_src) c = {s, b, ids, first, m, 0, q, out, stats, stage ? KS_ALL : 0, &ec};
     KD_WN(ks_lanes) w;
     w.node = w.sp = w.visits = IV(set1)(0);
     w.tn = w.tf = V(set1)(0.0f);

@@ -339,6 +339,10 @@ KD_AVX512 static inline unsigned f16_nlt(unsigned m, f16 a, f16 b) {
 KD_AVX512 static inline unsigned f16_ngt(unsigned m, f16 a, f16 b) {
     return _mm512_mask_cmp_ps_mask((__mmask16)m, a, b, _CMP_NGT_UQ);
 }
+/* lanes of m where a is not a NaN */
+KD_AVX512 static inline unsigned f16_ord(unsigned m, f16 a) {
+    return _mm512_mask_cmp_ps_mask((__mmask16)m, a, a, _CMP_ORD_Q);
+}
 KD_AVX512 static inline unsigned f16_signs(f16 a) {
     return _mm512_movepi32_mask(_mm512_castps_si512(a));
 }
@@ -346,6 +350,14 @@ KD_AVX512 static inline f16 f16_put(f16 v, unsigned m, float x) {
     return _mm512_mask_broadcastss_ps(v, (__mmask16)m, _mm_set_ss(x));
 }
 KD_AVX512 static inline void f16_store(float *p, f16 a) { _mm512_store_ps(p, a); }
+KD_AVX512 static inline f16 f16_loadu(const float *p) { return _mm512_loadu_ps(p); }
+/* lane j takes v's lane j - s; lanes below s take fill's (a scan's shift) */
+KD_AVX512 static inline f16 f16_up(f16 v, f16 fill, unsigned s) {
+    const __m512i idx = _mm512_sub_epi32(
+        _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+        _mm512_set1_epi32((int)s));
+    return _mm512_mask_permutexvar_ps(fill, (__mmask16)(0xffffu << s), idx, v);
+}
 KD_AVX512 static inline f16 f16_gather8(f16 src, unsigned m, i16 idx, const void *base) {
     return _mm512_mask_i32gather_ps(src, (__mmask16)m, idx, base, 8);
 }

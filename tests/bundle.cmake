@@ -16,3 +16,9 @@ set_tests_properties(bundle_ladder PROPERTIES FIXTURES_REQUIRED scenes_fetch
 add_executable(test_batch_route ${CMAKE_CURRENT_SOURCE_DIR}/test_batch_route.c)
 target_link_libraries(test_batch_route PRIVATE kdray_core m)
 add_test(NAME bundle_route COMMAND test_batch_route)
+# Entry points of rays that share an origin (core/kd_entry.h): every ray's
+# answer and work equal the single walk's, scalar and AVX-512 replays agree.
+add_executable(test_entry ${CMAKE_CURRENT_SOURCE_DIR}/test_entry.c
+                          ${CMAKE_CURRENT_SOURCE_DIR}/test_bundle_sets.c)
+target_link_libraries(test_entry PRIVATE kdray_core m)
+add_test(NAME entry COMMAND test_entry)
