@@ -404,7 +404,6 @@ KD_AVX512 static inline void i16_scatter(int32_t *base, unsigned m, i16 idx, i16
  * vpmovm2d and a vector mask a k-mask with vpmovd2m (one cheap
  * instruction each), so the template needs no second mask convention. */
 KD_AVX512 static inline f16 f16_load(const float *p) { return _mm512_load_ps(p); }
-KD_AVX512 static inline f16 f16_loadu(const float *p) { return _mm512_loadu_ps(p); }
 KD_AVX512 static inline f16 f16_div(f16 a, f16 b) { return _mm512_div_ps(a, b); }
 KD_AVX512 static inline f16 f16_kmask(__mmask16 k) {
     return _mm512_castsi512_ps(_mm512_movm_epi32(k));
