@@ -16,7 +16,8 @@
 #define KD_ALL_RAYS 8
 /* kdr_all_batch and kdr_count_batch take the interleaved walk on scenes
  * of at least this many bytes (kdr_tree_stats.bytes), the closest-hit
- * walk's staging threshold. */
+ * walk's staging threshold; on smaller ones, for the chunks that
+ * kd_batch_scattered calls scattered. */
 #define KD_ALL_STREAM_MIN_BYTES KD_STREAM_STAGE_MIN_BYTES
 /* Leaves staged (references, then triangles requested a turn ahead of the
  * test) on every scene, not only on those of KD_STREAM_STAGE_MIN_BYTES and
