@@ -145,6 +145,13 @@ static int all_interleave(const kdr_scene *sc, const kdr_ray_batch *b, size_t fi
            kd_batch_scattered(sc, b, first, count);
 }
 
+/* The interleaved walk stages leaves (kd_all_stream.h) by itself on scenes
+ * of KD_STREAM_STAGE_MIN_BYTES and more; scattered chunks of smaller
+ * scenes ask for it from KD_ALL_STAGE_MIN_BYTES. */
+static int all_stage(const kdr_scene *sc) {
+    return sc->stats.bytes >= KD_ALL_STAGE_MIN_BYTES ? KD_ALL_STAGE : 0;
+}
+
 /* Rays [first, first + count) of a batch into out, walk chosen per chunk of
  * KB_CHUNK rays; buf: KD_ALL_RAYS * max_hits entries of scratch, or NULL
  * (no memory for it: one ray at a time). */
@@ -152,7 +159,8 @@ static void all_chunk(const kdr_scene *scene, const kdr_ray_batch *batch, size_t
                       size_t count, uint32_t max_hits, kdr_hit *buf, kdr_hit *local,
                       kdr_all_hits *out, kdr_trav_stats *stats) {
     if (buf && all_interleave(scene, batch, first, count)) {
-        kd_all_stream(scene, batch, first, count, max_hits, buf, out, NULL, 0, stats);
+        kd_all_stream(scene, batch, first, count, max_hits, buf, out, NULL, all_stage(scene),
+                      stats);
         return;
     }
     for (size_t i = first; i < first + count; i++) {
@@ -199,7 +207,8 @@ int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t f
     for (size_t c = first; c < first + count; c += KB_CHUNK) {
         const size_t m = first + count - c < KB_CHUNK ? first + count - c : KB_CHUNK;
         if (all_interleave(scene, batch, c, m)) {
-            const int r = kd_all_stream(scene, batch, c, m, 0, NULL, NULL, counts, 0, stats);
+            const int r = kd_all_stream(scene, batch, c, m, 0, NULL, NULL, counts,
+                                         all_stage(scene), stats);
             if (r != KDR_OK) rc = r;
             continue;
         }

@@ -23,6 +23,12 @@
  * test) on every scene, not only on those of KD_STREAM_STAGE_MIN_BYTES and
  * more (tests put small scenes through that path with it). */
 #define KD_ALL_STAGE 1
+/* kdr_all_batch and kdr_count_batch stage leaves (KD_ALL_STAGE) on scenes
+ * of at least this many bytes: staged against not, scattered chunks
+ * (bench/ab, sets ball and bcount, --rays 32768 --rounds 5, B/A median):
+ * 2CylinderEngine (6 MiB) 1.29 / 1.12, haus (2 MiB) 0.89 / 0.87; the
+ * threshold lies between them, no scene in between was measured. */
+#define KD_ALL_STAGE_MIN_BYTES ((size_t)4 << 20)
 
 /* The interleaved walk of rays [first, first + count) of a batch
  * (arguments checked by the caller): with max_hits > 0 each ray's hits, as
