@@ -12,8 +12,13 @@
 #include "kd_tune.h"
 #include "kdray.h"
 
-/* Rays in flight in the interleaved walk. */
-#define KD_ALL_RAYS 8
+/* Rays in flight in the interleaved walk. 16 against 8 (bench/ab, B/A
+ * median, --rays 32768 --rounds 5; 0 answers differ): batches of random
+ * rays 1.12-1.16 on 2CylinderEngine, 1.13-1.18 on engine3, 1.23-1.24 on
+ * engine9, 1.01-1.08 on duck and haus (bcount; ball 0.97-1.01); camera
+ * batches 1.08 on engine3, 1.12 on engine9. Each slot holds about 2 KiB
+ * (its stack and a count's first prims), on the caller's stack. */
+#define KD_ALL_RAYS 16
 /* kdr_all_batch and kdr_count_batch take the interleaved walk on scenes
  * of at least this many bytes (kdr_tree_stats.bytes), the closest-hit
  * walk's staging threshold; on smaller ones, for the chunks that

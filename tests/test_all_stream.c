@@ -204,7 +204,8 @@ static scene_src small_soup(size_t n) {
 }
 
 /* The public entry points on a scene large enough for the interleaved
- * walk: cap 1024 (8 * 1024 scratch hits: the heap) and 16 (the stack). */
+ * walk: cap 1024 (KD_ALL_RAYS * 1024 scratch hits: the heap) and 16 (the
+ * stack). */
 static void check_large(void) {
     const scene_src src = small_soup(360000);
     kdr_scene *s = NULL;
