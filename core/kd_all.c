@@ -27,6 +27,7 @@
  * then sorts (by insertion when few) and counts distinct prims.
  */
 #include "kd_all.h"
+#include "kd_traverse_bundle.h" /* kd_batch_scattered */
 
 /* The front-to-back walk over every leaf the ray passes (within the slack)
  * that can still hold a hit at or before the bound. */
@@ -128,34 +129,39 @@ static int batch_ok(const kdr_ray_batch *b, size_t first, size_t count) {
     return first <= b->n && count <= b->n - first;
 }
 
-/* Batches go to the interleaved walk (kd_all_stream.c) on scenes of
+/* Which walk a chunk of a batch takes: the interleaved one on scenes of
  * KD_ALL_STREAM_MIN_BYTES and more, where it hides the loads of nodes,
- * references and triangles that miss the caches; on smaller scenes, whose
- * walks are bound by their instructions, not their loads, it lost to one
- * ray at a time (measured with branches in its node step; docs/
- * TRAVERSAL.md, "All hits and counts"). */
-static int all_interleave(const kdr_scene *sc, size_t count) {
-    return count > 1 && sc->nodes && sc->stats.bytes >= KD_ALL_STREAM_MIN_BYTES;
+ * references and triangles that miss the caches; on smaller scenes only
+ * for chunks kd_batch_scattered calls scattered (own origins, directions
+ * spread: bench_queries' random rays), where it beat one ray at a time
+ * (random batches 1.15-1.35x on duck and 2CylinderEngine, 0.95-1.16x on
+ * haus) while coherent chunks (a camera's rays) lost with it: those, and
+ * on small scenes every chunk that is not scattered, walk one ray at a
+ * time (docs/TRAVERSAL.md, "All hits and counts"). */
+static int all_interleave(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
+                          size_t count) {
+    if (count < 2 || !sc->nodes) return 0;
+    return sc->stats.bytes >= KD_ALL_STREAM_MIN_BYTES ||
+           kd_batch_scattered(sc, b, first, count);
 }
 
-int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
-                  size_t count, uint32_t max_hits, kdr_all_hits *out,
-                  kdr_trav_stats *stats) {
-    if (!scene || !batch_ok(batch, first, count) || !out || !out->nhits || !out->t ||
-        !out->prim || !out->u || !out->v || max_hits == 0 ||
-        max_hits > KDR_MAX_HITS_LIMIT)
-        return KDR_EINVAL;
-    kdr_hit local[KDR_MAX_HITS_LIMIT];
-    if (all_interleave(scene, count)) {
-        /* the interleaved walk's lists: on the stack when small, else on
-         * the heap; without memory, ray by ray below */
-        const size_t need = (size_t)KD_ALL_RAYS * max_hits;
-        kdr_hit *buf = need <= KDR_MAX_HITS_LIMIT ? local : malloc(need * sizeof *buf);
-        if (buf) {
-            kd_all_stream(scene, batch, first, count, max_hits, buf, out, NULL, 0, stats);
-            if (buf != local) free(buf);
-            return KDR_OK;
-        }
+/* The interleaved walk stages leaves (kd_all_stream.h) by itself on scenes
+ * of KD_STREAM_STAGE_MIN_BYTES and more; scattered chunks of smaller
+ * scenes ask for it from KD_ALL_STAGE_MIN_BYTES. */
+static int all_stage(const kdr_scene *sc) {
+    return sc->stats.bytes >= KD_ALL_STAGE_MIN_BYTES ? KD_ALL_STAGE : 0;
+}
+
+/* Rays [first, first + count) of a batch into out, walk chosen per chunk of
+ * KB_CHUNK rays; buf: KD_ALL_RAYS * max_hits entries of scratch, or NULL
+ * (no memory for it: one ray at a time). */
+static void all_chunk(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                      size_t count, uint32_t max_hits, kdr_hit *buf, kdr_hit *local,
+                      kdr_all_hits *out, kdr_trav_stats *stats) {
+    if (buf && all_interleave(scene, batch, first, count)) {
+        kd_all_stream(scene, batch, first, count, max_hits, buf, out, NULL, all_stage(scene),
+                      stats);
+        return;
     }
     for (size_t i = first; i < first + count; i++) {
         kdr_ray r;
@@ -171,19 +177,47 @@ int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t fir
             out->v[base + k] = local[k].v;
         }
     }
+}
+
+int kdr_all_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
+                  size_t count, uint32_t max_hits, kdr_all_hits *out,
+                  kdr_trav_stats *stats) {
+    if (!scene || !batch_ok(batch, first, count) || !out || !out->nhits || !out->t ||
+        !out->prim || !out->u || !out->v || max_hits == 0 ||
+        max_hits > KDR_MAX_HITS_LIMIT)
+        return KDR_EINVAL;
+    kdr_hit local[KDR_MAX_HITS_LIMIT];
+    /* the interleaved walk's lists: on the stack when small, else on the
+     * heap; without memory, ray by ray */
+    const size_t need = (size_t)KD_ALL_RAYS * max_hits;
+    kdr_hit *buf = need <= KDR_MAX_HITS_LIMIT ? local : malloc(need * sizeof *buf);
+    kdr_hit one[KDR_MAX_HITS_LIMIT];
+    for (size_t c = first; c < first + count; c += KB_CHUNK) {
+        const size_t m = first + count - c < KB_CHUNK ? first + count - c : KB_CHUNK;
+        all_chunk(scene, batch, c, m, max_hits, buf, one, out, stats);
+    }
+    if (buf != local) free(buf);
     return KDR_OK;
 }
 
 int kdr_count_batch(const kdr_scene *scene, const kdr_ray_batch *batch, size_t first,
                     size_t count, uint32_t *counts, kdr_trav_stats *stats) {
     if (!scene || !batch_ok(batch, first, count) || !counts) return KDR_EINVAL;
-    if (all_interleave(scene, count))
-        return kd_all_stream(scene, batch, first, count, 0, NULL, NULL, counts, 0, stats);
-    for (size_t i = first; i < first + count; i++) {
-        kdr_ray r;
-        all_batch_ray(batch, i, &r);
-        const int rc = kdr_count1(scene, &r, &counts[i], stats);
-        if (rc != KDR_OK) return rc;
+    int rc = KDR_OK;
+    for (size_t c = first; c < first + count; c += KB_CHUNK) {
+        const size_t m = first + count - c < KB_CHUNK ? first + count - c : KB_CHUNK;
+        if (all_interleave(scene, batch, c, m)) {
+            const int r = kd_all_stream(scene, batch, c, m, 0, NULL, NULL, counts,
+                                         all_stage(scene), stats);
+            if (r != KDR_OK) rc = r;
+            continue;
+        }
+        for (size_t i = c; i < c + m; i++) {
+            kdr_ray r;
+            all_batch_ray(batch, i, &r);
+            const int rr = kdr_count1(scene, &r, &counts[i], stats);
+            if (rr != KDR_OK) return rr;
+        }
     }
-    return KDR_OK;
+    return rc;
 }

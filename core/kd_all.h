@@ -23,6 +23,9 @@
 #include "kd_tri_ntri.h"
 
 #define KD_COUNT_STACK 256
+/* Leaves of at least this many references are tested eight at a time on
+ * AVX2 CPUs (one call where two groups of four cost more). */
+#define KD_ALL_LEAF8_MIN 5
 
 /* Where accepted hits go: a sorted, prim-unique list of at most cap hits
  * (all), or a growing list of prims (count). */
@@ -105,19 +108,29 @@ static void test_group4(const kdr_scene *sc, const uint32_t *ref, uint32_t left,
             keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
 }
 
-/* Eight at a time (AVX2); the last group is the last eight references. Not
- * inlined: the caller is not compiled for AVX2. */
+/* Eight at a time (AVX2), a tail of four or fewer four at a time (the
+ * last four references), a longer tail as the last eight references; a
+ * hit found twice is kept once. Not inlined: the caller is not compiled
+ * for AVX2. */
 KD_AVX2 __attribute__((noinline)) static void
 test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
-           const kd_ray_pre *pre, float tmin, all_sink *s) {
+           const kd_ray_pre *pre, const kd_ntri_pre4 *pre4, float tmin, all_sink *s) {
     kd_ntri_pre8 pre8;
     kd_ntri_pre_init8(pre, &pre8);
     const f8 tmin8 = f8_set1(tmin);
     for (uint32_t i = 0; i < count && !s->oom; i += 8) {
-        const uint32_t base = i + 8 <= count ? i : count - 8;
+        if (i > 0 && count - i <= 4) {
+            test_group4(sc, ref + count - 4, 4, pre4, tmin, s);
+            return;
+        }
+        /* a leaf of fewer than eight repeats its last reference */
+        const uint32_t base = i + 8 <= count ? i : count >= 8 ? count - 8 : 0;
         const float *rows[8];
-        for (int j = 0; j < 8; j++)
-            rows[j] = sc->tris + 9 * (size_t)ref[base + j];
+        int32_t prims[8];
+        for (uint32_t j = 0; j < 8; j++) {
+            prims[j] = (int32_t)ref[base + j < count ? base + j : count - 1];
+            rows[j] = sc->tris + 9 * (size_t)prims[j];
+        }
         f8 t, V, W, det;
         const int hits =
             kd_ntri_test8(&pre8, rows, tmin8, f8_set1(s->bound), &t, &V, &W, &det);
@@ -129,14 +142,15 @@ test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
         f8_store(dv, det);
         for (int j = 0; j < 8; j++)
             if ((hits >> j) & 1 && tv[j] <= s->bound)
-                keep(s, tv[j], (int32_t)ref[base + j], vv[j] / dv[j], wv[j] / dv[j]);
+                keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
     }
 }
 
-/* Every reference of leaf n over [tmin, bound]; leaves of at least
- * KD_LEAF_AVX2_MIN / KD_LEAF_SIMD_MIN references eight / four at a time,
- * as the single-ray walk does. prefetch: request the leaf's triangles first
- * (sc->prefetch_leaves; 0 where a staged walk requested them already). */
+/* Every reference of leaf n over [tmin, bound]: leaves of at least
+ * KD_ALL_LEAF8_MIN references eight at a time (test_leaf8), of at least
+ * KD_LEAF_SIMD_MIN four at a time, smaller ones one by one. prefetch:
+ * request the leaf's triangles first (sc->prefetch_leaves; 0 where a
+ * staged walk requested them already). */
 static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *pre,
                       const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s,
                       int prefetch) {
@@ -144,8 +158,8 @@ static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *p
     const uint32_t count = kd_count(n);
     s->tests += count;
     if (prefetch) kd_prefetch_tris(sc, ref, count);
-    if (avx2 && count >= KD_LEAF_AVX2_MIN) {
-        test_leaf8(sc, ref, count, pre, tmin, s);
+    if (avx2 && count >= KD_ALL_LEAF8_MIN) {
+        test_leaf8(sc, ref, count, pre, pre4, tmin, s);
         return;
     }
     if (count >= KD_LEAF_SIMD_MIN) {

@@ -6,8 +6,10 @@
  * yields, so when its turn comes again the node is in the cache and the
  * chain of dependent node loads that bounds the one-ray walk (kd_all.c)
  * overlaps with the other rays' work. On large scenes (KD_STREAM_STAGE_MIN_
- * BYTES, as for closest hits) a ray reaching a leaf requests its reference
- * list, on its next turn its triangles, and tests them on the turn after.
+ * BYTES, as for closest hits), or when the caller asks (KD_ALL_STAGE:
+ * kd_all.c does from KD_ALL_STAGE_MIN_BYTES), a ray reaching a leaf
+ * requests its reference list, on its next turn its triangles, and tests
+ * them on the turn after.
  * A finished ray writes its answer and its slot takes the batch's next ray.
  *
  * Exact: per ray this is kd_all.c's walk() step for step: the same set-up

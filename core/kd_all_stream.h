@@ -12,16 +12,28 @@
 #include "kd_tune.h"
 #include "kdray.h"
 
-/* Rays in flight in the interleaved walk. */
-#define KD_ALL_RAYS 8
+/* Rays in flight in the interleaved walk. 16 against 8 (bench/ab, B/A
+ * median, --rays 32768 --rounds 5; 0 answers differ): batches of random
+ * rays 1.12-1.16 on 2CylinderEngine, 1.13-1.18 on engine3, 1.23-1.24 on
+ * engine9, 1.01-1.08 on duck and haus (bcount; ball 0.97-1.01); camera
+ * batches 1.08 on engine3, 1.12 on engine9. Each slot holds about 2 KiB
+ * (its stack and a count's first prims), on the caller's stack. */
+#define KD_ALL_RAYS 16
 /* kdr_all_batch and kdr_count_batch take the interleaved walk on scenes
  * of at least this many bytes (kdr_tree_stats.bytes), the closest-hit
- * walk's staging threshold. */
+ * walk's staging threshold; on smaller ones, for the chunks that
+ * kd_batch_scattered calls scattered. */
 #define KD_ALL_STREAM_MIN_BYTES KD_STREAM_STAGE_MIN_BYTES
 /* Leaves staged (references, then triangles requested a turn ahead of the
  * test) on every scene, not only on those of KD_STREAM_STAGE_MIN_BYTES and
  * more (tests put small scenes through that path with it). */
 #define KD_ALL_STAGE 1
+/* kdr_all_batch and kdr_count_batch stage leaves (KD_ALL_STAGE) on scenes
+ * of at least this many bytes: staged against not, scattered chunks
+ * (bench/ab, sets ball and bcount, --rays 32768 --rounds 5, B/A median):
+ * 2CylinderEngine (6 MiB) 1.29 / 1.12, haus (2 MiB) 0.89 / 0.87; the
+ * threshold lies between them, no scene in between was measured. */
+#define KD_ALL_STAGE_MIN_BYTES ((size_t)4 << 20)
 
 /* The interleaved walk of rays [first, first + count) of a batch
  * (arguments checked by the caller): with max_hits > 0 each ray's hits, as

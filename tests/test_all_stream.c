@@ -15,6 +15,10 @@
  * and count must equal the one-ray answer, and the work sums (rays, nodes
  * entered, triangle tests) the one-ray walk's: a walk that visits other
  * leaves, drops a pending subtree or keeps a duplicate differs there.
+ * Each set also goes through the public kdr_all_batch / kdr_count_batch,
+ * which on these small scenes take the interleaved walk for chunks
+ * kd_batch_scattered calls scattered (own origins, spread directions; at
+ * least three sets must be) and one ray at a time for the rest.
  * Then a soup of KD_ALL_STREAM_MIN_BYTES and more through the public
  * kdr_all_batch / kdr_count_batch (which take the interleaved walk there),
  * with a cap whose scratch lists do not fit on the stack.
@@ -26,10 +30,14 @@
 #include <string.h>
 
 #include "kd_all_stream.h"
+#include "kd_traverse_bundle.h"
 #include "kdray.h"
 #include "test_bundle_sets.h"
 
 static int failures;
+/* sets whose first chunk kd_batch_scattered calls scattered: the public
+ * batch calls take the interleaved walk for them on small scenes too */
+static int scattered_sets;
 
 typedef struct answers {
     uint32_t *nh, *cnt;
@@ -140,9 +148,21 @@ static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
             compare(scene, rs, s, caps[c], &a, &sl, &sc,
                     flags ? "stream-staged" : "stream");
         }
+        /* the public calls: on these small scenes they take the interleaved
+         * walk for the chunks kd_batch_scattered calls scattered */
+        kdr_all_hits out = {a.nh, a.t, a.u, a.v, a.prim};
+        kdr_trav_stats sl = {0}, sc = {0};
+        if (kdr_all_batch(s, &b, 0, rs->n, caps[c], &out, &sl) != KDR_OK ||
+            kdr_count_batch(s, &b, 0, rs->n, a.cnt, &sc) != KDR_OK) {
+            fprintf(stderr, "FAIL %s/%s: batch call\n", scene, rs->name);
+            failures++;
+        }
+        compare(scene, rs, s, caps[c], &a, &sl, &sc, "kdr_all_batch");
         answers_free(&a);
         free(buf);
     }
+    if (b.org_stride && rs->n > 8 && kd_batch_scattered(s, &b, 0, rs->n < KB_CHUNK ? rs->n : KB_CHUNK))
+        scattered_sets++;
 }
 
 static void check_scene(const scene_src *src, int integer) {
@@ -170,7 +190,8 @@ static scene_src small_soup(size_t n) {
 }
 
 /* The public entry points on a scene large enough for the interleaved
- * walk: cap 1024 (8 * 1024 scratch hits: the heap) and 16 (the stack). */
+ * walk: cap 1024 (KD_ALL_RAYS * 1024 scratch hits: the heap) and 16 (the
+ * stack). */
 static void check_large(void) {
     const scene_src src = small_soup(360000);
     kdr_scene *s = NULL;
@@ -225,7 +246,14 @@ int main(int argc, char **argv) {
         check_scene(&scenes[k], k == 1);
     for (size_t k = 0; k < sizeof scenes / sizeof scenes[0]; k++)
         free(scenes[k].tris);
+    if (scattered_sets < 3) {
+        fprintf(stderr, "FAIL: only %d ray sets are scattered: the public calls' "
+                        "interleaved route on small scenes went untested\n",
+                scattered_sets);
+        failures++;
+    }
     if (argc < 2) check_large();
-    printf("%s: %d mismatches\n", failures ? "FAILED" : "passed", failures);
+    printf("%s: %d mismatches (%d scattered sets)\n", failures ? "FAILED" : "passed",
+           failures, scattered_sets);
     return failures ? 1 : 0;
 }
