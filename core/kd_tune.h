@@ -177,7 +177,7 @@
  * 2 spp: bundles 0.0018 s vs single rays 0.0015 s on default/small). */
 #define TREE_MIN_RAYS 3u
 
-/* The cheap test (kd_cone.c, walk_pays): below CONE_WALK_FROM samples per
+/* The cheap test (kd_cone.c, kd_walk_pays): below CONE_WALK_FROM samples per
  * point no whole-light cone walks; the samples of UNWALKED_CHUNK_RAYS / (S x
  * lights) consecutive points go through the tree in one kdr_trace_batch
  * (8-wide any-hit bundles), with no cone set-up. A walk (with its proofs)
@@ -202,7 +202,7 @@
 #define CONE_WIDE_SIN 0.1
 #define CONE_WALK_WIDE_FROM 128u
 #define UNWALKED_CHUNK_RAYS 1024u
-/* Shared walks (kd_cone.c trace_grouped, kd_cone_group.c): up to
+/* Shared walks (kd_cone_query.c trace_grouped, kd_cone_group.c): up to
  * GROUP_POINTS consecutive points walk one cone toward a light when the
  * ball around their apexes is at most GROUP_MAX_SPREAD times the light's;
  * the group's walk is over budget (the points then walk on their own) past

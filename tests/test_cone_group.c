@@ -1,6 +1,6 @@
 /*
  * test_cone_group.c — shared walks of the cone-shadow query
- * (core/kd_cone_group.c, kd_cone.c's trace_grouped): runs of consecutive
+ * (core/kd_cone_group.c, kd_cone_query.c's trace_grouped): runs of consecutive
  * points walk one cone toward a light and judge its list.
  *
  *  - containment: the group's cone holds every sample segment of every
