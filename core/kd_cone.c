@@ -157,6 +157,9 @@ static uint32_t disc_coord(const kd_shadow_frame *f, const float *dir,
     return (uint32_t)q;
 }
 
+/* Up to this many pending samples sort_pending sorts by insertion. */
+#define SORT_INSERT_MAX 128u
+
 static int cmp_u64(const void *a, const void *b) {
     const uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
     return (x > y) - (x < y);
@@ -171,7 +174,20 @@ static void sort_pending(const kd_shadow_frame *f, kd_shadow_ws *ws, uint32_t n)
                            spread_bits(disc_coord(f, d, f->b2)) << 1;
         ws->keys[j] = m << 12 | ws->idx[j];
     }
-    qsort(ws->keys, n, sizeof *ws->keys, cmp_u64);
+    if (n <= SORT_INSERT_MAX) {
+        /* a point's few dozen keys: insertion sort, without qsort's
+         * merge buffers and calls per comparison (the keys are distinct,
+         * so the order is the same) */
+        for (uint32_t j = 1; j < n; j++) {
+            const uint64_t k = ws->keys[j];
+            uint32_t i = j;
+            for (; i > 0 && ws->keys[i - 1] > k; i--)
+                ws->keys[i] = ws->keys[i - 1];
+            ws->keys[i] = k;
+        }
+    } else {
+        qsort(ws->keys, n, sizeof *ws->keys, cmp_u64);
+    }
     for (uint32_t j = 0; j < n; j++)
         ws->idx[j] = (uint32_t)(ws->keys[j] & 0xfffu);
 }

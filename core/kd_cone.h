@@ -27,6 +27,8 @@ typedef struct kd_shadow_frame {
     float along;        /* > 0: each ray's origin moves this far along it */
     uint64_t key;       /* hash of (seed, point, light) */
     double phi_shift;   /* per-pair rotation of the azimuth lattice */
+    double oc[3];       /* center - apex, as each sample's reach uses it */
+    double near_c;      /* (dist - radius)(dist + radius), likewise */
 } kd_shadow_frame;
 
 /* Sets up the frame of point i and light l; KDR_EINVAL if an input is not
