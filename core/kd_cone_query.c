@@ -93,18 +93,23 @@ static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
     return rc;
 }
 
-/* The group list of frames fs[0..n) (one light), in *gl: 1 if the group's
- * cone exists and its walk stayed within budget, else 0 (each point then
- * walks on its own). */
+#define GROUP_NONE 0   /* no group: each point walks on its own */
+#define GROUP_LIST 1   /* the group's list is in *gl */
+#define GROUP_SPREAD 2 /* no group cone (too spread out): worth a split */
+
+/* The group list of frames fs[0..n) (one light), in *gl: GROUP_LIST if
+ * the group's cone exists and its walk stayed within budget, GROUP_SPREAD
+ * if the cone does not exist, else GROUP_NONE. */
 static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
                       uint32_t nsamples, kd_shadow_ws *ws, kd_cand_list *gl, int *rc) {
     const double spread = ws->policy == KD_WALK_GROUPS ? 1.0 : GROUP_MAX_SPREAD;
     kd_cone gc;
     /* points that will not walk (kd_walk_pays) gain only from an empty list,
      * rare where walks do not pay: no group walk for them */
-    if (n < 2 || !kd_walk_pays(nsamples, fs[0]->sin_a, ws->policy) ||
-        !kd_group_cone(scene, fs, n, spread, &gc))
-        return 0;
+    if (n < 2 || !kd_walk_pays(nsamples, fs[0]->sin_a, ws->policy))
+        return GROUP_NONE;
+    if (!kd_group_cone(scene, fs, n, spread, &gc))
+        return GROUP_SPREAD;
     const uint64_t max_nodes =
         GROUP_WALK_NODES_BASE + GROUP_WALK_NODES_PER_POINT * (uint64_t)n;
     /* no prism test here: each point's own cull has it, and most of what
@@ -138,28 +143,85 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
     return 1;
 }
 
+/* Splits sel[0..m) (indices into fr) in two at the middle of the apexes'
+ * box along its longest side; returns the size of the first part, 0 if
+ * the apexes coincide. */
+static size_t split_by_apex(const kd_shadow_frame *fr, size_t *sel, size_t m) {
+    float lo[3], hi[3];
+    for (int k = 0; k < 3; k++)
+        lo[k] = hi[k] = fr[sel[0]].apex[k];
+    for (size_t j = 1; j < m; j++)
+        for (int k = 0; k < 3; k++) {
+            const float a = fr[sel[j]].apex[k];
+            lo[k] = a < lo[k] ? a : lo[k];
+            hi[k] = a > hi[k] ? a : hi[k];
+        }
+    int ax = 0;
+    for (int k = 1; k < 3; k++)
+        if (hi[k] - lo[k] > hi[ax] - lo[ax])
+            ax = k;
+    const float mid = lo[ax] + 0.5f * (hi[ax] - lo[ax]);
+    size_t front = 0;
+    for (size_t j = 0; j < m; j++) /* stable: each part keeps the list's order */
+        if (fr[sel[j]].apex[ax] <= mid) {
+            const size_t v = sel[j];
+            for (size_t i = j; i > front; i--)
+                sel[i] = sel[i - 1];
+            sel[front++] = v;
+        }
+    return front < m ? front : 0;
+}
+
+/* The points sel[0..m) of one run toward light l: one group list for all
+ * of them if their group's cone exists; if it does not (the run straddles
+ * a depth step or two surfaces), the run is cut in two by position and
+ * each part tries again (up to GROUP_SPLITS times); else each point walks
+ * on its own. */
+static int trace_run(const kdr_scene *scene, const kdr_shadow_query *q, size_t j0, size_t l,
+                     const kd_shadow_frame *fr, size_t *sel, size_t m, int splits,
+                     float *visibility, kd_shadow_ws *ws) {
+    const kd_shadow_frame *fs[GROUP_POINTS];
+    int rc = KDR_OK;
+    for (size_t j = 0; j < m; j++)
+        fs[j] = &fr[sel[j]];
+    const int g = group_list(scene, fs, m, q->samples, ws, &ws->gl, &rc);
+    if (rc != KDR_OK)
+        return rc;
+    if (g == GROUP_SPREAD && splits > 0 && m >= 2 * GROUP_SPLIT_MIN) {
+        const size_t h = split_by_apex(fr, sel, m);
+        if (h >= GROUP_SPLIT_MIN && m - h >= GROUP_SPLIT_MIN) {
+            rc = trace_run(scene, q, j0, l, fr, sel, h, splits - 1, visibility, ws);
+            if (rc == KDR_OK)
+                rc = trace_run(scene, q, j0, l, fr, sel + h, m - h, splits - 1, visibility,
+                               ws);
+            return rc;
+        }
+    }
+    for (size_t j = 0; rc == KDR_OK && j < m; j++)
+        rc = kd_pair_visibility(scene, &fr[sel[j]], q->samples, ws, &ws->lights[l],
+                                g == GROUP_LIST ? &ws->gl : NULL,
+                                &visibility[point_at(ws, j0 + sel[j]) * q->nlights + l]);
+    return rc;
+}
+
 /* Cone-mode points through shared walks: runs of up to GROUP_POINTS
  * consecutive points, light by light, share one walk of their group's cone
- * (kd_group_cone) when it exists; each point then judges that list. */
+ * (kd_group_cone) when it exists (trace_run); each point then judges that
+ * list. */
 static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size_t count,
                          float *visibility, kd_shadow_ws *ws) {
     kd_shadow_frame fr[GROUP_POINTS];
-    const kd_shadow_frame *fs[GROUP_POINTS];
+    size_t sel[GROUP_POINTS];
     int rc = KDR_OK;
     for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += GROUP_POINTS) {
         const size_t n = count - j0 < GROUP_POINTS ? count - j0 : GROUP_POINTS;
         for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
             for (size_t j = 0; rc == KDR_OK && j < n; j++) {
                 rc = kd_shadow_frame_init(scene, q, point_at(ws, j0 + j), l, &fr[j]);
-                fs[j] = &fr[j];
+                sel[j] = j;
             }
-            if (rc != KDR_OK)
-                break;
-            const int grouped = group_list(scene, fs, n, q->samples, ws, &ws->gl, &rc);
-            for (size_t j = 0; rc == KDR_OK && j < n; j++)
-                rc = kd_pair_visibility(scene, &fr[j], q->samples, ws, &ws->lights[l],
-                                        grouped ? &ws->gl : NULL,
-                                        &visibility[point_at(ws, j0 + j) * q->nlights + l]);
+            if (rc == KDR_OK)
+                rc = trace_run(scene, q, j0, l, fr, sel, n, GROUP_SPLITS, visibility, ws);
         }
     }
     return rc;
