@@ -1,17 +1,18 @@
 /*
- * kd_cone.c — the cone-shadow query (kdr_shadow_trace): visibility of
- * spherical lights from points, as the fraction of kdr_shadow_ray samples
- * whose segment reaches the light.
+ * kd_cone.c — one (point, light) of the cone-shadow query: visibility of a
+ * spherical light from a point, as the fraction of kdr_shadow_ray samples
+ * whose segment reaches the light. Which points take which path, in what
+ * order and in which groups is kd_cone_query.c's (kdr_shadow_trace).
  *
- * KDR_SHADOW_RAYS traces every sample through the kd-tree (the reference).
- * KDR_SHADOW_CONE first asks a cheap test whether a point's cone walk can
- * pay (walk_pays: not below CONE_WALK_FROM samples, nor toward wide lights
- * below CONE_WALK_WIDE_FROM); when it cannot, the point's samples go
- * straight to any-hit bundles (kdr_trace_batch), chunked over consecutive
- * points below CONE_WALK_FROM. Otherwise it decides the (point, light) by
- * cones, from the whole light down to small groups of samples, and traces
- * only what no cone decides (runs of consecutive points first try to share
- * step 1's walk: trace_grouped, kd_cone_group.c):
+ * KDR_SHADOW_RAYS traces every sample through the kd-tree (the reference:
+ * kd_pair_visibility_rays). KDR_SHADOW_CONE (kd_pair_visibility) first
+ * asks a cheap test whether the point's cone walk can pay (kd_walk_pays:
+ * not below CONE_WALK_FROM samples, nor toward wide lights below
+ * CONE_WALK_WIDE_FROM); when it cannot, the point's samples go straight to
+ * any-hit bundles (kdr_trace_batch). Otherwise it decides the (point,
+ * light) by cones, from the whole light down to small groups of samples,
+ * and traces only what no cone decides (a group's shared walk, when the
+ * caller made one, replaces step 1's walk: kd_cone_group.c):
  *  1. Candidates: the cone of the whole light walks the kd-tree with a
  *     budget (kd_cone_trav.c); every triangle its cull keeps is judged by
  *     a proof against the float triangle test (kd_cone_proof.c, which needs
@@ -33,11 +34,6 @@
  *     skip step 1 for a while (back-off): neighbours see the same busy
  *     cone.
  *
- * kdr_shadow_trace_order takes the points as a list of indices: the j-th
- * point traced is order[j], which seeds its samples and names its slots,
- * so only the cost depends on the order (groups form among consecutive
- * points of the list).
- *
  * Exactness: a cell is decided only by proofs made against the float
  * arithmetic of kd_tri_intersect (or, without normals, by the walk's cull,
  * which keeps every triangle a segment could touch); every list holds all
@@ -52,39 +48,11 @@
 #include "kd_internal.h"
 #include "kd_tri.h"
 
-#define SHADOW_MAX_SAMPLES 4096u
-#define NO_PRIM UINT32_MAX
-
-/* Per light, carried from point to point (points arrive in image order). */
-typedef struct light_state {
-    uint32_t last;    /* last blocker: tried first on the next samples */
-    uint32_t backoff; /* points to skip after the next failed walk */
-    uint32_t skip;    /* points still to skip */
-} light_state;
-
-typedef struct shadow_ws {
-    kd_cand_list cl;
-    kd_cand_list gl; /* a group's list (trace_grouped) */
-    kd_tri_pre *gpre; /* its triangles' cull data (GROUP_MAX_CANDS) */
-    kdr_ray *rays;  /* the samples of one (point, light) */
-    uint32_t *idx;  /* pending (not yet decided) samples */
-    uint64_t *keys; /* Morton key << 12 | sample, for grouping */
-    light_state *lights;
-    float *borg, *bdir, *btmax; /* pending samples as a kdr_ray_batch */
-    uint8_t *bhit;
-    int wide;       /* AVX2 packets */
-    kd_walk_policy policy;
-    const size_t *order; /* non-NULL: the j-th point traced is order[j] */
-    size_t first;        /* else it is first + j */
-    kdr_shadow_stats st;
-    kd_cells cells;
-} shadow_ws;
-
 /* ---- testing samples ----------------------------------------------------- */
 
 /* Lit samples among idx[0..n), each traced alone through the whole tree
  * with kdr_occluded1 (the reference mode). */
-static uint32_t lit_by_rays(const kdr_scene *scene, shadow_ws *ws,
+static uint32_t lit_by_rays(const kdr_scene *scene, kd_shadow_ws *ws,
                             const uint32_t *idx, uint32_t n) {
     kdr_trav_stats ts = {0};
     uint32_t lit = 0;
@@ -97,7 +65,7 @@ static uint32_t lit_by_rays(const kdr_scene *scene, shadow_ws *ws,
 
 /* The same answers through kdr_trace_batch, whose bundles share node steps
  * between samples of one point (equal to kdr_occluded1 ray by ray). */
-static uint32_t lit_by_tree(const kdr_scene *scene, shadow_ws *ws,
+static uint32_t lit_by_tree(const kdr_scene *scene, kd_shadow_ws *ws,
                             const uint32_t *idx, uint32_t n) {
     if (n < TREE_MIN_RAYS)
         return lit_by_rays(scene, ws, idx, n);
@@ -123,9 +91,9 @@ static uint32_t lit_by_tree(const kdr_scene *scene, shadow_ws *ws,
 }
 
 /* Drops the pending samples that the last blocker blocks. */
-static uint32_t filter_by_last(const kdr_scene *scene, shadow_ws *ws,
+static uint32_t filter_by_last(const kdr_scene *scene, kd_shadow_ws *ws,
                                uint32_t *idx, uint32_t n, uint32_t *last) {
-    if (*last == NO_PRIM || n == 0)
+    if (*last == KD_NO_PRIM || n == 0)
         return n;
     /* one triangle: the scalar test; a packet's set-up (shears of 8 rays
      * transposed into lanes) costs several times one test */
@@ -147,7 +115,7 @@ static uint32_t filter_by_last(const kdr_scene *scene, shadow_ws *ws,
  * it blocks (in umbra the others then cost one triangle test each); this
  * repeats up to LEARN_ROUNDS times and stops at the first sample that is
  * lit, which is then settled too. Returns the samples still pending. */
-static uint32_t learn_blockers(const kdr_scene *scene, shadow_ws *ws,
+static uint32_t learn_blockers(const kdr_scene *scene, kd_shadow_ws *ws,
                                uint32_t *idx, uint32_t n, uint32_t *last,
                                uint32_t *lit) {
     for (uint32_t round = 0; round < LEARN_ROUNDS && n >= LEARN_MIN; round++) {
@@ -189,6 +157,9 @@ static uint32_t disc_coord(const kd_shadow_frame *f, const float *dir,
     return (uint32_t)q;
 }
 
+/* Up to this many pending samples sort_pending sorts by insertion. */
+#define SORT_INSERT_MAX 128u
+
 static int cmp_u64(const void *a, const void *b) {
     const uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
     return (x > y) - (x < y);
@@ -196,14 +167,27 @@ static int cmp_u64(const void *a, const void *b) {
 
 /* Orders the pending samples along a Morton curve of the light's disc, so
  * that consecutive samples are close in direction. */
-static void sort_pending(const kd_shadow_frame *f, shadow_ws *ws, uint32_t n) {
+static void sort_pending(const kd_shadow_frame *f, kd_shadow_ws *ws, uint32_t n) {
     for (uint32_t j = 0; j < n; j++) {
         const float *d = ws->rays[ws->idx[j]].dir;
         const uint64_t m = spread_bits(disc_coord(f, d, f->b1)) |
                            spread_bits(disc_coord(f, d, f->b2)) << 1;
         ws->keys[j] = m << 12 | ws->idx[j];
     }
-    qsort(ws->keys, n, sizeof *ws->keys, cmp_u64);
+    if (n <= SORT_INSERT_MAX) {
+        /* a point's few dozen keys: insertion sort, without qsort's
+         * merge buffers and calls per comparison (the keys are distinct,
+         * so the order is the same) */
+        for (uint32_t j = 1; j < n; j++) {
+            const uint64_t k = ws->keys[j];
+            uint32_t i = j;
+            for (; i > 0 && ws->keys[i - 1] > k; i--)
+                ws->keys[i] = ws->keys[i - 1];
+            ws->keys[i] = k;
+        }
+    } else {
+        qsort(ws->keys, n, sizeof *ws->keys, cmp_u64);
+    }
     for (uint32_t j = 0; j < n; j++)
         ws->idx[j] = (uint32_t)(ws->keys[j] & 0xfffu);
 }
@@ -243,7 +227,7 @@ static uint32_t popcount8(int m) {
 
 /* Lit samples of one packet idx[0..n) (reordered in place). */
 static void lit_group(const kdr_scene *scene, const kd_shadow_frame *f,
-                      shadow_ws *ws, uint32_t *idx, uint32_t n, uint32_t *last,
+                      kd_shadow_ws *ws, uint32_t *idx, uint32_t n, uint32_t *last,
                       uint32_t *lit) {
     const uint32_t n0 = n;
     n = filter_by_last(scene, ws, idx, n, last);
@@ -273,7 +257,7 @@ static void lit_group(const kdr_scene *scene, const kd_shadow_frame *f,
 
 /* ---- one (point, light) ---------------------------------------------------- */
 
-static int ws_reserve(shadow_ws *ws, uint32_t nsamples) {
+static int ws_reserve(kd_shadow_ws *ws, uint32_t nsamples) {
     if (ws->rays)
         return KDR_OK;
     ws->rays = malloc(nsamples * sizeof *ws->rays);
@@ -289,7 +273,7 @@ static int ws_reserve(shadow_ws *ws, uint32_t nsamples) {
                : KDR_ENOMEM;
 }
 
-static void make_samples(const kd_shadow_frame *f, uint32_t n, shadow_ws *ws) {
+static void make_samples(const kd_shadow_frame *f, uint32_t n, kd_shadow_ws *ws) {
     for (uint32_t s = 0; s < n; s++) {
         kd_shadow_frame_ray(f, s, n, &ws->rays[s]);
         ws->idx[s] = s;
@@ -302,7 +286,7 @@ static void make_samples(const kd_shadow_frame *f, uint32_t n, shadow_ws *ws) {
  * closest hits learn blockers and the rest go through the tree in bundles
  * (kdr_trace_batch). */
 static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
-                         shadow_ws *ws, uint32_t n, uint32_t *last) {
+                         kd_shadow_ws *ws, uint32_t n, uint32_t *last) {
     uint32_t lit = 0;
     make_samples(f, n, ws);
     const uint32_t width = ws->wide ? 8u : 4u;
@@ -325,7 +309,7 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
  * then go through trace_unwalked in chunks); wide cones (penumbra-heavy:
  * the walk goes over budget, and a decided cone is rare) only from
  * CONE_WALK_WIDE_FROM samples on. */
-static int walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
+int kd_walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
     if (policy != KD_WALK_AUTO)
         return policy == KD_WALK_ALWAYS || policy == KD_WALK_GROUPS;
     if (nsamples < CONE_WALK_FROM)
@@ -338,7 +322,7 @@ static int walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
  * cone, stopping at the first candidate) below CONE_RAYS_BELOW samples
  * (forced walks only: the cheap test sends such points to bundles) and
  * while the light backs off after busy cones. */
-static size_t cand_budget(uint32_t nsamples, light_state *ls) {
+static size_t cand_budget(uint32_t nsamples, kd_light_state *ls) {
     if (ls->skip > 0) {
         ls->skip--;
         return 0;
@@ -348,9 +332,9 @@ static size_t cand_budget(uint32_t nsamples, light_state *ls) {
     return nsamples < CONE_WALK_MIN_SAMPLES ? CONE_FEW_CANDS : CONE_MAX_CANDS;
 }
 
-static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
-                              uint32_t nsamples, shadow_ws *ws, light_state *ls,
-                              const kd_cand_list *group, float *vis) {
+int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
+                       uint32_t nsamples, kd_shadow_ws *ws, kd_light_state *ls,
+                       const kd_cand_list *group, float *vis) {
     uint32_t lit = 0;
     const uint64_t traced = ws->st.rays_traced;
     int rc = ws_reserve(ws, nsamples);
@@ -363,7 +347,7 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
         *vis = 1.0f;
         return KDR_OK;
     }
-    if (!walk_pays(nsamples, f->sin_a, ws->policy)) {
+    if (!kd_walk_pays(nsamples, f->sin_a, ws->policy)) {
         /* a wide cone at moderate samples: straight to the bundles */
         make_samples(f, nsamples, ws);
         *vis = (float)lit_by_tree(scene, ws, ws->idx, nsamples) / (float)nsamples;
@@ -396,260 +380,27 @@ static int visibility_by_cone(const kdr_scene *scene, const kd_shadow_frame *f,
     return rc;
 }
 
-/* ---- the query ----------------------------------------------------------- */
-
-/* The index of the j-th point traced: its samples' seed and its answers'
- * slots (kdr_shadow_trace_order passes points in its own order). */
-static size_t point_at(const shadow_ws *ws, size_t j) {
-    return ws->order ? ws->order[j] : ws->first + j;
-}
-
-static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
-                       size_t first, size_t count, const float *visibility) {
-    if (!scene || !q || !visibility || !q->points || !q->lights)
-        return 0;
-    if (q->nlights < 1 || q->samples < 1 || q->samples > SHADOW_MAX_SAMPLES)
-        return 0;
-    return first <= q->n && count <= q->n - first;
-}
-
-/* Points that do not walk their cones, a chunk at a time: the samples of
- * consecutive points (toward the same lights, from nearby surfaces: the
- * bundles stay coherent) go through the tree in one kdr_trace_batch, whose
- * set-up is then paid per chunk, not per point. */
-static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
-                          size_t count, float *visibility, shadow_ws *ws) {
-    const uint32_t n = q->samples;
-    const size_t per_point = (size_t)n * q->nlights;
-    size_t step = UNWALKED_CHUNK_RAYS / per_point;
-    step = step ? step : 1;
-    const size_t cap = step * per_point;
-    float *org = malloc(3 * cap * sizeof *org), *dir = malloc(3 * cap * sizeof *dir);
-    float *tmax = malloc(cap * sizeof *tmax);
-    uint8_t *hit = malloc(cap);
-    int rc = org && dir && tmax && hit ? KDR_OK : KDR_ENOMEM;
-    for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += step) {
-        const size_t j1 = count - j0 < step ? count : j0 + step;
-        size_t m = 0;
-        for (size_t j = j0; rc == KDR_OK && j < j1; j++)
-            for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
-                kd_shadow_frame f;
-                rc = kd_shadow_frame_init(scene, q, point_at(ws, j), l, &f);
-                for (uint32_t s = 0; rc == KDR_OK && s < n; s++, m++) {
-                    kdr_ray r;
-                    kd_shadow_frame_ray(&f, s, n, &r);
-                    for (int k = 0; k < 3; k++) {
-                        org[3 * m + k] = r.org[k];
-                        dir[3 * m + k] = r.dir[k];
-                    }
-                    tmax[m] = r.tmax; /* tmin is 0 for every sample */
-                }
-            }
-        if (rc != KDR_OK)
-            break;
-        kdr_ray_batch b = {.n = m, .org = org, .org_stride = 3, .dir = dir,
-                           .tmax = tmax, .tmax_stride = 1};
-        kdr_hits out = {.hit = hit};
-        kdr_trav_stats ts = {0};
-        rc = kdr_trace_batch(scene, &b, 0, m, KDR_ANY, KDR_TRAV_AUTO, &out, &ts);
-        ws->st.rays_traced += m;
-        ws->st.nodes_visited += ts.nodes_visited;
-        for (size_t k = 0, pair = 0; rc == KDR_OK && k < m; k += n, pair++) {
-            uint32_t lit = 0;
-            for (uint32_t s = 0; s < n; s++)
-                lit += hit[k + s] ? 0u : 1u;
-            const size_t i = point_at(ws, j0 + pair / q->nlights);
-            visibility[i * q->nlights + pair % q->nlights] = (float)lit / (float)n;
-        }
-    }
-    free(org);
-    free(dir);
-    free(tmax);
-    free(hit);
-    return rc;
-}
-
-/* The group list of frames fs[0..n) (one light), in *gl: 1 if the group's
- * cone exists and its walk stayed within budget, else 0 (each point then
- * walks on its own). */
-static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
-                      uint32_t nsamples, shadow_ws *ws, kd_cand_list *gl, int *rc) {
-    const double spread = ws->policy == KD_WALK_GROUPS ? 1.0 : GROUP_MAX_SPREAD;
-    kd_cone gc;
-    /* points that will not walk (walk_pays) gain only from an empty list,
-     * rare where walks do not pay: no group walk for them */
-    if (n < 2 || !walk_pays(nsamples, fs[0]->sin_a, ws->policy) ||
-        !kd_group_cone(scene, fs, n, spread, &gc))
-        return 0;
-    const uint64_t max_nodes =
-        GROUP_WALK_NODES_BASE + GROUP_WALK_NODES_PER_POINT * (uint64_t)n;
-    /* no prism test here: each point's own cull has it, and most of what
-     * it would drop (the surface under the points) kd_group_clear drops
-     * for the group anyway (callgrind of the picture: -2.2% without it) */
-    const int r = kd_cone_collect(scene, &gc, gl, GROUP_MAX_CANDS, max_nodes, 0,
-                                  &ws->st.nodes_visited);
-    if (r == KDR_ENOMEM)
-        *rc = KDR_ENOMEM;
-    if (r != KDR_OK)
-        return 0;
-    if (!ws->gpre && !(ws->gpre = malloc(GROUP_MAX_CANDS * sizeof *ws->gpre))) {
-        *rc = KDR_ENOMEM;
-        return 0;
-    }
-    for (size_t j = 0; j < gl->n; j++)
-        kd_tri_pre_plane(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
-    /* the surfaces under the points (most of a list) are dropped here once
-     * for the whole group instead of by each point's cull; gpre keeps the
-     * rest (gl->n of them). None left: no segment of the group can touch a
-     * triangle, and the whole group is lit. */
-    kd_group_clear(fs, n, gc.band, ws->gpre, gl->n);
-    size_t kept = 0;
-    for (size_t j = 0; j < gl->n; j++)
-        if (!ws->gpre[j].clear) {
-            ws->gpre[kept] = ws->gpre[j];
-            kd_tri_pre_sides(&ws->gpre[kept], scene->tris + 9 * (size_t)ws->gpre[kept].prim);
-            kept++;
-        }
-    gl->n = kept;
-    return 1;
-}
-
-/* Cone-mode points through shared walks: runs of up to GROUP_POINTS
- * consecutive points, light by light, share one walk of their group's cone
- * (kd_group_cone) when it exists; each point then judges that list. */
-static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size_t count,
-                         float *visibility, shadow_ws *ws) {
-    kd_shadow_frame fr[GROUP_POINTS];
-    const kd_shadow_frame *fs[GROUP_POINTS];
-    int rc = KDR_OK;
-    for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += GROUP_POINTS) {
-        const size_t n = count - j0 < GROUP_POINTS ? count - j0 : GROUP_POINTS;
-        for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
-            for (size_t j = 0; rc == KDR_OK && j < n; j++) {
-                rc = kd_shadow_frame_init(scene, q, point_at(ws, j0 + j), l, &fr[j]);
-                fs[j] = &fr[j];
-            }
-            if (rc != KDR_OK)
-                break;
-            const int grouped = group_list(scene, fs, n, q->samples, ws, &ws->gl, &rc);
-            for (size_t j = 0; rc == KDR_OK && j < n; j++)
-                rc = visibility_by_cone(scene, &fr[j], q->samples, ws, &ws->lights[l],
-                                        grouped ? &ws->gl : NULL,
-                                        &visibility[point_at(ws, j0 + j) * q->nlights + l]);
-        }
-    }
-    return rc;
-}
-
-static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q, size_t count,
-                        kdr_shadow_mode mode, float *visibility, shadow_ws *ws) {
-    if (mode == KDR_SHADOW_CONE &&
-        (ws->policy == KD_WALK_NEVER ||
-         (ws->policy == KD_WALK_AUTO && q->samples < CONE_WALK_FROM)))
-        return trace_unwalked(scene, q, count, visibility, ws);
-    if (mode == KDR_SHADOW_CONE &&
-        (ws->policy == KD_WALK_GROUPS || (ws->policy == KD_WALK_AUTO && GROUP_POINTS > 1)))
-        return trace_grouped(scene, q, count, visibility, ws);
-    for (size_t j = 0; j < count; j++) {
-        const size_t i = point_at(ws, j);
-        for (size_t l = 0; l < q->nlights; l++) {
-            kd_shadow_frame f;
-            float *vis = &visibility[i * q->nlights + l];
-            int rc = kd_shadow_frame_init(scene, q, i, l, &f);
-            if (rc == KDR_OK && mode == KDR_SHADOW_RAYS) {
-                rc = ws_reserve(ws, q->samples);
-                if (rc == KDR_OK) {
-                    make_samples(&f, q->samples, ws);
-                    *vis = (float)lit_by_rays(scene, ws, ws->idx, q->samples) /
-                           (float)q->samples;
-                }
-            } else if (rc == KDR_OK) {
-                rc = visibility_by_cone(scene, &f, q->samples, ws, &ws->lights[l], NULL,
-                                        vis);
-            }
-            if (rc != KDR_OK)
-                return rc;
-        }
-    }
+int kd_pair_visibility_rays(const kdr_scene *scene, const kd_shadow_frame *f,
+                            uint32_t nsamples, kd_shadow_ws *ws, float *vis) {
+    const int rc = ws_reserve(ws, nsamples);
+    if (rc != KDR_OK)
+        return rc;
+    make_samples(f, nsamples, ws);
+    *vis = (float)lit_by_rays(scene, ws, ws->idx, nsamples) / (float)nsamples;
     return KDR_OK;
 }
 
-int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
-                     size_t first, size_t count, kdr_shadow_mode mode,
-                     float *visibility, kdr_shadow_stats *stats) {
-    return kd_shadow_trace_policy(scene, q, first, count, mode, KD_WALK_AUTO,
-                                  visibility, stats);
-}
-
-int kdr_shadow_trace_order(const kdr_scene *scene, const kdr_shadow_query *q,
-                           const size_t *order, size_t count, kdr_shadow_mode mode,
-                           float *visibility, kdr_shadow_stats *stats) {
-    return kd_shadow_trace_order_policy(scene, q, order, count, mode, KD_WALK_AUTO,
-                                        visibility, stats);
-}
-
-static int trace_query(const kdr_scene *scene, const kdr_shadow_query *q,
-                       const size_t *order, size_t first, size_t count,
-                       kdr_shadow_mode mode, kd_walk_policy policy, float *visibility,
-                       kdr_shadow_stats *stats);
-
-int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
-                           size_t first, size_t count, kdr_shadow_mode mode,
-                           kd_walk_policy policy, float *visibility,
-                           kdr_shadow_stats *stats) {
-    if (!query_valid(scene, q, first, count, visibility))
-        return KDR_EINVAL;
-    return trace_query(scene, q, NULL, first, count, mode, policy, visibility, stats);
-}
-
-int kd_shadow_trace_order_policy(const kdr_scene *scene, const kdr_shadow_query *q,
-                                 const size_t *order, size_t count, kdr_shadow_mode mode,
-                                 kd_walk_policy policy, float *visibility,
-                                 kdr_shadow_stats *stats) {
-    if (!query_valid(scene, q, 0, 0, visibility) || (count > 0 && !order))
-        return KDR_EINVAL;
-    for (size_t j = 0; j < count; j++)
-        if (order[j] >= q->n)
-            return KDR_EINVAL;
-    return trace_query(scene, q, order, 0, count, mode, policy, visibility, stats);
-}
-
-static int trace_query(const kdr_scene *scene, const kdr_shadow_query *q,
-                       const size_t *order, size_t first, size_t count,
-                       kdr_shadow_mode mode, kd_walk_policy policy, float *visibility,
-                       kdr_shadow_stats *stats) {
-    if (mode != KDR_SHADOW_CONE && mode != KDR_SHADOW_RAYS)
-        return KDR_EINVAL;
-    if (policy != KD_WALK_AUTO && policy != KD_WALK_ALWAYS && policy != KD_WALK_NEVER &&
-        policy != KD_WALK_GROUPS)
-        return KDR_EINVAL;
-    shadow_ws ws = {0};
-    ws.policy = policy;
-    ws.order = order;
-    ws.first = first;
-    ws.wide = kdr_cpu_has_avx2();
-    ws.lights = malloc(q->nlights * sizeof *ws.lights);
-    int rc = ws.lights ? KDR_OK : KDR_ENOMEM;
-    for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++)
-        ws.lights[l] = (light_state){NO_PRIM, 0, 0};
-    if (rc == KDR_OK)
-        rc = trace_points(scene, q, count, mode, visibility, &ws);
-    if (stats) {
-        stats->cones_decided += ws.st.cones_decided;
-        stats->rays_traced += ws.st.rays_traced;
-        stats->nodes_visited += ws.st.nodes_visited;
-    }
-    free(ws.cl.v);
-    free(ws.gl.v);
-    free(ws.gpre);
-    free(ws.rays);
-    free(ws.idx);
-    free(ws.keys);
-    free(ws.borg);
-    free(ws.bdir);
-    free(ws.btmax);
-    free(ws.bhit);
-    free(ws.lights);
-    kd_cells_free(&ws.cells);
-    return rc;
+void kd_shadow_ws_free(kd_shadow_ws *ws) {
+    free(ws->cl.v);
+    free(ws->gl.v);
+    free(ws->gpre);
+    free(ws->rays);
+    free(ws->idx);
+    free(ws->keys);
+    free(ws->borg);
+    free(ws->bdir);
+    free(ws->btmax);
+    free(ws->bhit);
+    free(ws->lights);
+    kd_cells_free(&ws->cells);
 }

@@ -1,10 +1,11 @@
 /*
  * kd_cone.h — internal interface between the shadow-ray sampler
  * (kd_cone_sample.c, which defines kdr_shadow_ray) and the cone-shadow query
- * (kd_cone.c). A "frame" is everything about one (point, light) pair that
- * all of its samples share: the cone apex, the axis and its basis, the
- * half-angle and the hash key; building it once per pair keeps the per-sample
- * cost to a few multiplications and makes every mode use identical rays.
+ * (kd_cone.c: one point and light; kd_cone_query.c: the driver). A "frame"
+ * is everything about one (point, light) pair that all of its samples
+ * share: the cone apex, the axis and its basis, the half-angle and the
+ * hash key; building it once per pair keeps the per-sample cost to a few
+ * multiplications and makes every mode use identical rays.
  */
 #ifndef KD_CONE_H
 #define KD_CONE_H
@@ -26,6 +27,8 @@ typedef struct kd_shadow_frame {
     float along;        /* > 0: each ray's origin moves this far along it */
     uint64_t key;       /* hash of (seed, point, light) */
     double phi_shift;   /* per-pair rotation of the azimuth lattice */
+    double oc[3];       /* center - apex, as each sample's reach uses it */
+    double near_c;      /* (dist - radius)(dist + radius), likewise */
 } kd_shadow_frame;
 
 /* Sets up the frame of point i and light l; KDR_EINVAL if an input is not
@@ -257,7 +260,7 @@ int kd_cone_packet_walk(const kdr_scene *scene, const kd_cone *c,
                         uint32_t *blocker, uint64_t *visited, int *open,
                         int wide);
 
-/* ---- the query's walk policy (kd_cone.c) ----------------------------------- */
+/* ---- the query's walk policy (kd_cone_query.c) ------------------------------ */
 
 /* Whether a (point, light) walks its whole light's cone before sampling.
  * KD_WALK_AUTO is what kdr_shadow_trace does (a cheap per-point test,
@@ -282,5 +285,49 @@ int kd_shadow_trace_order_policy(const kdr_scene *scene, const kdr_shadow_query 
                                  const size_t *order, size_t count, kdr_shadow_mode mode,
                                  kd_walk_policy policy, float *visibility,
                                  kdr_shadow_stats *stats);
+
+/* ---- one (point, light) (kd_cone.c) for the query (kd_cone_query.c) ------ */
+
+#define KD_NO_PRIM UINT32_MAX
+
+/* Per light, carried from point to point (points arrive in image order). */
+typedef struct kd_light_state {
+    uint32_t last;    /* last blocker: tried first on the next samples */
+    uint32_t backoff; /* points to skip after the next failed walk */
+    uint32_t skip;    /* points still to skip */
+} kd_light_state;
+
+/* One query's workspace (zero-initialise; kd_shadow_ws_free). */
+typedef struct kd_shadow_ws {
+    kd_cand_list cl;
+    kd_cand_list gl; /* a group's list (trace_grouped) */
+    kd_tri_pre *gpre; /* its triangles' cull data (GROUP_MAX_CANDS) */
+    kdr_ray *rays;  /* the samples of one (point, light) */
+    uint32_t *idx;  /* pending (not yet decided) samples */
+    uint64_t *keys; /* Morton key << 12 | sample, for grouping */
+    kd_light_state *lights;
+    float *borg, *bdir, *btmax; /* pending samples as a kdr_ray_batch */
+    uint8_t *bhit;
+    int wide;       /* AVX2 packets */
+    kd_walk_policy policy;
+    const size_t *order; /* non-NULL: the j-th point traced is order[j] */
+    size_t first;        /* else it is first + j */
+    kdr_shadow_stats st;
+    kd_cells cells;
+} kd_shadow_ws;
+
+/* The cheap test: does a point with this many samples toward a light of
+ * this angular size (sin_a = r / D) walk its whole light's cone? */
+int kd_walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy);
+/* KDR_SHADOW_CONE's visibility of one (point, light) into *vis; group: the
+ * list of its group's shared walk (kd_cone_group.c), or NULL for its own
+ * walk. KDR_OK or KDR_ENOMEM. */
+int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
+                       uint32_t nsamples, kd_shadow_ws *ws, kd_light_state *ls,
+                       const kd_cand_list *group, float *vis);
+/* KDR_SHADOW_RAYS: every sample traced alone (the reference). */
+int kd_pair_visibility_rays(const kdr_scene *scene, const kd_shadow_frame *f,
+                            uint32_t nsamples, kd_shadow_ws *ws, float *vis);
+void kd_shadow_ws_free(kd_shadow_ws *ws);
 
 #endif /* KD_CONE_H */

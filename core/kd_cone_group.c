@@ -1,6 +1,6 @@
 /*
  * kd_cone_group.c — one kd-tree walk shared by a group of consecutive
- * points toward one light (kd_cone.c says when groups are formed).
+ * points toward one light (kd_cone_query.c says when groups are formed).
  *
  * The group's cone holds every sample segment of every point of the group:
  * each segment runs from a point's apex into the light's ball, so it lies in

@@ -133,8 +133,11 @@ int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
     f->dist = sqrt(d2);
     if (!(f->dist > f->radius) || !isfinite(f->dist))
         return KDR_EINVAL;
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 3; k++) {
         f->axis[k] = w[k] / f->dist;
+        f->oc[k] = w[k];
+    }
+    f->near_c = (f->dist - f->radius) * (f->dist + f->radius);
     basis_around(f->axis, f->b1, f->b2);
     f->sin_a = f->radius / f->dist;
     const double cos_a = sqrt((1.0 - f->sin_a) * (1.0 + f->sin_a));
@@ -149,11 +152,10 @@ int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
  * The discriminant uses |oc x dir|^2 (Lagrange) so grazing samples at the
  * cone's rim do not cancel catastrophically. */
 static double near_surface(const kd_shadow_frame *f, const float dir[3]) {
-    double oc[3], dd[3];
-    for (int k = 0; k < 3; k++) {
-        oc[k] = f->center[k] - (double)f->apex[k];
+    const double *oc = f->oc;
+    double dd[3];
+    for (int k = 0; k < 3; k++)
         dd[k] = dir[k];
-    }
     const double qq = dd[0] * dd[0] + dd[1] * dd[1] + dd[2] * dd[2];
     const double b = oc[0] * dd[0] + oc[1] * dd[1] + oc[2] * dd[2];
     const double cx = oc[1] * dd[2] - oc[2] * dd[1];
@@ -162,13 +164,13 @@ static double near_surface(const kd_shadow_frame *f, const float dir[3]) {
     double disc = qq * f->radius * f->radius - (cx * cx + cy * cy + cz * cz);
     if (disc < 0.0) /* a rim sample rounded just outside: tangent point */
         disc = 0.0;
-    const double c = (f->dist - f->radius) * (f->dist + f->radius);
-    return c / (b + sqrt(disc));
+    return f->near_c / (b + sqrt(disc));
 }
 
 double kd_shadow_frame_phase(const kd_shadow_frame *f, uint32_t s) {
     const double phi = (double)s * GOLDEN_FRACTION + f->phi_shift;
-    return phi - floor(phi);
+    /* phi is in [0, 4097): truncation is floor, without libm's call */
+    return phi - (double)(int64_t)phi;
 }
 
 void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,

@@ -229,16 +229,17 @@ static int plane_misses(const kd_cone *cc, const float *tri, double un[3]) {
     return 0;
 }
 
-/* 0 only if the triangle provably misses every sample segment: its plane
- * leaves the truncated cone on one side, or its bounding sphere lies beyond
- * the segments' axial reach or farther from the cone than its radius, or
- * (with prism) the cone lies outside one side of its prism. */
+/* 0 only if the triangle provably misses every sample segment: its
+ * bounding sphere lies beyond the segments' axial reach or farther from
+ * the cone than its radius, or its plane leaves the truncated cone on one
+ * side, or (with prism) the cone lies outside one side of its prism. The
+ * sphere goes first: most triangles a walk meets lie beside the cone, and
+ * it drops them before the plane is formed (the same triangles are kept
+ * in either order; callgrind of the default picture -2.5%). */
 static int tri_may_block(const kd_cone *cc, const float *tri, int prism) {
     if (cc->cos_p == 0.0) /* near-hemisphere cone: keep everything */
         return 1;
     double un[3] = {0, 0, 0};
-    if (plane_misses(cc, tri, un))
-        return 0;
     double m[3], w[3], r2 = 0.0;
     for (int k = 0; k < 3; k++) {
         const double lo = dmin(tri[k], dmin(tri[3 + k], tri[6 + k]));
@@ -262,9 +263,15 @@ static int tri_may_block(const kd_cone *cc, const float *tri, int prism) {
     const double rad = r + cc->band + CULL_REL_SLACK * (wlen + r);
     if (proj - rad > (double)cc->t_far || proj + rad < (double)cc->t_near)
         return 0;
-    if (proj * cc->cos_p + perp * cc->sin_p <= 0.0) /* nearest: the apex */
-        return wlen <= rad && !(prism && prism_misses(cc, tri, un));
-    return perp * cc->cos_p - proj * cc->sin_p <= rad && !(prism && prism_misses(cc, tri, un));
+    if (proj * cc->cos_p + perp * cc->sin_p <= 0.0) { /* nearest: the apex */
+        if (!(wlen <= rad))
+            return 0;
+    } else if (!(perp * cc->cos_p - proj * cc->sin_p <= rad)) {
+        return 0;
+    }
+    if (plane_misses(cc, tri, un))
+        return 0;
+    return !(prism && prism_misses(cc, tri, un));
 }
 
 int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
@@ -336,7 +343,8 @@ static void pre_range(const kd_cone *cc, const double m[3], double off, double *
     *hi = dmax(d_apex, d_disc + spread);
 }
 
-/* tri_may_block's three tests in the same order. Its slacks use distances
+/* tri_may_block's three tests (plane first: here it is precomputed and
+ * cheap; the order changes no answer). Its slacks use distances
  * from the apex to a vertex or the sphere's centre; here all are bounded by
  * |apex - c| + r, so the margins are at least as wide, plus 1e-9 relative
  * for the offsets' own rounding (|off| up to the scene's magnitude). */

@@ -1,6 +1,6 @@
 /*
  * test_cone_group.c — shared walks of the cone-shadow query
- * (core/kd_cone_group.c, kd_cone.c's trace_grouped): runs of consecutive
+ * (core/kd_cone_group.c, kd_cone_query.c's trace_grouped): runs of consecutive
  * points walk one cone toward a light and judge its list.
  *
  *  - containment: the group's cone holds every sample segment of every
@@ -13,6 +13,8 @@
  *    runs of points (a grid in scan order on a tessellated floor and on a
  *    sphere, under occluders, toward small, large and straddling lights,
  *    one and two lights a query);
+ *  - split runs: a run straddling two heights is cut in two and each half
+ *    shares a walk (test_split_runs);
  *  - order: kdr_shadow_trace_order (render passes 4x4 squares of pixels)
  *    gives each point of its list, in any order, exactly its own answer
  *    under every policy (squares of a grid, a shuffle, with points left
@@ -609,11 +611,58 @@ static void test_sharing(void) {
     free(b.v);
 }
 
+/* Runs that straddle two surfaces: consecutive points alternate between
+ * two heights 1 apart (a run's apexes are far too spread for one group
+ * cone toward a light of radius 0.2), in free space. Each run is cut in
+ * two by position (trace_run), each half shares one walk that finds
+ * nothing: every point decided lit with far fewer nodes than own walks.
+ * Before runs were cut, every point of such a run walked on its own. */
+static void test_split_runs(void) {
+    tri_buf b = {0};
+    floor_grid(&b, 16, 0.0f);
+    const float lo[3] = {2.0f, 0.0f, 2.0f}, hi[3] = {3.0f, 1.0f, 3.0f};
+    soup(&b, 50, lo, hi, 0.2f); /* off to the side */
+    kdr_scene *s = build(&b);
+    enum { RES = 32 };
+    float pts[3 * RES * RES], nrm[3 * RES * RES];
+    for (int i = 0; i < RES * RES; i++) {
+        pts[3 * i] = -0.125f + 0.25f * (float)(i % RES) / RES;
+        pts[3 * i + 1] = 0.5f + (float)(i % 2);
+        pts[3 * i + 2] = -0.125f + 0.25f * (float)(i / RES) / RES;
+        nrm[3 * i] = nrm[3 * i + 2] = 0.0f;
+        nrm[3 * i + 1] = 1.0f;
+    }
+    const kdr_sphere_light light = {{0.0f, 4.0f, 0.0f}, 0.2f};
+    kdr_shadow_query q = {.n = RES * RES,
+                          .points = pts,
+                          .normals = nrm,
+                          .lights = &light,
+                          .nlights = 1,
+                          .samples = 64,
+                          .seed = 5,
+                          .offset = KDR_OFFSET_AUTO};
+    const kdr_shadow_stats sa = check_policies("two heights, split runs", s, &b, &q);
+    float v[RES * RES];
+    kdr_shadow_stats sw = {0};
+    CHECK(kd_shadow_trace_policy(s, &q, 0, q.n, KDR_SHADOW_CONE, KD_WALK_ALWAYS, v,
+                                 &sw) == KDR_OK,
+          "always");
+    for (int i = 0; i < RES * RES; i++)
+        CHECK(v[i] == 1.0f, "two-height point %d: %.6f", i, v[i]);
+    CHECK(sa.cones_decided == q.n && sa.rays_traced == 0, "every point decided lit");
+    CHECK(sa.nodes_visited * 4 < sw.nodes_visited,
+          "split runs %llu nodes, own walks %llu: the halves did not share walks",
+          (unsigned long long)sa.nodes_visited, (unsigned long long)sw.nodes_visited);
+    kdr_scene_free(s);
+    free(b.v);
+}
+
 int main(void) {
     test_containment();
     test_edges_miss();
     test_answers();
     test_sharing();
+    test_split_runs();
     test_clear(); /* last: the cases above were drawn before it existed */
     if (failures) {
         fprintf(stderr, "test_cone_group: %d failure(s)\n", failures);

@@ -1,0 +1,325 @@
+/*
+ * kd_cone_query.c — the cone-shadow query's driver (kdr_shadow_trace,
+ * kdr_shadow_trace_order and their forced-policy forms for tests): checks
+ * the query, then sends its points down one of three paths. Below
+ * CONE_WALK_FROM samples (or with walks forced off) no cone walks: the
+ * samples of consecutive points go through one any-hit kdr_trace_batch a
+ * chunk at a time (trace_unwalked). From there on, runs of up to
+ * GROUP_POINTS consecutive points toward one light share one walk of their
+ * group's cone (trace_grouped, kd_cone_group.c) and each point judges that
+ * list (kd_pair_visibility in kd_cone.c). KDR_SHADOW_RAYS traces every
+ * sample alone, point by point.
+ *
+ * kdr_shadow_trace_order takes the points as a list of indices: the j-th
+ * point traced is order[j], which seeds its samples and names its slots,
+ * so only the cost depends on the order (groups form among consecutive
+ * points of the list).
+ */
+#include <stdlib.h>
+
+#include "kd_cone.h"
+#include "kd_internal.h"
+
+#define SHADOW_MAX_SAMPLES 4096u
+
+/* The index of the j-th point traced: its samples' seed and its answers'
+ * slots (kdr_shadow_trace_order passes points in its own order). */
+static size_t point_at(const kd_shadow_ws *ws, size_t j) {
+    return ws->order ? ws->order[j] : ws->first + j;
+}
+
+static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
+                       size_t first, size_t count, const float *visibility) {
+    if (!scene || !q || !visibility || !q->points || !q->lights)
+        return 0;
+    if (q->nlights < 1 || q->samples < 1 || q->samples > SHADOW_MAX_SAMPLES)
+        return 0;
+    return first <= q->n && count <= q->n - first;
+}
+
+/* Points that do not walk their cones, a chunk at a time: the samples of
+ * consecutive points (toward the same lights, from nearby surfaces: the
+ * bundles stay coherent) go through the tree in one kdr_trace_batch, whose
+ * set-up is then paid per chunk, not per point. */
+static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
+                          size_t count, float *visibility, kd_shadow_ws *ws) {
+    const uint32_t n = q->samples;
+    const size_t per_point = (size_t)n * q->nlights;
+    size_t step = UNWALKED_CHUNK_RAYS / per_point;
+    step = step ? step : 1;
+    const size_t cap = step * per_point;
+    float *org = malloc(3 * cap * sizeof *org), *dir = malloc(3 * cap * sizeof *dir);
+    float *tmax = malloc(cap * sizeof *tmax);
+    uint8_t *hit = malloc(cap);
+    int rc = org && dir && tmax && hit ? KDR_OK : KDR_ENOMEM;
+    for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += step) {
+        const size_t j1 = count - j0 < step ? count : j0 + step;
+        size_t m = 0;
+        for (size_t j = j0; rc == KDR_OK && j < j1; j++)
+            for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
+                kd_shadow_frame f;
+                rc = kd_shadow_frame_init(scene, q, point_at(ws, j), l, &f);
+                for (uint32_t s = 0; rc == KDR_OK && s < n; s++, m++) {
+                    kdr_ray r;
+                    kd_shadow_frame_ray(&f, s, n, &r);
+                    for (int k = 0; k < 3; k++) {
+                        org[3 * m + k] = r.org[k];
+                        dir[3 * m + k] = r.dir[k];
+                    }
+                    tmax[m] = r.tmax; /* tmin is 0 for every sample */
+                }
+            }
+        if (rc != KDR_OK)
+            break;
+        kdr_ray_batch b = {.n = m, .org = org, .org_stride = 3, .dir = dir,
+                           .tmax = tmax, .tmax_stride = 1};
+        kdr_hits out = {.hit = hit};
+        kdr_trav_stats ts = {0};
+        rc = kdr_trace_batch(scene, &b, 0, m, KDR_ANY, KDR_TRAV_AUTO, &out, &ts);
+        ws->st.rays_traced += m;
+        ws->st.nodes_visited += ts.nodes_visited;
+        for (size_t k = 0, pair = 0; rc == KDR_OK && k < m; k += n, pair++) {
+            uint32_t lit = 0;
+            for (uint32_t s = 0; s < n; s++)
+                lit += hit[k + s] ? 0u : 1u;
+            const size_t i = point_at(ws, j0 + pair / q->nlights);
+            visibility[i * q->nlights + pair % q->nlights] = (float)lit / (float)n;
+        }
+    }
+    free(org);
+    free(dir);
+    free(tmax);
+    free(hit);
+    return rc;
+}
+
+#define GROUP_NONE 0   /* no group: each point walks on its own */
+#define GROUP_LIST 1   /* the group's list is in *gl */
+#define GROUP_SPREAD 2 /* no group cone (too spread out): worth a split */
+
+/* The group list of frames fs[0..n) (one light), in *gl: GROUP_LIST if
+ * the group's cone exists and its walk stayed within budget, GROUP_SPREAD
+ * if the cone does not exist, else GROUP_NONE. */
+static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, size_t n,
+                      uint32_t nsamples, kd_shadow_ws *ws, kd_cand_list *gl, int *rc) {
+    const double spread = ws->policy == KD_WALK_GROUPS ? 1.0 : GROUP_MAX_SPREAD;
+    kd_cone gc;
+    /* points that will not walk (kd_walk_pays) gain only from an empty list,
+     * rare where walks do not pay: no group walk for them */
+    if (n < 2 || !kd_walk_pays(nsamples, fs[0]->sin_a, ws->policy))
+        return GROUP_NONE;
+    if (!kd_group_cone(scene, fs, n, spread, &gc))
+        return GROUP_SPREAD;
+    const uint64_t max_nodes =
+        GROUP_WALK_NODES_BASE + GROUP_WALK_NODES_PER_POINT * (uint64_t)n;
+    /* no prism test here: each point's own cull has it, and most of what
+     * it would drop (the surface under the points) kd_group_clear drops
+     * for the group anyway (callgrind of the picture: -2.2% without it) */
+    const int r = kd_cone_collect(scene, &gc, gl, GROUP_MAX_CANDS, max_nodes, 0,
+                                  &ws->st.nodes_visited);
+    if (r == KDR_ENOMEM)
+        *rc = KDR_ENOMEM;
+    if (r != KDR_OK)
+        return 0;
+    if (!ws->gpre && !(ws->gpre = malloc(GROUP_MAX_CANDS * sizeof *ws->gpre))) {
+        *rc = KDR_ENOMEM;
+        return 0;
+    }
+    for (size_t j = 0; j < gl->n; j++)
+        kd_tri_pre_plane(&ws->gpre[j], scene->tris + 9 * (size_t)gl->v[j], gl->v[j]);
+    /* the surfaces under the points (most of a list) are dropped here once
+     * for the whole group instead of by each point's cull; gpre keeps the
+     * rest (gl->n of them). None left: no segment of the group can touch a
+     * triangle, and the whole group is lit. */
+    kd_group_clear(fs, n, gc.band, ws->gpre, gl->n);
+    size_t kept = 0;
+    for (size_t j = 0; j < gl->n; j++)
+        if (!ws->gpre[j].clear) {
+            ws->gpre[kept] = ws->gpre[j];
+            kd_tri_pre_sides(&ws->gpre[kept], scene->tris + 9 * (size_t)ws->gpre[kept].prim);
+            kept++;
+        }
+    gl->n = kept;
+    return 1;
+}
+
+/* Splits sel[0..m) (indices into fr) in two at the middle of the apexes'
+ * box along its longest side; returns the size of the first part, 0 if
+ * the apexes coincide. */
+static size_t split_by_apex(const kd_shadow_frame *fr, size_t *sel, size_t m) {
+    float lo[3], hi[3];
+    for (int k = 0; k < 3; k++)
+        lo[k] = hi[k] = fr[sel[0]].apex[k];
+    for (size_t j = 1; j < m; j++)
+        for (int k = 0; k < 3; k++) {
+            const float a = fr[sel[j]].apex[k];
+            lo[k] = a < lo[k] ? a : lo[k];
+            hi[k] = a > hi[k] ? a : hi[k];
+        }
+    int ax = 0;
+    for (int k = 1; k < 3; k++)
+        if (hi[k] - lo[k] > hi[ax] - lo[ax])
+            ax = k;
+    const float mid = lo[ax] + 0.5f * (hi[ax] - lo[ax]);
+    size_t front = 0;
+    for (size_t j = 0; j < m; j++) /* stable: each part keeps the list's order */
+        if (fr[sel[j]].apex[ax] <= mid) {
+            const size_t v = sel[j];
+            for (size_t i = j; i > front; i--)
+                sel[i] = sel[i - 1];
+            sel[front++] = v;
+        }
+    return front < m ? front : 0;
+}
+
+/* The points sel[0..m) of one run toward light l: one group list for all
+ * of them if their group's cone exists; if it does not (the run straddles
+ * a depth step or two surfaces), the run is cut in two by position and
+ * each part tries again (up to GROUP_SPLITS times); else each point walks
+ * on its own. */
+static int trace_run(const kdr_scene *scene, const kdr_shadow_query *q, size_t j0, size_t l,
+                     const kd_shadow_frame *fr, size_t *sel, size_t m, int splits,
+                     float *visibility, kd_shadow_ws *ws) {
+    const kd_shadow_frame *fs[GROUP_POINTS];
+    int rc = KDR_OK;
+    for (size_t j = 0; j < m; j++)
+        fs[j] = &fr[sel[j]];
+    const int g = group_list(scene, fs, m, q->samples, ws, &ws->gl, &rc);
+    if (rc != KDR_OK)
+        return rc;
+    if (g == GROUP_SPREAD && splits > 0 && m >= 2 * GROUP_SPLIT_MIN) {
+        const size_t h = split_by_apex(fr, sel, m);
+        if (h >= GROUP_SPLIT_MIN && m - h >= GROUP_SPLIT_MIN) {
+            rc = trace_run(scene, q, j0, l, fr, sel, h, splits - 1, visibility, ws);
+            if (rc == KDR_OK)
+                rc = trace_run(scene, q, j0, l, fr, sel + h, m - h, splits - 1, visibility,
+                               ws);
+            return rc;
+        }
+    }
+    for (size_t j = 0; rc == KDR_OK && j < m; j++)
+        rc = kd_pair_visibility(scene, &fr[sel[j]], q->samples, ws, &ws->lights[l],
+                                g == GROUP_LIST ? &ws->gl : NULL,
+                                &visibility[point_at(ws, j0 + sel[j]) * q->nlights + l]);
+    return rc;
+}
+
+/* Cone-mode points through shared walks: runs of up to GROUP_POINTS
+ * consecutive points, light by light, share one walk of their group's cone
+ * (kd_group_cone) when it exists (trace_run); each point then judges that
+ * list. */
+static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size_t count,
+                         float *visibility, kd_shadow_ws *ws) {
+    kd_shadow_frame fr[GROUP_POINTS];
+    size_t sel[GROUP_POINTS];
+    int rc = KDR_OK;
+    for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += GROUP_POINTS) {
+        const size_t n = count - j0 < GROUP_POINTS ? count - j0 : GROUP_POINTS;
+        for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
+            for (size_t j = 0; rc == KDR_OK && j < n; j++) {
+                rc = kd_shadow_frame_init(scene, q, point_at(ws, j0 + j), l, &fr[j]);
+                sel[j] = j;
+            }
+            if (rc == KDR_OK)
+                rc = trace_run(scene, q, j0, l, fr, sel, n, GROUP_SPLITS, visibility, ws);
+        }
+    }
+    return rc;
+}
+
+static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q, size_t count,
+                        kdr_shadow_mode mode, float *visibility, kd_shadow_ws *ws) {
+    if (mode == KDR_SHADOW_CONE &&
+        (ws->policy == KD_WALK_NEVER ||
+         (ws->policy == KD_WALK_AUTO && q->samples < CONE_WALK_FROM)))
+        return trace_unwalked(scene, q, count, visibility, ws);
+    if (mode == KDR_SHADOW_CONE &&
+        (ws->policy == KD_WALK_GROUPS || (ws->policy == KD_WALK_AUTO && GROUP_POINTS > 1)))
+        return trace_grouped(scene, q, count, visibility, ws);
+    for (size_t j = 0; j < count; j++) {
+        const size_t i = point_at(ws, j);
+        for (size_t l = 0; l < q->nlights; l++) {
+            kd_shadow_frame f;
+            float *vis = &visibility[i * q->nlights + l];
+            int rc = kd_shadow_frame_init(scene, q, i, l, &f);
+            if (rc == KDR_OK && mode == KDR_SHADOW_RAYS) {
+                rc = kd_pair_visibility_rays(scene, &f, q->samples, ws, vis);
+            } else if (rc == KDR_OK) {
+                rc = kd_pair_visibility(scene, &f, q->samples, ws, &ws->lights[l], NULL,
+                                        vis);
+            }
+            if (rc != KDR_OK)
+                return rc;
+        }
+    }
+    return KDR_OK;
+}
+
+int kdr_shadow_trace(const kdr_scene *scene, const kdr_shadow_query *q,
+                     size_t first, size_t count, kdr_shadow_mode mode,
+                     float *visibility, kdr_shadow_stats *stats) {
+    return kd_shadow_trace_policy(scene, q, first, count, mode, KD_WALK_AUTO,
+                                  visibility, stats);
+}
+
+int kdr_shadow_trace_order(const kdr_scene *scene, const kdr_shadow_query *q,
+                           const size_t *order, size_t count, kdr_shadow_mode mode,
+                           float *visibility, kdr_shadow_stats *stats) {
+    return kd_shadow_trace_order_policy(scene, q, order, count, mode, KD_WALK_AUTO,
+                                        visibility, stats);
+}
+
+static int trace_query(const kdr_scene *scene, const kdr_shadow_query *q,
+                       const size_t *order, size_t first, size_t count,
+                       kdr_shadow_mode mode, kd_walk_policy policy, float *visibility,
+                       kdr_shadow_stats *stats);
+
+int kd_shadow_trace_policy(const kdr_scene *scene, const kdr_shadow_query *q,
+                           size_t first, size_t count, kdr_shadow_mode mode,
+                           kd_walk_policy policy, float *visibility,
+                           kdr_shadow_stats *stats) {
+    if (!query_valid(scene, q, first, count, visibility))
+        return KDR_EINVAL;
+    return trace_query(scene, q, NULL, first, count, mode, policy, visibility, stats);
+}
+
+int kd_shadow_trace_order_policy(const kdr_scene *scene, const kdr_shadow_query *q,
+                                 const size_t *order, size_t count, kdr_shadow_mode mode,
+                                 kd_walk_policy policy, float *visibility,
+                                 kdr_shadow_stats *stats) {
+    if (!query_valid(scene, q, 0, 0, visibility) || (count > 0 && !order))
+        return KDR_EINVAL;
+    for (size_t j = 0; j < count; j++)
+        if (order[j] >= q->n)
+            return KDR_EINVAL;
+    return trace_query(scene, q, order, 0, count, mode, policy, visibility, stats);
+}
+
+static int trace_query(const kdr_scene *scene, const kdr_shadow_query *q,
+                       const size_t *order, size_t first, size_t count,
+                       kdr_shadow_mode mode, kd_walk_policy policy, float *visibility,
+                       kdr_shadow_stats *stats) {
+    if (mode != KDR_SHADOW_CONE && mode != KDR_SHADOW_RAYS)
+        return KDR_EINVAL;
+    if (policy != KD_WALK_AUTO && policy != KD_WALK_ALWAYS && policy != KD_WALK_NEVER &&
+        policy != KD_WALK_GROUPS)
+        return KDR_EINVAL;
+    kd_shadow_ws ws = {0};
+    ws.policy = policy;
+    ws.order = order;
+    ws.first = first;
+    ws.wide = kdr_cpu_has_avx2();
+    ws.lights = malloc(q->nlights * sizeof *ws.lights);
+    int rc = ws.lights ? KDR_OK : KDR_ENOMEM;
+    for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++)
+        ws.lights[l] = (kd_light_state){KD_NO_PRIM, 0, 0};
+    if (rc == KDR_OK)
+        rc = trace_points(scene, q, count, mode, visibility, &ws);
+    if (stats) {
+        stats->cones_decided += ws.st.cones_decided;
+        stats->rays_traced += ws.st.rays_traced;
+        stats->nodes_visited += ws.st.nodes_visited;
+    }
+    kd_shadow_ws_free(&ws);
+    return rc;
+}
