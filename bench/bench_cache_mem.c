@@ -28,6 +28,8 @@
 
 #include "kdr_gltf.h"
 #include "kdray.h"
+#include "test_util.h"
+#include "thp_smaps.h"
 #include "tree_cache.h"
 
 static double cpu_ms(void) {
@@ -42,35 +44,9 @@ static double wall_ms(void) {
     return t.tv_sec * 1e3 + t.tv_nsec / 1e6;
 }
 
-/* kB of `field` in the smaps entry of the mapping holding addr. */
-static long smaps_kb(const void *addr, const char *field) {
-    FILE *f = fopen("/proc/self/smaps", "r");
-    if (!f) return -1;
-    char line[512];
-    int inside = 0;
-    long kb = -1;
-    const size_t flen = strlen(field);
-    while (fgets(line, sizeof line, f)) {
-        unsigned long lo, hi;
-        char dash;
-        if (sscanf(line, "%lx%c%lx ", &lo, &dash, &hi) == 3 && dash == '-') {
-            if (inside) break;
-            inside = (uintptr_t)addr >= lo && (uintptr_t)addr < hi;
-            continue;
-        }
-        if (inside && strncmp(line, field, flen) == 0 && line[flen] == ':')
-            kb = strtol(line + flen + 1, NULL, 10);
-    }
-    fclose(f);
-    return kb;
-}
-
 static uint64_t rng = 0x9e3779b97f4a7c15ull;
 static float rnd(float lo, float hi) {
-    rng ^= rng << 13;
-    rng ^= rng >> 7;
-    rng ^= rng << 17;
-    return lo + (hi - lo) * (float)(rng >> 40) * 0x1p-24f;
+    return lo + (hi - lo) * (float)(xorshift64(&rng) >> 40) * 0x1p-24f;
 }
 
 /* CPU ms to trace every ray closest-hit and any-hit; sums answers into *sig. */
@@ -216,9 +192,9 @@ int main(int argc, char **argv) {
     printf("%s: %zu triangles, cache file %.1f MiB, page cache %s\n", argv[1], g.ntris,
            bytes / 1048576.0, warm ? "as written (--warm)" : "dropped before opening");
     printf("  plain  : %6.1f ms to open, at %p, FilePmdMapped %ld kB\n", plain_ms,
-           (void *)map, smaps_kb(map, "FilePmdMapped"));
+           (void *)map, thp_smaps_kb(map, "FilePmdMapped"));
     printf("  advised: %6.1f ms to open, at %p, FilePmdMapped %ld kB\n", adv_ms, t.map,
-           smaps_kb(t.map, "FilePmdMapped"));
+           thp_smaps_kb(t.map, "FilePmdMapped"));
     double ratio[99];
     int differ = sig_plain != sig_adv;
     for (int r = 0; r < rounds; r++) {

@@ -19,36 +19,12 @@
 
 #include "kdr_gltf.h"
 #include "oracle.h"
-
-/* kB of field in the smaps entry holding addr (addr NULL: smaps_rollup). */
-static long smaps_kb(const void *addr, const char *field) {
-    FILE *f = fopen(addr ? "/proc/self/smaps" : "/proc/self/smaps_rollup", "r");
-    if (!f) return -1;
-    char line[512];
-    int inside = addr == NULL;
-    long kb = -1;
-    const size_t n = strlen(field);
-    while (fgets(line, sizeof line, f)) {
-        unsigned long lo, hi;
-        char dash;
-        if (addr && sscanf(line, "%lx%c%lx ", &lo, &dash, &hi) == 3 && dash == '-') {
-            if (inside) break;
-            inside = (uintptr_t)addr >= lo && (uintptr_t)addr < hi;
-            continue;
-        }
-        if (inside && strncmp(line, field, n) == 0 && line[n] == ':')
-            kb = strtol(line + n + 1, NULL, 10);
-    }
-    fclose(f);
-    return kb;
-}
+#include "test_util.h"
+#include "thp_smaps.h"
 
 static uint64_t rng = 0x9e3779b97f4a7c15ull;
 static float rnd(float lo, float hi) {
-    rng ^= rng << 13;
-    rng ^= rng >> 7;
-    rng ^= rng << 17;
-    return lo + (hi - lo) * (float)(rng >> 40) * 0x1p-24f;
+    return lo + (hi - lo) * (float)(xorshift64(&rng) >> 40) * 0x1p-24f;
 }
 
 int main(int argc, char **argv) {
@@ -63,7 +39,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "%s: %s\n", argv[1], err);
         return 1;
     }
-    const long before = smaps_kb(NULL, "AnonHugePages");
+    const long before = thp_smaps_kb(NULL, "AnonHugePages");
     oracle_opts oo;
     oracle_opts_default(&oo);
     oo.robust = robust;
@@ -77,10 +53,10 @@ int main(int argc, char **argv) {
     printf("%s: %zu triangles, Embree %s mode, %.1f MB allocated by Embree\n", argv[1],
            g.ntris, robust ? "robust" : "fast", (double)oracle_bytes(o) / 1e6);
     printf("  process AnonHugePages: %ld kB before Embree's build, %ld kB after\n", before,
-           smaps_kb(NULL, "AnonHugePages"));
+           thp_smaps_kb(NULL, "AnonHugePages"));
     for (int i = 0; i < 2; i++)
         printf("  %-6s buffer at %p, its mapping: Rss %ld kB, AnonHugePages %ld kB\n", name[i], buf[i],
-               smaps_kb(buf[i], "Rss"), smaps_kb(buf[i], "AnonHugePages"));
+               thp_smaps_kb(buf[i], "Rss"), thp_smaps_kb(buf[i], "AnonHugePages"));
     FILE *c = fopen("/proc/self/clear_refs", "w");
     if (!c || fputs("1", c) < 0 || fclose(c) != 0) {
         perror("/proc/self/clear_refs");
@@ -104,8 +80,8 @@ int main(int argc, char **argv) {
     printf("  after %d random rays (closest and any-hit, %ld hits), referenced in:\n", nrays,
            hits);
     for (int i = 0; i < 2; i++)
-        printf("  the %-6s buffer's mapping: %ld of %ld kB\n", name[i], smaps_kb(buf[i], "Referenced"),
-               smaps_kb(buf[i], "Rss"));
+        printf("  the %-6s buffer's mapping: %ld of %ld kB\n", name[i], thp_smaps_kb(buf[i], "Referenced"),
+               thp_smaps_kb(buf[i], "Rss"));
     oracle_free(o);
     kdr_gltf_free(&g);
     return 0;

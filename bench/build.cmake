@@ -14,6 +14,7 @@ if(TARGET kdray_server)
   add_executable(kdray_bench_cache_mem ${CMAKE_CURRENT_SOURCE_DIR}/bench_cache_mem.c)
   set_target_properties(kdray_bench_cache_mem PROPERTIES OUTPUT_NAME kdray-bench-cache-mem)
   target_link_libraries(kdray_bench_cache_mem PRIVATE kdray_server)
+  target_include_directories(kdray_bench_cache_mem PRIVATE ${CMAKE_SOURCE_DIR}/tests/support)
 endif()
 
 # The rival's memory: which of Embree's allocations are in huge pages and

@@ -20,15 +20,13 @@
 #include "check.h"
 #include "kd_internal.h"
 #include "kdray.h"
+#include "test_util.h"
 #include "thp_smaps.h"
 #include "tree_cache.h"
 
 static uint64_t rng_state = 0x2545f4914f6cdd1dull;
 static float rnd(float lo, float hi) {
-    rng_state ^= rng_state << 13;
-    rng_state ^= rng_state >> 7;
-    rng_state ^= rng_state << 17;
-    return lo + (hi - lo) * (float)(rng_state >> 40) * 0x1p-24f;
+    return lo + (hi - lo) * (float)(xorshift64(&rng_state) >> 40) * 0x1p-24f;
 }
 
 static int inside(const void *p, size_t n, const void *map, size_t len) {

@@ -2,14 +2,16 @@
  * thp_smaps.h — is memory huge-page eligible? Reads the entry of
  * /proc/self/smaps that holds an address (its VmFlags "hg": the mapping
  * was advised with MADV_HUGEPAGE; THPeligible: the kernel would back it
- * with transparent huge pages) and the machine's THP mode. Linux only;
- * header-only for test_core_mem.c and test_tree_cache_mem.c.
+ * with transparent huge pages), any one field of it, and the machine's THP
+ * mode. Linux only; header-only for test_core_mem.c, test_tree_cache_mem.c
+ * and the two memory benchmarks (bench_cache_mem.c, bench_rival_mem.c).
  */
 #ifndef KDRAY_TESTS_THP_SMAPS_H
 #define KDRAY_TESTS_THP_SMAPS_H
 
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #define THP_HUGE_PAGE ((uintptr_t)2 << 20)
@@ -57,6 +59,33 @@ static inline thp_vma thp_vma_of(const void *addr) {
     }
     fclose(f);
     return v;
+}
+
+/* kB of one field ("Rss", "AnonHugePages", "FilePmdMapped", ...) of the
+ * smaps entry holding addr, or of the whole process (smaps_rollup) when
+ * addr is NULL; -1 when the file or the field is missing. */
+static inline long thp_smaps_kb(const void *addr, const char *field) {
+    FILE *f = fopen(addr ? "/proc/self/smaps" : "/proc/self/smaps_rollup", "r");
+    if (!f)
+        return -1;
+    char line[512];
+    int inside = addr == NULL;
+    long kb = -1;
+    const size_t n = strlen(field);
+    while (fgets(line, sizeof line, f)) {
+        unsigned long lo, hi;
+        char dash;
+        if (addr && sscanf(line, "%lx%c%lx ", &lo, &dash, &hi) == 3 && dash == '-') {
+            if (inside)
+                break;
+            inside = (uintptr_t)addr >= lo && (uintptr_t)addr < hi;
+            continue;
+        }
+        if (inside && strncmp(line, field, n) == 0 && line[n] == ':')
+            kb = strtol(line + n + 1, NULL, 10);
+    }
+    fclose(f);
+    return kb;
 }
 
 /* 0 when THP is off (mode never) or unknown; the mode line into mode[]. */
