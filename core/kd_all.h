@@ -86,6 +86,17 @@ static inline void keep(all_sink *s, float t, int32_t prim, float u, float v) {
         keep_prim(s, prim);
 }
 
+/* The hit lanes (bit j of hits) of a group of w tests, stored lane by
+ * lane: each one at or before the bound is kept with its u, v divided out
+ * (the division only for hits, as the scalar test does it). */
+static inline void keep_lanes(all_sink *s, int hits, int w, const float *tv,
+                              const float *vv, const float *wv, const float *dv,
+                              const int32_t *prims) {
+    for (int j = 0; j < w; j++)
+        if ((hits >> j) & 1 && tv[j] <= s->bound)
+            keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+}
+
 /* Four references at once (the last group repeats its final reference: a
  * hit found twice is kept once); the same float operations as
  * kd_tri_intersect, so t, u, v are bit for bit the scalar ones. */
@@ -103,9 +114,7 @@ static void test_group4(const kdr_scene *sc, const uint32_t *ref, uint32_t left,
     f4_store(vv, V);
     f4_store(wv, W);
     f4_store(dv, det);
-    for (int j = 0; j < 4; j++)
-        if ((hits >> j) & 1 && tv[j] <= s->bound)
-            keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+    keep_lanes(s, hits, 4, tv, vv, wv, dv, prims);
 }
 
 /* Eight at a time (AVX2), a tail of four or fewer four at a time (the
@@ -140,9 +149,7 @@ test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
         f8_store(vv, V);
         f8_store(wv, W);
         f8_store(dv, det);
-        for (int j = 0; j < 8; j++)
-            if ((hits >> j) & 1 && tv[j] <= s->bound)
-                keep(s, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+        keep_lanes(s, hits, 8, tv, vv, wv, dv, prims);
     }
 }
 
