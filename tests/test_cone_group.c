@@ -568,9 +568,14 @@ static void test_answers(void) {
     free(b.v);
 }
 
-/* Points in free space (normals up, nothing above them): each group's walk
- * finds nothing, so every point is lit with no walk of its own. */
-static void test_sharing(void) {
+/* A 32x32 grid of points in free space (normals up, nothing above them;
+ * row-major, heights 0.5 + (i % 2) * step) toward a light of radius 0.2:
+ * every point must be decided lit with no ray traced, bit-identical under
+ * every policy, and the grouped walks must enter fewer than a quarter of
+ * the nodes that one walk per point enters. */
+static void check_free_space_lit(const char *label, float step, uint64_t seed,
+                                 const char *point_kind, const char *walks_kind,
+                                 const char *not_shared) {
     tri_buf b = {0};
     floor_grid(&b, 16, 0.0f);
     const float lo[3] = {2.0f, 0.0f, 2.0f}, hi[3] = {3.0f, 1.0f, 3.0f};
@@ -580,7 +585,7 @@ static void test_sharing(void) {
     float pts[3 * RES * RES], nrm[3 * RES * RES];
     for (int i = 0; i < RES * RES; i++) {
         pts[3 * i] = -0.125f + 0.25f * (float)(i % RES) / RES;
-        pts[3 * i + 1] = 0.5f;
+        pts[3 * i + 1] = 0.5f + step * (float)(i % 2);
         pts[3 * i + 2] = -0.125f + 0.25f * (float)(i / RES) / RES;
         nrm[3 * i] = nrm[3 * i + 2] = 0.0f;
         nrm[3 * i + 1] = 1.0f;
@@ -592,23 +597,29 @@ static void test_sharing(void) {
                           .lights = &light,
                           .nlights = 1,
                           .samples = 64,
-                          .seed = 3,
+                          .seed = seed,
                           .offset = KDR_OFFSET_AUTO};
-    const kdr_shadow_stats sa = check_policies("free space, grouped", s, &b, &q);
+    const kdr_shadow_stats sa = check_policies(label, s, &b, &q);
     float v[RES * RES];
     kdr_shadow_stats sw = {0};
     CHECK(kd_shadow_trace_policy(s, &q, 0, q.n, KDR_SHADOW_CONE, KD_WALK_ALWAYS, v,
                                  &sw) == KDR_OK,
           "always");
     for (int i = 0; i < RES * RES; i++)
-        CHECK(v[i] == 1.0f, "free-space point %d: %.6f", i, v[i]);
+        CHECK(v[i] == 1.0f, "%s point %d: %.6f", point_kind, i, v[i]);
     CHECK(sa.cones_decided == q.n && sa.rays_traced == 0, "every point decided lit");
-    /* one walk per group of points instead of one per point */
-    CHECK(sa.nodes_visited * 4 < sw.nodes_visited,
-          "grouped walks %llu nodes, own walks %llu: not shared",
-          (unsigned long long)sa.nodes_visited, (unsigned long long)sw.nodes_visited);
+    CHECK(sa.nodes_visited * 4 < sw.nodes_visited, "%s %llu nodes, own walks %llu: %s",
+          walks_kind, (unsigned long long)sa.nodes_visited,
+          (unsigned long long)sw.nodes_visited, not_shared);
     kdr_scene_free(s);
     free(b.v);
+}
+
+/* Points in free space at one height: each group's walk finds nothing, so
+ * every point is lit with one walk per group instead of one per point. */
+static void test_sharing(void) {
+    check_free_space_lit("free space, grouped", 0.0f, 3, "free-space", "grouped walks",
+                         "not shared");
 }
 
 /* Runs that straddle two surfaces: consecutive points alternate between
@@ -618,43 +629,8 @@ static void test_sharing(void) {
  * nothing: every point decided lit with far fewer nodes than own walks.
  * Before runs were cut, every point of such a run walked on its own. */
 static void test_split_runs(void) {
-    tri_buf b = {0};
-    floor_grid(&b, 16, 0.0f);
-    const float lo[3] = {2.0f, 0.0f, 2.0f}, hi[3] = {3.0f, 1.0f, 3.0f};
-    soup(&b, 50, lo, hi, 0.2f); /* off to the side */
-    kdr_scene *s = build(&b);
-    enum { RES = 32 };
-    float pts[3 * RES * RES], nrm[3 * RES * RES];
-    for (int i = 0; i < RES * RES; i++) {
-        pts[3 * i] = -0.125f + 0.25f * (float)(i % RES) / RES;
-        pts[3 * i + 1] = 0.5f + (float)(i % 2);
-        pts[3 * i + 2] = -0.125f + 0.25f * (float)(i / RES) / RES;
-        nrm[3 * i] = nrm[3 * i + 2] = 0.0f;
-        nrm[3 * i + 1] = 1.0f;
-    }
-    const kdr_sphere_light light = {{0.0f, 4.0f, 0.0f}, 0.2f};
-    kdr_shadow_query q = {.n = RES * RES,
-                          .points = pts,
-                          .normals = nrm,
-                          .lights = &light,
-                          .nlights = 1,
-                          .samples = 64,
-                          .seed = 5,
-                          .offset = KDR_OFFSET_AUTO};
-    const kdr_shadow_stats sa = check_policies("two heights, split runs", s, &b, &q);
-    float v[RES * RES];
-    kdr_shadow_stats sw = {0};
-    CHECK(kd_shadow_trace_policy(s, &q, 0, q.n, KDR_SHADOW_CONE, KD_WALK_ALWAYS, v,
-                                 &sw) == KDR_OK,
-          "always");
-    for (int i = 0; i < RES * RES; i++)
-        CHECK(v[i] == 1.0f, "two-height point %d: %.6f", i, v[i]);
-    CHECK(sa.cones_decided == q.n && sa.rays_traced == 0, "every point decided lit");
-    CHECK(sa.nodes_visited * 4 < sw.nodes_visited,
-          "split runs %llu nodes, own walks %llu: the halves did not share walks",
-          (unsigned long long)sa.nodes_visited, (unsigned long long)sw.nodes_visited);
-    kdr_scene_free(s);
-    free(b.v);
+    check_free_space_lit("two heights, split runs", 1.0f, 5, "two-height", "split runs",
+                         "the halves did not share walks");
 }
 
 int main(void) {
