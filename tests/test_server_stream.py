@@ -274,6 +274,17 @@ def free_after_timeout(t, c, what, limit_s):
     return None
 
 
+def freed_and_cut(t, c, sock, kind, within_s):
+    """A stalled <kind> stream's slot and bytes come back, and the daemon
+    closes its connection mid-answer, both within within_s seconds."""
+    what = "stalled %s stream" % kind
+    took = free_after_timeout(t, c, what, within_s)
+    print("%s: freed %.1f s after it stalled" % (what, took)
+          if took is not None else "%s: not freed" % what)
+    t.check(cut_by_daemon(sock, within_s),
+            "the daemon closed the stalled %s stream mid-answer" % kind)
+
+
 def cut_by_daemon(sock, limit_s):
     """Reads what the daemon had sent on a stalled stream's socket: True if
     it ends in EOF (or a reset) before the chunked body's last chunk, so the
@@ -324,11 +335,7 @@ def test_stalled_stream_timeout(t):
         # the workers are free while it stalls
         t.eq(len(Client(d.url).bundle(SCENE, [0, 3, 0], [0, -1, 0])["t"]), 1,
              "a query answered beside the stalled stream")
-        took = free_after_timeout(t, c, "stalled bundle stream", 10 * timeout_s)
-        print("stalled bundle stream: freed %.1f s after it stalled" % took
-              if took is not None else "stalled bundle stream: not freed")
-        t.check(cut_by_daemon(sock, 10 * timeout_s),
-                "the daemon closed the stalled bundle stream mid-answer")
+        freed_and_cut(t, c, sock, "bundle", 10 * timeout_s)
         t.eq(lib.metric(c.metrics(), "kdray_cancellations_total"), cancels + 1,
              "the stalled bundle query was cancelled")
         # the frustum: finished while its answer waits in the connection
@@ -339,11 +346,7 @@ def test_stalled_stream_timeout(t):
         time.sleep(0.5)
         t.check(lib.metric(c.metrics(), "kdray_inflight_bytes") > 0,
                 "the stalled frustum stream holds its bytes")
-        took = free_after_timeout(t, c, "stalled frustum stream", 10 * timeout_s)
-        print("stalled frustum stream: freed %.1f s after it stalled" % took
-              if took is not None else "stalled frustum stream: not freed")
-        t.check(cut_by_daemon(sock, 10 * timeout_s),
-                "the daemon closed the stalled frustum stream mid-answer")
+        freed_and_cut(t, c, sock, "frustum", 10 * timeout_s)
         s = Client(d.url, stream=True)
         t.eq(len(s.bundle(SCENE, [0, 3, 0], random_directions(5000, 3))["t"]), 5000,
              "a streamed query after the timeouts")
