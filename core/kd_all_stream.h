@@ -37,6 +37,10 @@
  * 2CylinderEngine (6 MiB) 1.29 / 1.12, haus (2 MiB) 0.89 / 0.87; the
  * threshold lies between them, no scene in between was measured. */
 #define KD_ALL_STAGE_MIN_BYTES ((size_t)4 << 20)
+/* On AVX-512 CPUs (kd_all_lanes16) kdr_all_batch and kdr_count_batch take
+ * the interleaved walk for every chunk from this many bytes, a camera's
+ * chunks included. */
+#define KD_ALL_LANES_MIN_BYTES ((size_t)4 << 20)
 
 /* The interleaved walk of rays [first, first + count) of a batch
  * (arguments checked by the caller): with max_hits > 0 each ray's hits, as
