@@ -27,6 +27,7 @@
  * then sorts (by insertion when few) and counts distinct prims.
  */
 #include "kd_all.h"
+#include "kd_stream.h"          /* kd_cpu_has_avx512 */
 #include "kd_traverse_bundle.h" /* kd_batch_scattered */
 
 /* The front-to-back walk over every leaf the ray passes (within the slack)
@@ -131,7 +132,9 @@ static int batch_ok(const kdr_ray_batch *b, size_t first, size_t count) {
 
 /* Which walk a chunk of a batch takes: the interleaved one on scenes of
  * KD_ALL_STREAM_MIN_BYTES and more, where it hides the loads of nodes,
- * references and triangles that miss the caches; on smaller scenes only
+ * references and triangles that miss the caches; on AVX-512 CPUs from
+ * KD_ALL_LANES_MIN_BYTES (its lanes form: a camera's chunks of
+ * 2CylinderEngine 1.09x, bench/ab set ball16); on smaller scenes only
  * for chunks kd_batch_scattered calls scattered (own origins, directions
  * spread: bench_queries' random rays), where it beat one ray at a time
  * (random batches 1.15-1.35x on duck and 2CylinderEngine, 0.95-1.16x on
@@ -142,6 +145,7 @@ static int all_interleave(const kdr_scene *sc, const kdr_ray_batch *b, size_t fi
                           size_t count) {
     if (count < 2 || !sc->nodes) return 0;
     return sc->stats.bytes >= KD_ALL_STREAM_MIN_BYTES ||
+           (sc->stats.bytes >= KD_ALL_LANES_MIN_BYTES && kd_cpu_has_avx512()) ||
            kd_batch_scattered(sc, b, first, count);
 }
 

@@ -23,6 +23,7 @@
  * kdr_count1's bit for bit (tests/test_all_stream.c checks it ray by ray).
  */
 #include "kd_all.h"
+#include "kd_stream.h" /* kd_cpu_has_avx512 */
 #include "kd_tune.h"
 
 /* One ray in flight. Slots never move (a count's sink points into its
@@ -148,6 +149,9 @@ static inline int ka_turn(const ka_src *c, ka_ray *r) {
 int kd_all_stream(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
                   size_t count, uint32_t max_hits, kdr_hit *buf, kdr_all_hits *out,
                   uint32_t *counts, int flags, kdr_trav_stats *stats) {
+    if (!(flags & KD_ALL_SCALAR) && kd_cpu_has_avx512())
+        return kd_all_lanes16(sc, b, first, count, max_hits, buf, out, counts,
+                              flags & KD_ALL_STAGE, stats);
     ka_ray slot[KD_ALL_RAYS];
     int live_slot[KD_ALL_RAYS];
     ka_src c = {sc,

@@ -28,22 +28,37 @@
  * test) on every scene, not only on those of KD_STREAM_STAGE_MIN_BYTES and
  * more (tests put small scenes through that path with it). */
 #define KD_ALL_STAGE 1
+/* kd_all_stream takes its scalar form even on AVX-512 CPUs (tests compare
+ * both forms with the one-ray walk). */
+#define KD_ALL_SCALAR 2
 /* kdr_all_batch and kdr_count_batch stage leaves (KD_ALL_STAGE) on scenes
  * of at least this many bytes: staged against not, scattered chunks
  * (bench/ab, sets ball and bcount, --rays 32768 --rounds 5, B/A median):
  * 2CylinderEngine (6 MiB) 1.29 / 1.12, haus (2 MiB) 0.89 / 0.87; the
  * threshold lies between them, no scene in between was measured. */
 #define KD_ALL_STAGE_MIN_BYTES ((size_t)4 << 20)
+/* On AVX-512 CPUs (kd_all_lanes16) kdr_all_batch and kdr_count_batch take
+ * the interleaved walk for every chunk from this many bytes, a camera's
+ * chunks included. */
+#define KD_ALL_LANES_MIN_BYTES ((size_t)4 << 20)
 
 /* The interleaved walk of rays [first, first + count) of a batch
  * (arguments checked by the caller): with max_hits > 0 each ray's hits, as
  * kdr_intersect_all1 finds them, into out (buf: KD_ALL_RAYS * max_hits
  * entries of scratch); else each ray's count, as kdr_count1 finds it, into
- * counts[i]. Stats as the one-ray calls sum them. flags: KD_ALL_STAGE or
- * 0. Returns KDR_OK, or KDR_ENOMEM when a count's list could not grow
- * (that ray's count is 0; the other rays are answered). */
+ * counts[i]. Stats as the one-ray calls sum them. flags: KD_ALL_STAGE,
+ * KD_ALL_SCALAR, both or 0. On AVX-512 CPUs, unless flags has KD_ALL_SCALAR,
+ * the node steps run in the lanes of kd_all_lanes16 (kd_all_lanes.c), else
+ * one ray at a time in turn (kd_all_stream.c). Returns KDR_OK, or
+ * KDR_ENOMEM when a count's list could not grow (that ray's count is 0;
+ * the other rays are answered). */
 int kd_all_stream(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
                   size_t count, uint32_t max_hits, kdr_hit *buf, kdr_all_hits *out,
                   uint32_t *counts, int flags, kdr_trav_stats *stats);
+/* The lanes form, same contract (flags: KD_ALL_STAGE or 0); only after
+ * kd_cpu_has_avx512() said yes. */
+int kd_all_lanes16(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
+                   size_t count, uint32_t max_hits, kdr_hit *buf, kdr_all_hits *out,
+                   uint32_t *counts, int flags, kdr_trav_stats *stats);
 
 #endif /* KD_ALL_STREAM_H */

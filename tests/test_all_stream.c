@@ -129,7 +129,9 @@ static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
             free(buf);
             return;
         }
-        for (int flags = 0; flags <= KD_ALL_STAGE; flags += KD_ALL_STAGE) {
+        /* both forms (the lanes on AVX-512 CPUs, and the scalar one),
+         * staged and not */
+        for (int flags = 0; flags <= (KD_ALL_STAGE | KD_ALL_SCALAR); flags++) {
             kdr_all_hits out = {a.nh, a.t, a.u, a.v, a.prim};
             kdr_trav_stats sl = {0}, sc = {0};
             /* a first ray other than 0: answers land at their own index */
@@ -145,8 +147,9 @@ static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
                         rc);
                 failures++;
             }
-            compare(scene, rs, s, caps[c], &a, &sl, &sc,
-                    flags ? "stream-staged" : "stream");
+            static const char *const form[] = {"stream", "stream-staged", "stream-scalar",
+                                               "stream-scalar-staged"};
+            compare(scene, rs, s, caps[c], &a, &sl, &sc, form[flags]);
         }
         /* the public calls: on these small scenes they take the interleaved
          * walk for the chunks kd_batch_scattered calls scattered */
