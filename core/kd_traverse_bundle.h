@@ -42,6 +42,13 @@
  * the minority lanes see their back child first, which costs pruning but
  * not correctness.
  *
+ * Entry: bundles of one origin all descend the top of the tree along the
+ * origin's path (kd_entry.h). Once a second bundle in a row has the origin,
+ * the path is built and each bundle replays kb_step_shared along it
+ * (kb_replay) to the point where the loop's walk leaves it, with the
+ * loop's cursor, stack and counts there: same walk, fewer loads and
+ * branches (docs/TRAVERSAL.md, "Bundles from the origin's path").
+ *
  * Lanes are active while t_near <= t_far and t_near <= kd_term_bound(best_t)
  * (any-hit lanes leave once they hit); a bundle pops when no lane is active.
  * Rays a bundle cannot take (NaN/inf input, zero direction, a subnormal
