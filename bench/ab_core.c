@@ -234,7 +234,9 @@ static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
                    &h, st);
         return;
     }
-    if (j->set == SET_B8AO || j->set == SET_B8CAM || j->set == SET_B16CAM) {
+    if (j->set == SET_B8AO || j->set == SET_B8AO8 || j->set == SET_B8CAM ||
+        j->set == SET_B16CAM) {
+        const kdr_trav_mode mode = j->set == SET_B8AO8 ? KDR_TRAV_BUNDLE8 : KDR_TRAV_AUTO;
         for (size_t first = 0; first < j->n; first += j->group) {
             const size_t g = j->n - first < j->group ? j->n - first : j->group;
             const kdr_ray *r0 = &j->rays[first];
@@ -242,7 +244,7 @@ static void trace_kd(const core_api *c, const kdr_scene *s, const job *j,
                                &r0->tmin, 0, &r0->tmax, 0};
             kdr_hits h = {o->t + first, o->prim + first, o->u + first,
                           o->v + first, o->hit + first};
-            c->trace_batch(s, &b, 0, g, j->q, KDR_TRAV_AUTO, &h, st);
+            c->trace_batch(s, &b, 0, g, j->q, mode, &h, st);
         }
         return;
     }
@@ -478,7 +480,7 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             light_of(&si, 0, &li);
             shadow_rays(&si, n, 16, &li, rays), j.q = KDR_ANY;
             break;
-        default: /* ao64, b8ao */
+        default: /* ao64, b8ao, b8ao8 */
             ao_rays(&si, n, 64, rays), j.q = KDR_ANY, j.group = 64;
             break;
         }
@@ -556,7 +558,7 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &o) != 0) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
-                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam|all16|all|"
+                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam|b8ao8|all16|all|"
                         "count|closest|ball16|ball|bcount]...\n", argv[0]);
         return 2;
     }

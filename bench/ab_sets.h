@@ -11,7 +11,10 @@
  *   random   closest, origins in the bounds, uniform directions, per ray
  *   ao       any hit, 16 hemisphere rays per surface point, per ray
  *   ao64     any hit, 64 rays per point, per ray (the bundles' baseline)
- *   b8ao     ao64 through kdr_trace_batch(AUTO): 8-wide bundles per point
+ *   b8ao     ao64 through kdr_trace_batch(AUTO): bundles per point (16
+ *            lanes on an AVX-512 CPU, else 8)
+ *   b8ao8    the same through KDR_TRAV_BUNDLE8: 8 lanes on any AVX2 CPU
+ *            (kdray_bench's kd_bundle8 AO row, issue 11's bundle target)
  *   b8cam    camera rays in 4x2 pixel blocks through kdr_trace_batch(AUTO)
  *   b16cam   camera rays in 4x4 pixel blocks (a 16-wide bundle's tile)
  *            through kdr_trace_batch(AUTO)
@@ -61,7 +64,9 @@
 enum {
     SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
     SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
-    SET_BSHADOW, SET_BSHADOW16, SET_B16CAM, SET_CONECAM, SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
+    SET_BSHADOW, SET_BSHADOW16, SET_B16CAM, SET_CONECAM,
+    SET_B8AO8, /* b8ao through the 8-wide driver (KDR_TRAV_BUNDLE8), issue 11 */
+    SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
     SET_BALL16, SET_BALL, SET_BCOUNT, NSETS
 };
 /* The sets run when no --set is given (issue 15's only on request). */

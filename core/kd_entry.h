@@ -12,7 +12,9 @@
  * the work (nodes, triangle tests) are the single walk's exactly, for
  * closest and any hit alike; only the replayed steps are cheaper (levels
  * held in a small array, 16 per AVX-512 operation, no near/far branch).
- * Used by the interleaved walk's refill (kd_entry_for). Internal to core/.
+ * Used by the interleaved walk's refill (kd_entry_for); bundles whose lanes
+ * share an origin replay the same path with their own step (kb_replay in
+ * kd_traverse_bundle.h). Internal to core/.
  */
 #ifndef KD_ENTRY_H
 #define KD_ENTRY_H

@@ -42,6 +42,13 @@
  * the minority lanes see their back child first, which costs pruning but
  * not correctness.
  *
+ * Entry: bundles of one origin all descend the top of the tree along the
+ * origin's path (kd_entry.h). Once a second bundle in a row has the origin,
+ * the path is built and each bundle replays kb_step_shared along it
+ * (kb_replay) to the point where the loop's walk leaves it, with the
+ * loop's cursor, stack and counts there: same walk, fewer loads and
+ * branches (docs/TRAVERSAL.md, "Bundles from the origin's path").
+ *
  * Lanes are active while t_near <= t_far and t_near <= kd_term_bound(best_t)
  * (any-hit lanes leave once they hit); a bundle pops when no lane is active.
  * Rays a bundle cannot take (NaN/inf input, zero direction, a subnormal
@@ -112,6 +119,7 @@ void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids)
 #define KB_FALLBACK 1 /* incoherent stretches go through kd_stream_trace */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 #define KB_LIVE 4     /* answer rays that cannot hit first (kd_batch_live) */
+#define KB_ROOT 8     /* every bundle walks from the root: no kb_replay (tests, A/B) */
 /* The incoherence probe's knobs (KB_OCC_MIN, KB_PROBE, KB_FALLBACK_CHUNKS)
  * are in kd_tune.h with KB_CHUNK. */
 
@@ -120,6 +128,7 @@ void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids)
 #ifdef KD_W
 #include <string.h>
 
+#include "kd_entry.h"
 #include "kd_tri_nray.h"
 
 /* One bundle: the lanes' rays in SoA and their best hits. */
@@ -336,13 +345,71 @@ KD_FN int KD_WN(kb_step_general)(const KD_WN(kb_state) *st, const kd_node *n,
     return 1;
 }
 
-/* The node loop: from the root interval to an empty stack. */
+/*
+ * The shared-origin steps of the walk along the origin's path (kd_entry.h),
+ * from the root: at each level kb_step_shared's own operations on the
+ * path's copy of the node (a = split - org as the walk computes it, the
+ * axis, the back child's empty flag and index), for as long as the walk
+ * takes the front child, which is the path's child (the origin's side).
+ * The back child is pushed with its per-lane interval when a lane needs
+ * it, as kb_step_shared pushes it (the write is unconditional, the stack
+ * pointer moves only then). At the first level where no lane needs the
+ * front child the replay stops without counting that node: the loop then
+ * steps it as usual. So the cursor, the stack (entries, order, intervals)
+ * and the step counts are those the loop reaches there; only the node
+ * loads, the leaf and origin tests and the branches of the loop are saved.
+ * The path never holds a node whose split the origin lies on, nor a step
+ * into an empty front child (kd_entry_path_init stops there).
+ */
+KD_FN void KD_WN(kb_replay)(const kdr_scene *s, const kd_entry_path *p,
+                            KD_WN(kb_state) *st, KD_WN(kb_cursor) *c,
+                            KD_WN(kb_entry) *stack, int *sp, uint64_t *steps) {
+    const VF ones = V(seti)(-1);
+    const VF t_near = c->t_near;
+    VF t_far = c->t_far, act = c->act, lane_steps = st->lane_steps;
+    int i = 0, k = *sp;
+    for (; i < p->depth; i++) {
+        const struct kd_entry_level *l = &p->lv[i];
+        const int axis = l->axis;
+        const float a = p->a[i];
+        if (a == 0.0f) /* flushed to zero (FTZ): the loop's general step */
+            break;
+        const VF av = V(set1)(a), inv = st->inv_dir[axis];
+        const VF t_lo = V(mul)(V(sub)(av, st->ss[axis]), inv);
+        const VF t_hi = V(mul)(V(add)(av, st->ss[axis]), inv);
+        const VF away = a < 0.0f ? V(andnot)(st->sgn[axis], ones) : st->sgn[axis];
+        KD_WN(kb_span) f, b;
+        KD_WN(kb_spans)(t_lo, t_hi, away, t_near, t_far, &f, &b);
+        const VF f_act = V(and)(act, V(le)(f.t_near, f.t_far));
+        if (!V(bits)(f_act))
+            break;
+        const VF b_act = V(and)(act, KD_WN(kb_active)(st, b.t_near, b.t_far));
+        const int b_empty = l->above ? (l->empty & 1) : (l->empty >> 1) & 1;
+        lane_steps = V(count)(lane_steps, act);
+        KD_WN(kb_entry) *e = &stack[k];
+        e->node = (uint32_t)(p->sib[i] - s->nodes);
+        e->t_near = b.t_near, e->t_far = b.t_far;
+        k += !b_empty && V(bits)(b_act);
+        t_far = f.t_far, act = f_act;
+    }
+    *steps += (uint64_t)i;
+    st->lane_steps = lane_steps;
+    c->node = (uint32_t)(p->node[i] - s->nodes);
+    c->t_far = t_far, c->act = act;
+    *sp = k;
+}
+
+/* The node loop: from the root interval (or, given the path of the
+ * bundle's shared origin, from where kb_replay leaves it) to an empty
+ * stack. */
 KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF t_far,
-                    KD_WN(kb_bundle) *b) {
+                    const kd_entry_path *path, KD_WN(kb_bundle) *b) {
     KD_WN(kb_entry) stack[KD_MAX_DEPTH + 1];
     int sp = 0;
     KD_WN(kb_cursor) c = {t_near, t_far, KD_WN(kb_active)(st, t_near, t_far), 0};
     uint64_t steps = 0;
+    if (path)
+        KD_WN(kb_replay)(s, path, st, &c, stack, &sp, &steps);
     for (;;) {
         const kd_node *n = &s->nodes[c.node];
         steps++;
@@ -439,8 +506,33 @@ KD_FN void KD_WN(kb_setup)(const kdr_scene *s, KD_WN(kb_bundle) *b, KD_WN(kb_sta
     }
 }
 
-/* Traces the gathered lanes of a bundle. */
-KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any) {
+/* The origin's path for a bundle whose lanes share an origin, from the
+ * chunk's cache (a kd_entry_cache: the last path and the previous bundle's
+ * origin), or NULL: the path is built when a second bundle in a row has
+ * the origin (a run of bundles; one bundle alone would pay the path's
+ * 25-level walk to save about as much), reused while bundles keep it. */
+KD_FN const kd_entry_path *KD_WN(kb_path)(const kdr_scene *s, const KD_WN(kb_state) *st,
+                                          kd_entry_cache *ec) {
+    if (!ec || !st->shared)
+        return NULL;
+    const size_t sz = 3 * sizeof(float);
+    if (ec->have_path && memcmp(st->sorg, ec->path_org, sz) == 0)
+        return &ec->path;
+    const int run = ec->have_prev && memcmp(st->sorg, ec->prev_org, sz) == 0;
+    memcpy(ec->prev_org, st->sorg, sz);
+    ec->have_prev = 1;
+    if (!run)
+        return NULL;
+    kd_entry_path_init(s, st->sorg, &ec->path);
+    memcpy(ec->path_org, st->sorg, sz);
+    ec->have_path = 1;
+    return &ec->path;
+}
+
+/* Traces the gathered lanes of a bundle; ec (NULL: every walk starts at
+ * the root) caches the path of a shared origin (kb_path). */
+KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any,
+                           kd_entry_cache *ec) {
     KD_WN(kb_state) st;
     VF t_near, t_far;
     b->hit = 0;
@@ -457,7 +549,7 @@ KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any) {
     st.lane_steps = st.tri_tests = V(seti)(0);
     st.any = any;
     KD_WN(kb_update_limit)(&st);
-    KD_WN(kb_walk)(s, &st, t_near, t_far, b);
+    KD_WN(kb_walk)(s, &st, t_near, t_far, KD_WN(kb_path)(s, &st, ec), b);
     b->lane_steps = V(count_sum)(st.lane_steps);
     b->tri_tests = V(count_sum)(st.tri_tests);
     V(store)(b->best_t, st.best_t);

@@ -106,13 +106,15 @@ KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
                     const size_t *ids, int m, kdr_query q, int flags,
                     kdr_hits *out, kdr_trav_stats *stats) {
     KD_WN(kb_bundle) b;
+    kd_entry_cache ec;
+    ec.have_path = ec.have_prev = 0;
     double used = 0.0, offered = 0.0; /* lane steps: taken / possible */
     b.scene_mag = KD_WN(kb_scene_mag)(s);
     for (int g = 0, k = 1; g < m; g += KD_W, k++) {
         const int n = m - g < KD_W ? m - g : KD_W;
         int alone;
         KD_WN(kb_gather)(rb, ids + g, n, &b, &alone);
-        KD_WN(kb_trace)(s, &b, q == KDR_ANY);
+        KD_WN(kb_trace)(s, &b, q == KDR_ANY, (flags & KB_ROOT) ? NULL : &ec);
         KD_WN(kb_store)(&b, ids + g, n, alone, q, out);
         KD_WN(kb_stats_add)(stats, &b, n, alone);
         for (int j = 0; j < n; j++)

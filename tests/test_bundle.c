@@ -218,6 +218,65 @@ static void check_cut(const char *scene, const rayset *rs, const kdr_scene *s,
     res_free(&got);
 }
 
+/* Bundles whose lanes share an origin replay the top of their walk along
+ * the origin's path (kb_replay) once a second bundle in a row has that
+ * origin. The replay must reach the loop's state exactly: the same answers
+ * (bits) and the same work (lane node steps, triangle tests) as the same
+ * driver with every walk from the root (KB_ROOT), at each width, in one
+ * call (runs of bundles) and in calls of 1..64 rays. A sibling the replay
+ * failed to push, or pushed with another interval, changes the work even
+ * where no answer changes. */
+static void check_entry_work(const char *scene, const rayset *rs, const kdr_scene *s,
+                             const kdr_ray_batch *b) {
+    typedef void (*bundle_fn)(const kdr_scene *, const kdr_ray_batch *, size_t, size_t,
+                              kdr_query, int, kdr_hits *, kdr_trav_stats *);
+    static const bundle_fn fns[3] = {kd_bundle4_trace, kd_bundle8_trace, kd_bundle16_trace};
+    static const char *const names[3] = {"raw4", "raw8", "raw16"};
+    static const size_t sizes[] = {1, 3, 5, 7, 9, 13, 64};
+    for (int w = 0; w < 3; w++) {
+        if ((w == 1 && !kdr_cpu_has_avx2()) || (w == 2 && !kd_cpu_has_avx512()))
+            continue;
+        for (int q = KDR_CLOSEST; q <= KDR_ANY; q++)
+            for (int whole = 0; whole < 2; whole++) {
+                results got[2] = {res_alloc(b->n), res_alloc(b->n)};
+                for (int root = 0; root < 2; root++) {
+                    kdr_hits h = {got[root].t, got[root].prim, got[root].u, got[root].v,
+                                  got[root].hit};
+                    size_t first = 0;
+                    for (int c = 0; first < b->n; c = (c + 1) % 7) {
+                        const size_t cnt = whole ? b->n
+                                           : sizes[c] < b->n - first ? sizes[c]
+                                                                     : b->n - first;
+                        fns[w](s, b, first, cnt, (kdr_query)q, root ? KB_ROOT : 0, &h,
+                               &got[root].st[q]);
+                        first += cnt;
+                    }
+                }
+                int bad = 0;
+                for (size_t i = 0; i < b->n; i++)
+                    bad += differ(&got[0], &got[1], i, (kdr_query)q);
+                const kdr_trav_stats *e = &got[0].st[q], *r = &got[1].st[q];
+                if (bad || e->rays != r->rays || e->nodes_visited != r->nodes_visited ||
+                    e->tri_tests != r->tri_tests) {
+                    fprintf(stderr,
+                            "FAIL %s/%s %s %s%s: with entries / from the root: %d answers "
+                            "differ, rays %llu / %llu, nodes %llu / %llu, triangle tests "
+                            "%llu / %llu\n",
+                            scene, rs->name, names[w], q == KDR_ANY ? "any" : "closest",
+                            whole ? " (one call)" : "", bad, (unsigned long long)e->rays,
+                            (unsigned long long)r->rays,
+                            (unsigned long long)e->nodes_visited,
+                            (unsigned long long)r->nodes_visited,
+                            (unsigned long long)e->tri_tests,
+                            (unsigned long long)r->tri_tests);
+                    failures++;
+                }
+                res_free(&got[0]);
+                res_free(&got[1]);
+            }
+    }
+}
+
 static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
     kdr_ray_batch b = {rs->n, rs->org, rs->shared_org ? 0 : 3, rs->dir,
                        rs->tmin, 1, rs->tmax, 1};
@@ -230,6 +289,8 @@ static void check_set(const char *scene, const kdr_scene *s, rayset *rs) {
         for (int way = 0; way < NWAYS; way++)
             if (way_runs(way))
                 check_way(scene, rs, s, &b, &ref, (kdr_query)q, way);
+    if (s->nodes)
+        check_entry_work(scene, rs, s, &b);
     res_free(&ref);
 }
 

@@ -9,7 +9,9 @@
  * level too deep or too shallow, or with another interval, shows here even
  * where the answer survives); kd_entry_descend16 (AVX-512) must return the
  * scalar replay's node, level, interval and stack bits; kdr_trace_batch
- * must give the single answers for batches of runs.
+ * must give the single answers for batches of runs, and so must the 4-, 8-
+ * and 16-lane bundle drivers, whose bundles of one origin replay its path
+ * (kb_replay), with the work of the same drivers walking from the root.
  *
  * Rays: test_bundle's twelve sets on its three scenes (random soup;
  * lattice of axis-aligned quads, whose integer split planes hold origins
@@ -29,6 +31,7 @@
 
 #include "kd_entry.h"
 #include "kd_stream.h"
+#include "kd_traverse_bundle.h"
 #include "kd_walk.h"
 #include "kdray.h"
 #include "test_bundle_sets.h"
@@ -153,6 +156,39 @@ static void check_batch(const char *scene, const char *set, const kdr_scene *s,
                         st.tri_tests != ref.tri_tests))
                 fail(scene, set, 0, "stream work sums differ from the single walk's");
         }
+    /* the bundle drivers (4, 8, 16 lanes, no fallback): bundles of one
+     * origin replay the top of their walk along its path once a run of
+     * them has it (kb_replay); answers equal the single walk's, and the
+     * work equals the same driver's with every walk from the root */
+    typedef void (*bundle_fn)(const kdr_scene *, const kdr_ray_batch *, size_t, size_t,
+                              kdr_query, int, kdr_hits *, kdr_trav_stats *);
+    static const bundle_fn fns[3] = {kd_bundle4_trace, kd_bundle8_trace, kd_bundle16_trace};
+    for (int w = 0; w < 3; w++) {
+        if ((w == 1 && !kdr_cpu_has_avx2()) || (w == 2 && !kd_cpu_has_avx512()))
+            continue;
+        for (int q = 0; q < 2; q++) {
+            const kdr_query query = q ? KDR_CLOSEST : KDR_ANY;
+            kdr_trav_stats st[2] = {{0}, {0}};
+            for (int root = 1; root >= 0; root--) {
+                fns[w](s, &b, 0, n, query, root ? KB_ROOT : 0, &out, &st[root]);
+                for (size_t i = 0; i < n; i++) {
+                    if (!q) {
+                        if (hit[i] != (uint8_t)kdr_occluded1(s, &rays[i], NULL))
+                            fail(scene, set, i, "bundle any hit");
+                        continue;
+                    }
+                    kdr_hit h;
+                    kdr_intersect1(s, &rays[i], &h, NULL);
+                    if (!same_f(h.t, t[i]) || !same_f(h.u, u[i]) || !same_f(h.v, v[i]) ||
+                        h.prim != prim[i])
+                        fail(scene, set, i, "bundle closest hit");
+                }
+            }
+            if (st[0].rays != st[1].rays || st[0].nodes_visited != st[1].nodes_visited ||
+                st[0].tri_tests != st[1].tri_tests)
+                fail(scene, set, (size_t)w, "bundle work with entries differs from the root's");
+        }
+    }
 done:
     free(org), free(dir), free(tmin), free(tmax), free(hit), free(t), free(u), free(v),
         free(prim);
