@@ -46,7 +46,8 @@ set_tests_properties(bench_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
 # picture there. Prints only.
 add_executable(kdray_bench_render ${CMAKE_CURRENT_SOURCE_DIR}/bench_render.c)
 set_target_properties(kdray_bench_render PROPERTIES OUTPUT_NAME kdray-bench-render)
-target_link_libraries(kdray_bench_render PRIVATE kdray_render kdray_scenes kdray_core)
+target_link_libraries(kdray_bench_render PRIVATE kdray_render kdray_scenes kdray_core
+                      Threads::Threads)
 
 # What rays that cannot hit cost in kdr_trace_batch (a generated scene, no
 # Embree: nothing to compare against). Prints only; the smoke test runs it
