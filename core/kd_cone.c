@@ -354,6 +354,7 @@ int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
         return KDR_OK;
     }
     kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
+                       .wide16 = ws->wide16,
                        .proofs = f->along == 0.0f, .last = ls->last,
                        .max_cands = cand_budget(nsamples, ls),
                        .group = group ? ws->gpre : NULL,

@@ -197,6 +197,7 @@ typedef struct kd_cone_pair {
     const kd_shadow_frame *f;
     uint32_t n;          /* samples */
     int wide;            /* 8-wide (AVX2) packets */
+    int wide16;          /* 16-wide (AVX-512) packets for lists */
     int proofs;          /* fixed origin (normals given): kd_cone_proof applies */
     double tmax_lo;      /* least tmax of any sample */
     size_t max_cands;    /* a walk with more candidates is over budget
@@ -221,7 +222,7 @@ typedef struct kd_cells {
     size_t nviews, cap_views;
     uint32_t *lists;     /* KD_CELL_MAX_DEPTH lists of CONE_MAX_CANDS */
     kd_cand_list cl;
-    kdr_ray rays[8];
+    kdr_ray rays[16];
     double hw_cos[KD_CELL_MAX_LEVEL], hw_sin[KD_CELL_MAX_LEVEL];
     double slack_cos, slack_sin;
     int hw_ready;
@@ -243,13 +244,14 @@ int kd_cone_tri_may_block(const kd_cone *c, const float *tri);
 
 /* ---- packets (kd_cone_packet.c) ------------------------------------------ */
 
-/* Tests the n <= 8 rays lanes[0..n) against the candidates (any hit in each
- * ray's [tmin, tmax]); returns the mask of blocked lanes and sets *blocker
- * to the last triangle that blocked one. wide: use AVX2 (only when
- * kdr_cpu_has_avx2()). */
+/* Tests the n <= 16 rays lanes[0..n) against the candidates (any hit in
+ * each ray's [tmin, tmax]); returns the mask of blocked lanes and sets
+ * *blocker to the last triangle that blocked one. width: 16 (AVX-512, only
+ * when kd_cpu_has_avx512(); n <= 16), 8 (AVX2, only when
+ * kdr_cpu_has_avx2(); n <= 8) or 4 (two packets of 4; n <= 8). */
 int kd_cone_packet_blocked(const kdr_scene *scene, const kdr_ray *const *lanes,
                            int n, const uint32_t *cands, size_t ncand,
-                           uint32_t *blocker, int wide);
+                           uint32_t *blocker, int width);
 
 /* The n rays (n <= 8 with wide, <= 4 without) walk cone c together, testing
  * each leaf's triangles on the way; returns the mask of blocked lanes. When
@@ -309,6 +311,7 @@ typedef struct kd_shadow_ws {
     float *borg, *bdir, *btmax; /* pending samples as a kdr_ray_batch */
     uint8_t *bhit;
     int wide;       /* AVX2 packets */
+    int wide16;     /* AVX-512 packets for a cell's samples (kd_cone_cells.c) */
     kd_walk_policy policy;
     const size_t *order; /* non-NULL: the j-th point traced is order[j] */
     size_t first;        /* else it is first + j */

@@ -191,16 +191,18 @@ static uint32_t popcount8(int m) {
 static uint32_t trace_list(kd_cells *c, kd_cone_pair *pr, const cell *ce,
                            const uint32_t *prims, size_t np) {
     uint32_t lit = 0;
-    const uint32_t width = pr->wide ? 8u : 4u;
+    /* 16 lanes where AVX-512 runs and more than 8 samples are left, else
+     * 8 (AVX2) or 4 */
+    const uint32_t width = pr->wide16 && ce->i1 - ce->i0 > 8 ? 16u : pr->wide ? 8u : 4u;
     for (uint32_t g = ce->i0; g < ce->i1; g += width) {
         const int m = (int)(ce->i1 - g < width ? ce->i1 - g : width);
-        const kdr_ray *lanes[8];
+        const kdr_ray *lanes[16];
         for (int j = 0; j < m; j++) {
             kd_shadow_frame_ray(pr->f, c->idx[g + j], pr->n, &c->rays[j]);
             lanes[j] = &c->rays[j];
         }
         const int blocked =
-            np ? kd_cone_packet_blocked(pr->scene, lanes, m, prims, np, &pr->last, pr->wide)
+            np ? kd_cone_packet_blocked(pr->scene, lanes, m, prims, np, &pr->last, (int)width)
                : 0;
         lit += (uint32_t)m - popcount8(blocked);
     }

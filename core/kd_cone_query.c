@@ -19,6 +19,7 @@
 
 #include "kd_cone.h"
 #include "kd_internal.h"
+#include "kd_stream.h" /* kd_cpu_has_avx512 */
 
 #define SHADOW_MAX_SAMPLES 4096u
 
@@ -309,6 +310,7 @@ static int trace_query(const kdr_scene *scene, const kdr_shadow_query *q,
     ws.order = order;
     ws.first = first;
     ws.wide = kdr_cpu_has_avx2();
+    ws.wide16 = ws.wide && kd_cpu_has_avx512();
     ws.lights = malloc(q->nlights * sizeof *ws.lights);
     int rc = ws.lights ? KDR_OK : KDR_ENOMEM;
     for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++)
