@@ -126,6 +126,27 @@ typedef struct kd_tri_pre {
     uint32_t prim;
 } kd_tri_pre;
 
+/* The cull's relative distance slack (kd_cone_trav.c, kd_cone_cull4.c). */
+#define KD_CULL_REL_SLACK 1e-6
+
+/* A group list's cull data by field, four triangles to a block (made once
+ * per group, read by every point of it: kd_cone_cull4.c). Lanes past n
+ * are padding that no cull keeps. */
+typedef struct kd_tri_soa {
+    double *f;      /* KD_SOA_FIELDS arrays of cap doubles */
+    uint32_t *prim;
+    size_t n, cap;
+} kd_tri_soa;
+#define KD_SOA_FIELDS 22 /* n[3], n_off, c[3], r, e[3][3], e_off[3], flat, used */
+
+/* Copies pre[0..n) into s (s->cap >= n rounded up to 4). */
+void kd_tri_soa_fill(kd_tri_soa *s, const kd_tri_pre *pre, size_t n);
+/* kd_cone_pre_may_block of the four triangles s[j..j+4) (j a multiple of
+ * 4) at once, bit i for triangle j + i: the same float operations in the
+ * same order, so the same answer for every triangle. AVX2 only (after
+ * kdr_cpu_has_avx2()); c->cos_p != 0 (the caller keeps all otherwise). */
+int kd_cone_pre_may_block4(const kd_cone *c, const kd_tri_soa *s, size_t j);
+
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
 /* kd_tri_pre_init in two parts: the plane and the bounding sphere (all
  * kd_group_clear needs), then the prism's sides. */
@@ -209,6 +230,8 @@ typedef struct kd_cone_pair {
                                 kd_group_clear showed harmless) replaces
                                 the pair's walk */
     size_t ngroup;
+    const kd_tri_soa *gsoa; /* non-NULL: the group's list by field, culled
+                               four at a time (AVX2) */
     kdr_shadow_stats st; /* added to */
     int rc;
 } kd_cone_pair;
@@ -304,6 +327,7 @@ typedef struct kd_shadow_ws {
     kd_cand_list cl;
     kd_cand_list gl; /* a group's list (trace_grouped) */
     kd_tri_pre *gpre; /* its triangles' cull data (GROUP_MAX_CANDS) */
+    kd_tri_soa gsoa;  /* the same by field (with AVX2: kd_cone_cull4.c) */
     kdr_ray *rays;  /* the samples of one (point, light) */
     uint32_t *idx;  /* pending (not yet decided) samples */
     uint64_t *keys; /* Morton key << 12 | sample, for grouping */

@@ -311,6 +311,19 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
  * cull, then the proofs (the list has no duplicates). */
 static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
                        const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
+    if (pr->gsoa && kc->cos_p != 0.0) {
+        /* the same cull four at a time (kd_cone_cull4.c: the same answer
+         * for each), the survivors judged in the list's order */
+        for (size_t j = 0; j < pr->ngroup; j += 4)
+            for (int keep = kd_cone_pre_may_block4(kc, pr->gsoa, j); keep; keep &= keep - 1) {
+                const int i = keep & 1 ? 0 : keep & 2 ? 1 : keep & 4 ? 2 : 3;
+                const int rc = judge(c, pr, dc, pr->gsoa->prim[j + (size_t)i], out, nl,
+                                     covered);
+                if (rc != KDR_OK || *covered)
+                    return rc;
+            }
+        return KDR_OK;
+    }
     for (size_t j = 0; j < pr->ngroup; j++) {
         if (!kd_cone_pre_may_block(kc, &pr->group[j]))
             continue;

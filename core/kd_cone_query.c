@@ -141,6 +141,17 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
             kept++;
         }
     gl->n = kept;
+    if (ws->wide && !ws->gsoa.f) {
+        ws->gsoa.cap = (GROUP_MAX_CANDS + 3) & ~3u;
+        ws->gsoa.f = malloc(KD_SOA_FIELDS * ws->gsoa.cap * sizeof *ws->gsoa.f);
+        ws->gsoa.prim = malloc(ws->gsoa.cap * sizeof *ws->gsoa.prim);
+        if (!ws->gsoa.f || !ws->gsoa.prim) {
+            *rc = KDR_ENOMEM;
+            return 0;
+        }
+    }
+    if (ws->wide)
+        kd_tri_soa_fill(&ws->gsoa, ws->gpre, kept);
     return 1;
 }
 

@@ -31,9 +31,10 @@
 #define CONE_SLOPE_SLACK 1e-5f
 /* Relative padding of plane distances (float division rounding). */
 #define CONE_REL_PAD 0x1p-20f
-/* The cull's half-angle slack and relative distance slack. */
+/* The cull's half-angle slack and relative distance slack (the latter is
+ * KD_CULL_REL_SLACK of kd_cone.h: kd_cone_cull4.c uses it too). */
 #define CULL_ANGLE_SLACK 1e-5
-#define CULL_REL_SLACK 1e-6
+#define CULL_REL_SLACK KD_CULL_REL_SLACK
 /* Beyond this half-angle the cull's cone formulas are not trusted. */
 #define CULL_MAX_ANGLE 1.5707
 
