@@ -146,6 +146,13 @@ void kd_tri_soa_fill(kd_tri_soa *s, const kd_tri_pre *pre, size_t n);
  * same order, so the same answer for every triangle. AVX2 only (after
  * kdr_cpu_has_avx2()); c->cos_p != 0 (the caller keeps all otherwise). */
 int kd_cone_pre_may_block4(const kd_cone *c, const kd_tri_soa *s, size_t j);
+/* The first test of kd_cone_tri_may_block (kd_cone_trav.c): 0 if the
+ * triangle's bounding sphere lies beyond the segments' axial reach or
+ * beside the cone (c->cos_p != 0). */
+int kd_cone_tri_sphere_may(const kd_cone *c, const float *tri);
+/* kd_cone_tri_sphere_may of tris[0..n) (n <= 4) at once, bit i for
+ * tris[i], each the scalar answer. AVX2 only; c->cos_p != 0. */
+int kd_cone_tri_sphere4(const kd_cone *c, const float *const *tris, int n);
 
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
 /* kd_tri_pre_init in two parts: the plane and the bounding sphere (all

@@ -121,3 +121,52 @@ KD_AVX2 int kd_cone_pre_may_block4(const kd_cone *cc, const kd_tri_soa *s, size_
                              GT(LD(F_USED), SET(0.0)));
     return _mm256_movemask_pd(keep);
 }
+
+/* ---- the walks' sphere test ------------------------------------------------------- */
+
+/* Coordinate q (0..8) of the four triangles, widened exactly; lanes past n
+ * repeat triangle 0. */
+KD_AVX2 static __m256d coord4(const float *const *t, int n, int q) {
+    return _mm256_set_pd((double)t[n > 3 ? 3 : 0][q], (double)t[n > 2 ? 2 : 0][q],
+                         (double)t[n > 1 ? 1 : 0][q], (double)t[0][q]);
+}
+
+KD_AVX2 int kd_cone_tri_sphere4(const kd_cone *cc, const float *const *tris, int n) {
+    __m256d v[9], m[3], w[3];
+    for (int q = 0; q < 9; q++)
+        v[q] = coord4(tris, n, q);
+    for (int k = 0; k < 3; k++) {
+        /* dmin(t0, dmin(t3, t6)): min_pd(a, b) is a < b ? a : b */
+        const __m256d lo = _mm256_min_pd(v[k], _mm256_min_pd(v[3 + k], v[6 + k]));
+        const __m256d hi = _mm256_max_pd(v[k], _mm256_max_pd(v[3 + k], v[6 + k]));
+        m[k] = MUL(SET(0.5), ADD(lo, hi));
+        w[k] = SUB(m[k], SET(cc->dapex[k]));
+    }
+    __m256d r2 = SET(0.0);
+    for (int j = 0; j < 3; j++) {
+        const __m256d d0 = SUB(v[3 * j], m[0]), d1 = SUB(v[3 * j + 1], m[1]),
+                      d2 = SUB(v[3 * j + 2], m[2]);
+        r2 = _mm256_max_pd(r2, ADD(ADD(MUL(d0, d0), MUL(d1, d1)), MUL(d2, d2)));
+    }
+    const __m256d a0 = SET(cc->axis[0]), a1 = SET(cc->axis[1]), a2 = SET(cc->axis[2]);
+    const __m256d proj = ADD(ADD(MUL(w[0], a0), MUL(w[1], a1)), MUL(w[2], a2));
+    const __m256d cx = SUB(MUL(w[1], a2), MUL(w[2], a1));
+    const __m256d cy = SUB(MUL(w[2], a0), MUL(w[0], a2));
+    const __m256d cz = SUB(MUL(w[0], a1), MUL(w[1], a0));
+    const __m256d perp = _mm256_sqrt_pd(ADD(ADD(MUL(cx, cx), MUL(cy, cy)), MUL(cz, cz)));
+    const __m256d wlen =
+        _mm256_sqrt_pd(ADD(ADD(MUL(w[0], w[0]), MUL(w[1], w[1])), MUL(w[2], w[2])));
+    const __m256d r = _mm256_sqrt_pd(r2);
+    const __m256d rad = ADD(ADD(r, SET((double)cc->band)),
+                            MUL(SET(KD_CULL_REL_SLACK), ADD(wlen, r)));
+    __m256d drop = OR(GT(SUB(proj, rad), SET((double)cc->t_far)),
+                      LT(ADD(proj, rad), SET((double)cc->t_near)));
+    const __m256d cp = SET(cc->cos_p), sp = SET(cc->sin_p);
+    const __m256d apex_near =
+        LE(ADD(MUL(proj, cp), MUL(perp, sp)), SET(0.0));
+    /* !(x <= rad): true for NaN too, as the scalar test's */
+    drop = OR(drop, _mm256_blendv_pd(
+                        _mm256_cmp_pd(SUB(MUL(perp, cp), MUL(proj, sp)), rad, _CMP_NLE_UQ),
+                        _mm256_cmp_pd(wlen, rad, _CMP_NLE_UQ), apex_near));
+    return ~_mm256_movemask_pd(drop) & ((1 << n) - 1);
+}

@@ -1,7 +1,9 @@
 /*
- * test_cone_cull4.c — the group list's cull four triangles at a time
- * (core/kd_cone_cull4.c) gives every triangle exactly the answer of the
- * scalar kd_cone_pre_may_block, for the whole light's cone of a point and
+ * test_cone_cull4.c — the culls four triangles at a time
+ * (core/kd_cone_cull4.c) give every triangle exactly the answer of the
+ * scalar ones: the group list's kd_cone_pre_may_block4 against
+ * kd_cone_pre_may_block, the walks' kd_cone_tri_sphere4 (one to four
+ * triangles) against kd_cone_tri_sphere_may; for the whole light's cone of a point and
  * for the narrower cones of its cells (random axes inside the light's),
  * against triangles through, beside, under and behind the points at every
  * scale, degenerate ones (no plane) and padded lists of every length mod 4
@@ -54,7 +56,7 @@ int main(void) {
         CHECK(0, "set-up failed");
         return 1;
     }
-    long kept = 0, dropped = 0, cones = 0;
+    long kept = 0, dropped = 0, cones = 0, near = 0, far = 0;
     for (int trial = 0; trial < 400; trial++) {
         const float p[3] = {(float)(urnd() - 0.5), 0.0f, (float)(urnd() - 0.5)};
         const float nrm[3] = {0.0f, 1.0f, 0.0f};
@@ -119,10 +121,29 @@ int main(void) {
                     }
                 }
             }
+            for (size_t j = 0; j < n; j += 4) {
+                const int m = 1 + (int)((j / 4 + (size_t)trial) % 4); /* 1 to 4 at once */
+                const float *four[4];
+                for (int i = 0; i < m; i++)
+                    four[i] = tris + 9 * ((j + (size_t)i) % n);
+                const int got4 = kd_cone_tri_sphere4(&c, four, m);
+                CHECK((got4 >> m) == 0, "trial %d: lanes past %d set", trial, m);
+                for (int i = 0; i < m; i++) {
+                    const int want = kd_cone_tri_sphere_may(&c, four[i]);
+                    CHECK(((got4 >> i) & 1) == want,
+                          "trial %d cone %d triangle %zu: four-wide sphere %d, scalar %d", trial,
+                          ci, (j + (size_t)i) % n, (got4 >> i) & 1, want);
+                    near += want;
+                    far += !want;
+                }
+            }
         }
     }
-    printf("cull4: %ld cones, %ld triangles kept, %ld dropped, each as the scalar cull\n",
-           cones, kept, dropped);
+    printf("cull4: %ld cones, %ld triangles kept, %ld dropped, each as the scalar cull; "
+           "sphere test: %ld kept, %ld dropped, each as the scalar test\n",
+           cones, kept, dropped, near, far);
+    CHECK(near > (near + far) / 20 && far > (near + far) / 20,
+          "one sphere answer is rare (%ld kept, %ld dropped)", near, far);
     CHECK(cones > 1000, "too few cones (%ld)", cones);
     CHECK(kept > (kept + dropped) / 20 && dropped > (kept + dropped) / 20,
           "one answer is rare (%ld kept, %ld dropped): the comparison says little", kept,
