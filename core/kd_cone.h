@@ -150,6 +150,10 @@ int kd_cone_pre_may_block4(const kd_cone *c, const kd_tri_soa *s, size_t j);
  * triangle's bounding sphere lies beyond the segments' axial reach or
  * beside the cone (c->cos_p != 0). */
 int kd_cone_tri_sphere_may(const kd_cone *c, const float *tri);
+/* The rest of kd_cone_tri_may_block after the sphere (plane, prism):
+ * kd_cone_tri_may_block = kd_cone_tri_sphere_may && kd_cone_tri_rest_may
+ * wherever c->cos_p != 0. */
+int kd_cone_tri_rest_may(const kd_cone *c, const float *tri);
 /* kd_cone_tri_sphere_may of tris[0..n) (n <= 4) at once, bit i for
  * tris[i], each the scalar answer. AVX2 only; c->cos_p != 0. */
 int kd_cone_tri_sphere4(const kd_cone *c, const float *const *tris, int n);

@@ -286,10 +286,31 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
         c->stamp = 1;
     }
     c->nseen = 0;
+    /* with AVX2 the cull's sphere tests go four at a time (the same
+     * answers, kd_cone_cull4.c); judged in the leaf's order either way
+     * (marks made past a covering triangle do not matter: the walk ends) */
+    const int wide4 = pr->wide && kc->cos_p != 0.0;
     kd_cone_walk_init(&w, pr->scene, kc);
     while (rc == KDR_OK && (leaf = kd_cone_walk_next(&w)) != NULL) {
         const uint32_t *refs = pr->scene->refs + leaf->u.first;
-        for (uint32_t j = 0; j < kd_count(leaf) && rc == KDR_OK; j++) {
+        const uint32_t count = kd_count(leaf);
+        const float *tris[4];
+        uint32_t prims[4];
+        int nb = 0;
+        for (uint32_t j = 0; wide4 && j <= count && rc == KDR_OK && !*covered; j++) {
+            if (j < count && !seen_before(c, refs[j])) {
+                prims[nb] = refs[j];
+                tris[nb++] = pr->scene->tris + 9 * (size_t)refs[j];
+            }
+            if (nb == 4 || (j == count && nb > 0)) {
+                const int near = kd_cone_tri_sphere4(kc, tris, nb);
+                for (int i = 0; i < nb && rc == KDR_OK && !*covered; i++)
+                    if ((near >> i) & 1 && kd_cone_tri_rest_may(kc, tris[i]))
+                        rc = judge(c, pr, dc, prims[i], out, nl, covered);
+                nb = 0;
+            }
+        }
+        for (uint32_t j = 0; !wide4 && j < count && rc == KDR_OK; j++) {
             const uint32_t prim = refs[j];
             if (seen_before(c, prim) ||
                 !kd_cone_tri_may_block(kc, pr->scene->tris + 9 * (size_t)prim))

@@ -290,6 +290,10 @@ int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
     return tri_may_block(c, tri, 1);
 }
 
+int kd_cone_tri_rest_may(const kd_cone *c, const float *tri) {
+    return tri_rest_may(c, tri, 1);
+}
+
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
     kd_tri_pre_plane(p, tri, prim);
     kd_tri_pre_sides(p, tri);

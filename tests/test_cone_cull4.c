@@ -3,8 +3,10 @@
  * (core/kd_cone_cull4.c) give every triangle exactly the answer of the
  * scalar ones: the group list's kd_cone_pre_may_block4 against
  * kd_cone_pre_may_block, the walks' kd_cone_tri_sphere4 (one to four
- * triangles) against kd_cone_tri_sphere_may; for the whole light's cone of a point and
- * for the narrower cones of its cells (random axes inside the light's),
+ * triangles) against kd_cone_tri_sphere_may (and the whole cull,
+ * kd_cone_tri_may_block, is that test and then kd_cone_tri_rest_may); for
+ * the whole light's cone of a point and for the narrower cones of its
+ * cells (random axes inside the light's),
  * against triangles through, beside, under and behind the points at every
  * scale, degenerate ones (no plane) and padded lists of every length mod 4
  * included. Both answers must occur often, so the comparison means
@@ -130,6 +132,9 @@ int main(void) {
                 CHECK((got4 >> m) == 0, "trial %d: lanes past %d set", trial, m);
                 for (int i = 0; i < m; i++) {
                     const int want = kd_cone_tri_sphere_may(&c, four[i]);
+                    CHECK(kd_cone_tri_may_block(&c, four[i]) ==
+                              (want && kd_cone_tri_rest_may(&c, four[i])),
+                          "trial %d cone %d: the cull is not the sphere and the rest", trial, ci);
                     CHECK(((got4 >> i) & 1) == want,
                           "trial %d cone %d triangle %zu: four-wide sphere %d, scalar %d", trial,
                           ci, (j + (size_t)i) % n, (got4 >> i) & 1, want);
