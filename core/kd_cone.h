@@ -215,6 +215,10 @@ kd_verdict kd_tri_view_classify(const kd_tri_view *v, const kd_dir_cone *c);
 /* 1 only if kd_tri_view_classify would find the triangle MISSES by two
  * robust edges of opposite signs, with wider margins and no view made. */
 int kd_tri_edges_miss(const float *tri, const float apex[3], const kd_dir_cone *c);
+/* kd_tri_edges_miss of tris[0..n) (n <= 4) at once (kd_cone_cull4.c), bit
+ * i for tris[i], each the scalar answer. AVX2 only. */
+int kd_tri_edges_miss4(const float *const *tris, int n, const float apex[3],
+                       const kd_dir_cone *c);
 
 /* ---- adaptive sub-cones (kd_cone_cells.c) --------------------------------- */
 

@@ -250,11 +250,20 @@ static int seen_before(kd_cells *c, uint32_t prim) {
 /* Judges triangle prim for the cell (the cheap edge test, else a view and
  * its verdict): listed
  * (as a view index) unless it misses; KD_CONE_OVER past CONE_MAX_CANDS. */
+static int judge_view(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
+                      uint32_t *out, size_t *nl, int *covered);
+
 static int judge(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
                  uint32_t *out, size_t *nl, int *covered) {
-    uint32_t at;
     if (kd_tri_edges_miss(pr->scene->tris + 9 * (size_t)prim, pr->f->apex, dc))
         return KDR_OK; /* beside the cone: no view needed */
+    return judge_view(c, pr, dc, prim, out, nl, covered);
+}
+
+/* judge after the edge test: the view and its verdict. */
+static int judge_view(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
+                      uint32_t *out, size_t *nl, int *covered) {
+    uint32_t at;
     if (push_view(c, pr, prim, &at) != KDR_OK)
         return KDR_ENOMEM;
     const kd_verdict v = kd_tri_view_classify(&c->views[at], dc);
@@ -333,16 +342,28 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
 static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
                        const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
     if (pr->gsoa && kc->cos_p != 0.0) {
-        /* the same cull four at a time (kd_cone_cull4.c: the same answer
-         * for each), the survivors judged in the list's order */
-        for (size_t j = 0; j < pr->ngroup; j += 4)
+        /* the same cull four at a time, then the survivors' edge tests at
+         * once (kd_cone_cull4.c: the same answer for each), the rest
+         * judged in the list's order */
+        for (size_t j = 0; j < pr->ngroup; j += 4) {
+            const float *tris[4];
+            uint32_t prims[4];
+            int nb = 0;
             for (int keep = kd_cone_pre_may_block4(kc, pr->gsoa, j); keep; keep &= keep - 1) {
                 const int i = keep & 1 ? 0 : keep & 2 ? 1 : keep & 4 ? 2 : 3;
-                const int rc = judge(c, pr, dc, pr->gsoa->prim[j + (size_t)i], out, nl,
-                                     covered);
+                prims[nb] = pr->gsoa->prim[j + (size_t)i];
+                tris[nb] = pr->scene->tris + 9 * (size_t)prims[nb];
+                nb++;
+            }
+            const int miss = nb ? kd_tri_edges_miss4(tris, nb, pr->f->apex, dc) : 0;
+            for (int i = 0; i < nb; i++) {
+                if ((miss >> i) & 1)
+                    continue; /* beside the cone: no view needed */
+                const int rc = judge_view(c, pr, dc, prims[i], out, nl, covered);
                 if (rc != KDR_OK || *covered)
                     return rc;
             }
+        }
         return KDR_OK;
     }
     for (size_t j = 0; j < pr->ngroup; j++) {

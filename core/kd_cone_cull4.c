@@ -170,3 +170,58 @@ KD_AVX2 int kd_cone_tri_sphere4(const kd_cone *cc, const float *const *tris, int
                         _mm256_cmp_pd(wlen, rad, _CMP_NLE_UQ), apex_near));
     return ~_mm256_movemask_pd(drop) & ((1 << n) - 1);
 }
+
+/* ---- the cheap edge test ------------------------------------------------------------- */
+
+/* Coordinate q of the four triangles less apex[q % 3], subtracted in float
+ * as the triangle test does, then widened. */
+KD_AVX2 static __m256d rel4(const float *const *t, int n, const float *apex, int q) {
+    const __m128 v = _mm_set_ps(t[n > 3 ? 3 : 0][q], t[n > 2 ? 2 : 0][q],
+                                t[n > 1 ? 1 : 0][q], t[0][q]);
+    return _mm256_cvtps_pd(_mm_sub_ps(v, _mm_set1_ps(apex[q % 3])));
+}
+
+/* side_robust of kd_cone_proof.c for four planes. */
+KD_AVX2 static __m256d robust4(const kd_dir_cone *c, __m256d x, __m256d sn, __m256d cs) {
+    const __m256d cb = SET(c->cos_b), sb = SET(c->sin_b);
+    const __m256d cos_bm = SUB(MUL(cb, cs), MUL(sb, sn));
+    return AND(GT(cos_bm, SET(0.0)),
+               _mm256_cmp_pd(x, ADD(MUL(sb, cs), MUL(cb, sn)), _CMP_GE_OQ));
+}
+
+KD_AVX2 int kd_tri_edges_miss4(const float *const *tris, int n, const float apex[3],
+                               const kd_dir_cone *c) {
+    const double ur = 0x1p-24; /* kd_cone_proof.c's UR and OWN_REL */
+    const __m256d sign = SET(-0.0);
+    __m256d A[3][3], W[3];
+    for (int i = 0; i < 3; i++) {
+        for (int k = 0; k < 3; k++)
+            A[i][k] = rel4(tris, n, apex, 3 * i + k);
+        W[i] = ADD(ADD(_mm256_andnot_pd(sign, A[i][0]), _mm256_andnot_pd(sign, A[i][1])),
+                   _mm256_andnot_pd(sign, A[i][2]));
+    }
+    __m256d pos = SET(0.0), neg = SET(0.0);
+    for (int i = 0; i < 3; i++) {
+        const int j = (i + 1) % 3, k = (i + 2) % 3;
+        const __m256d n0 = SUB(MUL(A[j][1], A[k][2]), MUL(A[j][2], A[k][1]));
+        const __m256d n1 = SUB(MUL(A[j][2], A[k][0]), MUL(A[j][0], A[k][2]));
+        const __m256d n2 = SUB(MUL(A[j][0], A[k][1]), MUL(A[j][1], A[k][0]));
+        const __m256d l = _mm256_sqrt_pd(ADD(ADD(MUL(n0, n0), MUL(n1, n1)), MUL(n2, n2)));
+        const __m256d ok = GT(l, SET(0.0));
+        /* margin(12.1 UR W_j W_k / l + 4 UR): s + OWN_REL, its sine and cosine */
+        const __m256d s = ADD(
+            ADD(_mm256_div_pd(MUL(MUL(SET(12.1 * ur), W[j]), W[k]), l), SET(4.0 * ur)),
+            SET(1e-12));
+        const __m256d below = LT(s, SET(1.0));
+        const __m256d sn = _mm256_blendv_pd(SET(1.0), s, below);
+        const __m256d cs = _mm256_blendv_pd(
+            SET(0.0), _mm256_sqrt_pd(MUL(SUB(SET(1.0), s), ADD(SET(1.0), s))), below);
+        const __m256d x = _mm256_div_pd(
+            ADD(ADD(MUL(n0, SET(c->axis[0])), MUL(n1, SET(c->axis[1]))),
+                MUL(n2, SET(c->axis[2]))),
+            l);
+        pos = OR(pos, AND(ok, robust4(c, x, sn, cs)));
+        neg = OR(neg, AND(ok, robust4(c, _mm256_xor_pd(x, sign), sn, cs)));
+    }
+    return _mm256_movemask_pd(AND(pos, neg)) & ((1 << n) - 1);
+}

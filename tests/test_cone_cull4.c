@@ -4,7 +4,8 @@
  * scalar ones: the group list's kd_cone_pre_may_block4 against
  * kd_cone_pre_may_block, the walks' kd_cone_tri_sphere4 (one to four
  * triangles) against kd_cone_tri_sphere_may (and the whole cull,
- * kd_cone_tri_may_block, is that test and then kd_cone_tri_rest_may); for
+ * kd_cone_tri_may_block, is that test and then kd_cone_tri_rest_may), and
+ * the cheap edge test kd_tri_edges_miss4 against kd_tri_edges_miss; for
  * the whole light's cone of a point and for the narrower cones of its
  * cells (random axes inside the light's),
  * against triangles through, beside, under and behind the points at every
@@ -58,7 +59,7 @@ int main(void) {
         CHECK(0, "set-up failed");
         return 1;
     }
-    long kept = 0, dropped = 0, cones = 0, near = 0, far = 0;
+    long kept = 0, dropped = 0, cones = 0, near = 0, far = 0, miss = 0, unsure = 0;
     for (int trial = 0; trial < 400; trial++) {
         const float p[3] = {(float)(urnd() - 0.5), 0.0f, (float)(urnd() - 0.5)};
         const float nrm[3] = {0.0f, 1.0f, 0.0f};
@@ -108,6 +109,28 @@ int main(void) {
             if (c.cos_p == 0.0)
                 continue;
             cones++;
+            { /* the edge test, for the cone's directions (as kd_cone_cells.c's) */
+                const double sb = c.sin_p * urnd();
+                kd_dir_cone dc;
+                kd_dir_cone_set(&dc, c.axis, sqrt((1.0 - sb) * (1.0 + sb)), sb,
+                                f.dist - f.radius);
+                for (size_t j = 0; j < n; j += 4) {
+                    const int m = 1 + (int)((j / 4 + (size_t)trial + (size_t)ci) % 4);
+                    const float *four[4];
+                    for (int i = 0; i < m; i++)
+                        four[i] = tris + 9 * ((j + (size_t)i) % n);
+                    const int got4 = kd_tri_edges_miss4(four, m, f.apex, &dc);
+                    CHECK((got4 >> m) == 0, "trial %d: edge lanes past %d set", trial, m);
+                    for (int i = 0; i < m; i++) {
+                        const int want = kd_tri_edges_miss(four[i], f.apex, &dc);
+                        CHECK(((got4 >> i) & 1) == want,
+                              "trial %d cone %d triangle %zu: four-wide edges %d, scalar %d",
+                              trial, ci, (j + (size_t)i) % n, (got4 >> i) & 1, want);
+                        miss += want;
+                        unsure += !want;
+                    }
+                }
+            }
             for (size_t j = 0; j < n; j += 4) {
                 const int four = kd_cone_pre_may_block4(&c, &soa, j);
                 for (size_t i = 0; i < 4; i++) {
@@ -144,9 +167,12 @@ int main(void) {
             }
         }
     }
-    printf("cull4: %ld cones, %ld triangles kept, %ld dropped, each as the scalar cull; "
-           "sphere test: %ld kept, %ld dropped, each as the scalar test\n",
-           cones, kept, dropped, near, far);
+    printf("cull4: %ld cones, %ld triangles kept, %ld dropped by the group cull; "
+           "sphere test: %ld kept, %ld dropped; edge test: %ld miss, %ld not proved; each "
+           "as the scalar test\n",
+           cones, kept, dropped, near, far, miss, unsure);
+    CHECK(miss > (miss + unsure) / 20 && unsure > (miss + unsure) / 20,
+          "one edge answer is rare (%ld miss, %ld not proved)", miss, unsure);
     CHECK(near > (near + far) / 20 && far > (near + far) / 20,
           "one sphere answer is rare (%ld kept, %ld dropped)", near, far);
     CHECK(cones > 1000, "too few cones (%ld)", cones);
