@@ -313,9 +313,16 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
             }
             if (nb == 4 || (j == count && nb > 0)) {
                 const int near = kd_cone_tri_sphere4(kc, tris, nb);
-                for (int i = 0; i < nb && rc == KDR_OK && !*covered; i++)
-                    if ((near >> i) & 1 && kd_cone_tri_rest_may(kc, tris[i]))
-                        rc = judge(c, pr, dc, prims[i], out, nl, covered);
+                int nk = 0; /* the cull's survivors, then their edge tests at once */
+                for (int i = 0; i < nb; i++)
+                    if ((near >> i) & 1 && kd_cone_tri_rest_may(kc, tris[i])) {
+                        tris[nk] = tris[i];
+                        prims[nk++] = prims[i];
+                    }
+                const int miss = nk ? kd_tri_edges_miss4(tris, nk, pr->f->apex, dc) : 0;
+                for (int i = 0; i < nk && rc == KDR_OK && !*covered; i++)
+                    if (!((miss >> i) & 1))
+                        rc = judge_view(c, pr, dc, prims[i], out, nl, covered);
                 nb = 0;
             }
         }
