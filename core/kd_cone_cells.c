@@ -27,9 +27,9 @@
  * into four (twice the longer of its radial and azimuthal sides on the
  * light's disc, so cells stay square-ish) while it holds more than
  * CELL_LEAF_SAMPLES samples; a leaf tests its samples against its list in
- * packets of 8 or 4. Only the whole light walks the tree: when that walk
- * is over budget, nothing is decided here (kd_cone.c traces a busy cone
- * otherwise).
+ * packets of 16 (AVX-512), 8 or 4. Only the whole light walks the tree:
+ * when that walk is over budget, nothing is decided here (kd_cone.c traces
+ * a busy cone otherwise).
  */
 #include <stdlib.h>
 #include <string.h>
