@@ -1,14 +1,21 @@
 /*
- * kd_cone_cull4.c — the group list's per-point cull four triangles at a
- * time (AVX2 doubles). Each point of a group culls the group's whole list
- * (kd_cone_cells.c, judge_group) with kd_cone_pre_may_block; in the
- * default picture that scalar loop, a branch per test, was 8% of the
- * instructions. Here the list is laid out by field once per group
- * (kd_tri_soa_fill) and each lane performs exactly the scalar function's
- * double operations in its order (the build has -ffp-contract=off; the
+ * kd_cone_cull4.c — the cone culls and the cheap edge test four triangles
+ * at a time (AVX2 doubles):
+ *  - the group list's per-point cull (kd_cone_pre_may_block4): each point
+ *    of a group culls the group's whole list (kd_cone_cells.c,
+ *    judge_group); the list is laid out by field once per group
+ *    (kd_tri_soa_fill);
+ *  - the walks' bounding-sphere test (kd_cone_tri_sphere4), the first test
+ *    of kd_cone_tri_may_block, for a leaf's triangles (kd_cone_collect,
+ *    walk_with_proofs);
+ *  - the cheap edge test of kd_cone_proof.c (kd_tri_edges_miss4) for the
+ *    survivors of either.
+ * In the default picture those scalar loops, with a branch per test, were
+ * a fifth of the instructions. Each lane performs exactly the scalar
+ * function's operations in its order (the build has -ffp-contract=off; the
  * vector min and max and the ordered compares give what the scalar
  * a < b ? a : b forms and comparisons give, NaN included), so every
- * triangle gets the scalar answer: tests/test_cone_group.c checks that
+ * triangle gets the scalar answer: tests/test_cone_cull4.c checks that
  * decision by decision.
  */
 #include <immintrin.h>
