@@ -11,7 +11,7 @@
  *  - the cheap edge test of kd_cone_proof.c (kd_tri_edges_miss4) for the
  *    survivors of either.
  * In the default picture those scalar loops, with a branch per test, were
- * a fifth of the instructions. Each lane performs exactly the scalar
+ * a quarter of the instructions (26%). Each lane performs exactly the scalar
  * function's operations in its order (the build has -ffp-contract=off; the
  * vector min and max and the ordered compares give what the scalar
  * a < b ? a : b forms and comparisons give, NaN included), so every
