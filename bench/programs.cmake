@@ -42,11 +42,13 @@ add_test(NAME bench_smoke
 set_tests_properties(bench_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
 
 # A picture's cost by stage on one thread (render/), against one plain
-# cone-shadow call over the same points. No Embree: nothing renders the same
-# picture there. Prints only.
+# cone-shadow call over the same points; with --threads N also the picture
+# on N threads as kdrayd's executor runs it (wall, summed CPU, tail). No
+# Embree: nothing renders the same picture there. Prints only.
 add_executable(kdray_bench_render ${CMAKE_CURRENT_SOURCE_DIR}/bench_render.c)
 set_target_properties(kdray_bench_render PROPERTIES OUTPUT_NAME kdray-bench-render)
-target_link_libraries(kdray_bench_render PRIVATE kdray_render kdray_scenes kdray_core)
+target_link_libraries(kdray_bench_render PRIVATE kdray_render kdray_scenes kdray_core
+                      Threads::Threads)
 
 # What rays that cannot hit cost in kdr_trace_batch (a generated scene, no
 # Embree: nothing to compare against). Prints only; the smoke test runs it

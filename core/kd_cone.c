@@ -354,10 +354,12 @@ int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
         return KDR_OK;
     }
     kd_cone_pair pr = {.scene = scene, .f = f, .n = nsamples, .wide = ws->wide,
+                       .wide16 = ws->wide16,
                        .proofs = f->along == 0.0f, .last = ls->last,
                        .max_cands = cand_budget(nsamples, ls),
                        .group = group ? ws->gpre : NULL,
-                       .ngroup = group ? group->n : 0};
+                       .ngroup = group ? group->n : 0,
+                       .gsoa = group && ws->gsoa.f ? &ws->gsoa : NULL};
     /* every tmax is the float of (near side - along) >= D - r - along */
     pr.tmax_lo = ((f->dist - f->radius) - (double)f->along) * (1.0 - 0x1p-22);
     rc = kd_cells_lit(&ws->cells, &pr, &lit);
@@ -394,6 +396,8 @@ void kd_shadow_ws_free(kd_shadow_ws *ws) {
     free(ws->cl.v);
     free(ws->gl.v);
     free(ws->gpre);
+    free(ws->gsoa.f);
+    free(ws->gsoa.prim);
     free(ws->rays);
     free(ws->idx);
     free(ws->keys);

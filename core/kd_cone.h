@@ -126,6 +126,38 @@ typedef struct kd_tri_pre {
     uint32_t prim;
 } kd_tri_pre;
 
+/* The cull's relative distance slack (kd_cone_trav.c, kd_cone_cull4.c). */
+#define KD_CULL_REL_SLACK 1e-6
+
+/* A group list's cull data by field, four triangles to a block (made once
+ * per group, read by every point of it: kd_cone_cull4.c). Lanes past n
+ * are padding that no cull keeps. */
+typedef struct kd_tri_soa {
+    double *f;      /* KD_SOA_FIELDS arrays of cap doubles */
+    uint32_t *prim;
+    size_t n, cap;
+} kd_tri_soa;
+#define KD_SOA_FIELDS 22 /* n[3], n_off, c[3], r, e[3][3], e_off[3], flat, used */
+
+/* Copies pre[0..n) into s (s->cap >= n rounded up to 4). */
+void kd_tri_soa_fill(kd_tri_soa *s, const kd_tri_pre *pre, size_t n);
+/* kd_cone_pre_may_block of the four triangles s[j..j+4) (j a multiple of
+ * 4) at once, bit i for triangle j + i: the same float operations in the
+ * same order, so the same answer for every triangle. AVX2 only (after
+ * kdr_cpu_has_avx2()); c->cos_p != 0 (the caller keeps all otherwise). */
+int kd_cone_pre_may_block4(const kd_cone *c, const kd_tri_soa *s, size_t j);
+/* The first test of kd_cone_tri_may_block (kd_cone_trav.c): 0 if the
+ * triangle's bounding sphere lies beyond the segments' axial reach or
+ * beside the cone (c->cos_p != 0). */
+int kd_cone_tri_sphere_may(const kd_cone *c, const float *tri);
+/* The rest of kd_cone_tri_may_block after the sphere (plane, prism):
+ * kd_cone_tri_may_block = kd_cone_tri_sphere_may && kd_cone_tri_rest_may
+ * wherever c->cos_p != 0. */
+int kd_cone_tri_rest_may(const kd_cone *c, const float *tri);
+/* kd_cone_tri_sphere_may of tris[0..n) (n <= 4) at once, bit i for
+ * tris[i], each the scalar answer. AVX2 only; c->cos_p != 0. */
+int kd_cone_tri_sphere4(const kd_cone *c, const float *const *tris, int n);
+
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim);
 /* kd_tri_pre_init in two parts: the plane and the bounding sphere (all
  * kd_group_clear needs), then the prism's sides. */
@@ -183,6 +215,10 @@ kd_verdict kd_tri_view_classify(const kd_tri_view *v, const kd_dir_cone *c);
 /* 1 only if kd_tri_view_classify would find the triangle MISSES by two
  * robust edges of opposite signs, with wider margins and no view made. */
 int kd_tri_edges_miss(const float *tri, const float apex[3], const kd_dir_cone *c);
+/* kd_tri_edges_miss of tris[0..n) (n <= 4) at once (kd_cone_cull4.c), bit
+ * i for tris[i], each the scalar answer. AVX2 only. */
+int kd_tri_edges_miss4(const float *const *tris, int n, const float apex[3],
+                       const kd_dir_cone *c);
 
 /* ---- adaptive sub-cones (kd_cone_cells.c) --------------------------------- */
 
@@ -197,6 +233,7 @@ typedef struct kd_cone_pair {
     const kd_shadow_frame *f;
     uint32_t n;          /* samples */
     int wide;            /* 8-wide (AVX2) packets */
+    int wide16;          /* 16-wide (AVX-512) packets for lists */
     int proofs;          /* fixed origin (normals given): kd_cone_proof applies */
     double tmax_lo;      /* least tmax of any sample */
     size_t max_cands;    /* a walk with more candidates is over budget
@@ -208,6 +245,8 @@ typedef struct kd_cone_pair {
                                 kd_group_clear showed harmless) replaces
                                 the pair's walk */
     size_t ngroup;
+    const kd_tri_soa *gsoa; /* non-NULL: the group's list by field, culled
+                               four at a time (AVX2) */
     kdr_shadow_stats st; /* added to */
     int rc;
 } kd_cone_pair;
@@ -221,7 +260,7 @@ typedef struct kd_cells {
     size_t nviews, cap_views;
     uint32_t *lists;     /* KD_CELL_MAX_DEPTH lists of CONE_MAX_CANDS */
     kd_cand_list cl;
-    kdr_ray rays[8];
+    kdr_ray rays[16];
     double hw_cos[KD_CELL_MAX_LEVEL], hw_sin[KD_CELL_MAX_LEVEL];
     double slack_cos, slack_sin;
     int hw_ready;
@@ -243,13 +282,14 @@ int kd_cone_tri_may_block(const kd_cone *c, const float *tri);
 
 /* ---- packets (kd_cone_packet.c) ------------------------------------------ */
 
-/* Tests the n <= 8 rays lanes[0..n) against the candidates (any hit in each
- * ray's [tmin, tmax]); returns the mask of blocked lanes and sets *blocker
- * to the last triangle that blocked one. wide: use AVX2 (only when
- * kdr_cpu_has_avx2()). */
+/* Tests the n <= 16 rays lanes[0..n) against the candidates (any hit in
+ * each ray's [tmin, tmax]); returns the mask of blocked lanes and sets
+ * *blocker to the last triangle that blocked one. width: 16 (AVX-512, only
+ * when kd_cpu_has_avx512(); n <= 16), 8 (AVX2, only when
+ * kdr_cpu_has_avx2(); n <= 8) or 4 (two packets of 4; n <= 8). */
 int kd_cone_packet_blocked(const kdr_scene *scene, const kdr_ray *const *lanes,
                            int n, const uint32_t *cands, size_t ncand,
-                           uint32_t *blocker, int wide);
+                           uint32_t *blocker, int width);
 
 /* The n rays (n <= 8 with wide, <= 4 without) walk cone c together, testing
  * each leaf's triangles on the way; returns the mask of blocked lanes. When
@@ -302,6 +342,7 @@ typedef struct kd_shadow_ws {
     kd_cand_list cl;
     kd_cand_list gl; /* a group's list (trace_grouped) */
     kd_tri_pre *gpre; /* its triangles' cull data (GROUP_MAX_CANDS) */
+    kd_tri_soa gsoa;  /* the same by field (with AVX2: kd_cone_cull4.c) */
     kdr_ray *rays;  /* the samples of one (point, light) */
     uint32_t *idx;  /* pending (not yet decided) samples */
     uint64_t *keys; /* Morton key << 12 | sample, for grouping */
@@ -309,6 +350,7 @@ typedef struct kd_shadow_ws {
     float *borg, *bdir, *btmax; /* pending samples as a kdr_ray_batch */
     uint8_t *bhit;
     int wide;       /* AVX2 packets */
+    int wide16;     /* AVX-512 packets for a cell's samples (kd_cone_cells.c) */
     kd_walk_policy policy;
     const size_t *order; /* non-NULL: the j-th point traced is order[j] */
     size_t first;        /* else it is first + j */

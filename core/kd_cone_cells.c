@@ -27,9 +27,9 @@
  * into four (twice the longer of its radial and azimuthal sides on the
  * light's disc, so cells stay square-ish) while it holds more than
  * CELL_LEAF_SAMPLES samples; a leaf tests its samples against its list in
- * packets of 8 or 4. Only the whole light walks the tree: when that walk
- * is over budget, nothing is decided here (kd_cone.c traces a busy cone
- * otherwise).
+ * packets of 16 (AVX-512), 8 or 4. Only the whole light walks the tree:
+ * when that walk is over budget, nothing is decided here (kd_cone.c traces
+ * a busy cone otherwise).
  */
 #include <stdlib.h>
 #include <string.h>
@@ -191,16 +191,18 @@ static uint32_t popcount8(int m) {
 static uint32_t trace_list(kd_cells *c, kd_cone_pair *pr, const cell *ce,
                            const uint32_t *prims, size_t np) {
     uint32_t lit = 0;
-    const uint32_t width = pr->wide ? 8u : 4u;
+    /* 16 lanes where AVX-512 runs and more than 8 samples are left, else
+     * 8 (AVX2) or 4 */
+    const uint32_t width = pr->wide16 && ce->i1 - ce->i0 > 8 ? 16u : pr->wide ? 8u : 4u;
     for (uint32_t g = ce->i0; g < ce->i1; g += width) {
         const int m = (int)(ce->i1 - g < width ? ce->i1 - g : width);
-        const kdr_ray *lanes[8];
+        const kdr_ray *lanes[16];
         for (int j = 0; j < m; j++) {
             kd_shadow_frame_ray(pr->f, c->idx[g + j], pr->n, &c->rays[j]);
             lanes[j] = &c->rays[j];
         }
         const int blocked =
-            np ? kd_cone_packet_blocked(pr->scene, lanes, m, prims, np, &pr->last, pr->wide)
+            np ? kd_cone_packet_blocked(pr->scene, lanes, m, prims, np, &pr->last, (int)width)
                : 0;
         lit += (uint32_t)m - popcount8(blocked);
     }
@@ -248,11 +250,20 @@ static int seen_before(kd_cells *c, uint32_t prim) {
 /* Judges triangle prim for the cell (the cheap edge test, else a view and
  * its verdict): listed
  * (as a view index) unless it misses; KD_CONE_OVER past CONE_MAX_CANDS. */
+static int judge_view(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
+                      uint32_t *out, size_t *nl, int *covered);
+
 static int judge(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
                  uint32_t *out, size_t *nl, int *covered) {
-    uint32_t at;
     if (kd_tri_edges_miss(pr->scene->tris + 9 * (size_t)prim, pr->f->apex, dc))
         return KDR_OK; /* beside the cone: no view needed */
+    return judge_view(c, pr, dc, prim, out, nl, covered);
+}
+
+/* judge after the edge test: the view and its verdict. */
+static int judge_view(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc, uint32_t prim,
+                      uint32_t *out, size_t *nl, int *covered) {
+    uint32_t at;
     if (push_view(c, pr, prim, &at) != KDR_OK)
         return KDR_ENOMEM;
     const kd_verdict v = kd_tri_view_classify(&c->views[at], dc);
@@ -284,10 +295,38 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
         c->stamp = 1;
     }
     c->nseen = 0;
+    /* with AVX2 the cull's sphere tests go four at a time (the same
+     * answers, kd_cone_cull4.c); judged in the leaf's order either way
+     * (marks made past a covering triangle do not matter: the walk ends) */
+    const int wide4 = pr->wide && kc->cos_p != 0.0;
     kd_cone_walk_init(&w, pr->scene, kc);
     while (rc == KDR_OK && (leaf = kd_cone_walk_next(&w)) != NULL) {
         const uint32_t *refs = pr->scene->refs + leaf->u.first;
-        for (uint32_t j = 0; j < kd_count(leaf) && rc == KDR_OK; j++) {
+        const uint32_t count = kd_count(leaf);
+        const float *tris[4];
+        uint32_t prims[4];
+        int nb = 0;
+        for (uint32_t j = 0; wide4 && j <= count && rc == KDR_OK && !*covered; j++) {
+            if (j < count && !seen_before(c, refs[j])) {
+                prims[nb] = refs[j];
+                tris[nb++] = pr->scene->tris + 9 * (size_t)refs[j];
+            }
+            if (nb == 4 || (j == count && nb > 0)) {
+                const int near = kd_cone_tri_sphere4(kc, tris, nb);
+                int nk = 0; /* the cull's survivors, then their edge tests at once */
+                for (int i = 0; i < nb; i++)
+                    if ((near >> i) & 1 && kd_cone_tri_rest_may(kc, tris[i])) {
+                        tris[nk] = tris[i];
+                        prims[nk++] = prims[i];
+                    }
+                const int miss = nk ? kd_tri_edges_miss4(tris, nk, pr->f->apex, dc) : 0;
+                for (int i = 0; i < nk && rc == KDR_OK && !*covered; i++)
+                    if (!((miss >> i) & 1))
+                        rc = judge_view(c, pr, dc, prims[i], out, nl, covered);
+                nb = 0;
+            }
+        }
+        for (uint32_t j = 0; !wide4 && j < count && rc == KDR_OK; j++) {
             const uint32_t prim = refs[j];
             if (seen_before(c, prim) ||
                 !kd_cone_tri_may_block(kc, pr->scene->tris + 9 * (size_t)prim))
@@ -309,6 +348,31 @@ static int walk_with_proofs(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc
  * cull, then the proofs (the list has no duplicates). */
 static int judge_group(kd_cells *c, kd_cone_pair *pr, const kd_dir_cone *dc,
                        const kd_cone *kc, uint32_t *out, size_t *nl, int *covered) {
+    if (pr->gsoa && kc->cos_p != 0.0) {
+        /* the same cull four at a time, then the survivors' edge tests at
+         * once (kd_cone_cull4.c: the same answer for each), the rest
+         * judged in the list's order */
+        for (size_t j = 0; j < pr->ngroup; j += 4) {
+            const float *tris[4];
+            uint32_t prims[4];
+            int nb = 0;
+            for (int keep = kd_cone_pre_may_block4(kc, pr->gsoa, j); keep; keep &= keep - 1) {
+                const int i = keep & 1 ? 0 : keep & 2 ? 1 : keep & 4 ? 2 : 3;
+                prims[nb] = pr->gsoa->prim[j + (size_t)i];
+                tris[nb] = pr->scene->tris + 9 * (size_t)prims[nb];
+                nb++;
+            }
+            const int miss = nb ? kd_tri_edges_miss4(tris, nb, pr->f->apex, dc) : 0;
+            for (int i = 0; i < nb; i++) {
+                if ((miss >> i) & 1)
+                    continue; /* beside the cone: no view needed */
+                const int rc = judge_view(c, pr, dc, prims[i], out, nl, covered);
+                if (rc != KDR_OK || *covered)
+                    return rc;
+            }
+        }
+        return KDR_OK;
+    }
     for (size_t j = 0; j < pr->ngroup; j++) {
         if (!kd_cone_pre_may_block(kc, &pr->group[j]))
             continue;

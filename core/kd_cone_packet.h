@@ -15,7 +15,7 @@ typedef struct KD_WN(kc_packet) {
 
 KD_FN void KD_WN(kc_packet_init)(KD_WN(kc_packet) *pk, const kdr_ray *const *lanes,
                                  int n) {
-    _Alignas(32) float tmin[KD_W], tmax[KD_W];
+    _Alignas(KD_VALIGN) float tmin[KD_W], tmax[KD_W];
     kd_ray_pre pre[KD_W];
     for (int j = 0; j < KD_W; j++) {
         const kdr_ray *r = lanes[j < n ? j : 0];

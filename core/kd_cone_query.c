@@ -19,6 +19,7 @@
 
 #include "kd_cone.h"
 #include "kd_internal.h"
+#include "kd_stream.h" /* kd_cpu_has_avx512 */
 
 #define SHADOW_MAX_SAMPLES 4096u
 
@@ -140,6 +141,17 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
             kept++;
         }
     gl->n = kept;
+    if (ws->wide && !ws->gsoa.f) {
+        ws->gsoa.cap = (GROUP_MAX_CANDS + 3) & ~3u;
+        ws->gsoa.f = malloc(KD_SOA_FIELDS * ws->gsoa.cap * sizeof *ws->gsoa.f);
+        ws->gsoa.prim = malloc(ws->gsoa.cap * sizeof *ws->gsoa.prim);
+        if (!ws->gsoa.f || !ws->gsoa.prim) {
+            *rc = KDR_ENOMEM;
+            return 0;
+        }
+    }
+    if (ws->wide)
+        kd_tri_soa_fill(&ws->gsoa, ws->gpre, kept);
     return 1;
 }
 
@@ -309,6 +321,7 @@ static int trace_query(const kdr_scene *scene, const kdr_shadow_query *q,
     ws.order = order;
     ws.first = first;
     ws.wide = kdr_cpu_has_avx2();
+    ws.wide16 = ws.wide && kd_cpu_has_avx512();
     ws.lights = malloc(q->nlights * sizeof *ws.lights);
     int rc = ws.lights ? KDR_OK : KDR_ENOMEM;
     for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++)

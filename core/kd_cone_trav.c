@@ -31,9 +31,10 @@
 #define CONE_SLOPE_SLACK 1e-5f
 /* Relative padding of plane distances (float division rounding). */
 #define CONE_REL_PAD 0x1p-20f
-/* The cull's half-angle slack and relative distance slack. */
+/* The cull's half-angle slack and relative distance slack (the latter is
+ * KD_CULL_REL_SLACK of kd_cone.h: kd_cone_cull4.c uses it too). */
 #define CULL_ANGLE_SLACK 1e-5
-#define CULL_REL_SLACK 1e-6
+#define CULL_REL_SLACK KD_CULL_REL_SLACK
 /* Beyond this half-angle the cull's cone formulas are not trusted. */
 #define CULL_MAX_ANGLE 1.5707
 
@@ -235,11 +236,10 @@ static int plane_misses(const kd_cone *cc, const float *tri, double un[3]) {
  * side, or (with prism) the cone lies outside one side of its prism. The
  * sphere goes first: most triangles a walk meets lie beside the cone, and
  * it drops them before the plane is formed (the same triangles are kept
- * in either order; callgrind of the default picture -2.5%). */
-static int tri_may_block(const kd_cone *cc, const float *tri, int prism) {
-    if (cc->cos_p == 0.0) /* near-hemisphere cone: keep everything */
-        return 1;
-    double un[3] = {0, 0, 0};
+ * in either order; callgrind of the default picture -2.5%). The sphere
+ * test is kd_cone_tri_sphere_may (kd_cone_tri_sphere4 makes it for four
+ * triangles at once in the walks' leaves), the rest tri_rest_may. */
+int kd_cone_tri_sphere_may(const kd_cone *cc, const float *tri) {
     double m[3], w[3], r2 = 0.0;
     for (int k = 0; k < 3; k++) {
         const double lo = dmin(tri[k], dmin(tri[3 + k], tri[6 + k]));
@@ -269,13 +269,29 @@ static int tri_may_block(const kd_cone *cc, const float *tri, int prism) {
     } else if (!(perp * cc->cos_p - proj * cc->sin_p <= rad)) {
         return 0;
     }
+    return 1;
+}
+
+/* tri_may_block after the sphere: the plane, then (prism) the sides. */
+static int tri_rest_may(const kd_cone *cc, const float *tri, int prism) {
+    double un[3] = {0, 0, 0};
     if (plane_misses(cc, tri, un))
         return 0;
     return !(prism && prism_misses(cc, tri, un));
 }
 
+static int tri_may_block(const kd_cone *cc, const float *tri, int prism) {
+    if (cc->cos_p == 0.0) /* near-hemisphere cone: keep everything */
+        return 1;
+    return kd_cone_tri_sphere_may(cc, tri) && tri_rest_may(cc, tri, prism);
+}
+
 int kd_cone_tri_may_block(const kd_cone *c, const float *tri) {
     return tri_may_block(c, tri, 1);
+}
+
+int kd_cone_tri_rest_may(const kd_cone *c, const float *tri) {
+    return tri_rest_may(c, tri, 1);
 }
 
 void kd_tri_pre_init(kd_tri_pre *p, const float *tri, uint32_t prim) {
@@ -479,7 +495,8 @@ static int seen_before(seen_set *st, uint32_t prim) {
 /* Appends the leaf's triangles that may touch a segment; 0 once the list
  * is over max (or memory runs out: *rc = KDR_ENOMEM). */
 static int take_leaf(const kdr_scene *scene, const kd_cone *c, const kd_node *leaf,
-                     kd_cand_list *cl, size_t max, int prism, seen_set *seen, int *rc) {
+                     kd_cand_list *cl, size_t max, int prism, seen_set *seen, int wide4,
+                     int *rc) {
     const uint32_t *refs = scene->refs + leaf->u.first;
     const uint32_t count = kd_count(leaf);
     if (cl->n + count > cl->cap) {
@@ -494,10 +511,31 @@ static int take_leaf(const kdr_scene *scene, const kd_cone *c, const kd_node *le
         cl->v = v;
         cl->cap = cap;
     }
-    for (uint32_t j = 0; j < count; j++) {
-        if (!seen_before(seen, refs[j]) &&
-            tri_may_block(c, scene->tris + 9 * (size_t)refs[j], prism))
-            cl->v[cl->n++] = refs[j];
+    if (wide4 && c->cos_p != 0.0) {
+        /* the sphere tests four at a time (kd_cone_cull4.c: the same
+         * answers), the rest one by one, in the leaf's order */
+        const float *tris[4];
+        uint32_t prims[4];
+        int nb = 0;
+        for (uint32_t j = 0; j <= count; j++) {
+            if (j < count && !seen_before(seen, refs[j])) {
+                prims[nb] = refs[j];
+                tris[nb++] = scene->tris + 9 * (size_t)refs[j];
+            }
+            if (nb == 4 || (j == count && nb > 0)) {
+                const int near = kd_cone_tri_sphere4(c, tris, nb);
+                for (int i = 0; i < nb; i++)
+                    if ((near >> i) & 1 && tri_rest_may(c, tris[i], prism))
+                        cl->v[cl->n++] = prims[i];
+                nb = 0;
+            }
+        }
+    } else {
+        for (uint32_t j = 0; j < count; j++) {
+            if (!seen_before(seen, refs[j]) &&
+                tri_may_block(c, scene->tris + 9 * (size_t)refs[j], prism))
+                cl->v[cl->n++] = refs[j];
+        }
     }
     if (cl->n > max) {
         *rc = KD_CONE_OVER;
@@ -529,9 +567,10 @@ int kd_cone_collect(const kdr_scene *scene, const kd_cone *c, kd_cand_list *cl,
     memset(seen.prim, 0xff, sizeof seen.prim);
     seen.n = 0;
     cl->n = 0;
+    const int wide4 = kdr_cpu_has_avx2();
     kd_cone_walk_init(&w, scene, c);
     while (rc == KDR_OK && (leaf = kd_cone_walk_next(&w)) != NULL) {
-        if (!take_leaf(scene, c, leaf, cl, max_cands, prism, &seen, &rc))
+        if (!take_leaf(scene, c, leaf, cl, max_cands, prism, &seen, wide4, &rc))
             break;
         if (w.visited > max_nodes)
             rc = KD_CONE_OVER;

@@ -30,3 +30,9 @@ add_test(NAME cone_accuracy COMMAND test_cone_accuracy)
 add_executable(test_cone_group ${CMAKE_CURRENT_SOURCE_DIR}/test_cone_group.c)
 target_link_libraries(test_cone_group PRIVATE kdray_testsupport kdray_core m)
 add_test(NAME cone_group COMMAND test_cone_group)
+
+# The group list's four-wide cull (kd_cone_cull4.c) answers every triangle
+# as the scalar kd_cone_pre_may_block does.
+add_executable(test_cone_cull4 ${CMAKE_CURRENT_SOURCE_DIR}/test_cone_cull4.c)
+target_link_libraries(test_cone_cull4 PRIVATE kdray_testsupport kdray_core m)
+add_test(NAME cone_cull4 COMMAND test_cone_cull4)
