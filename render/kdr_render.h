@@ -107,6 +107,8 @@ typedef struct kdr_render_image {
     float *points, *normals; /* 3 per pixel, valid where prim >= 0 */
     float *visibility;       /* 1 per pixel */
     uint8_t *rgb;            /* 3 per pixel */
+    void *block;             /* the one allocation the arrays above share */
+    size_t block_len;        /* its mapped length; 0: malloc'd */
 } kdr_render_image;
 
 /* Bytes kdr_render_alloc takes for p's image, and the most a PNG of it can

@@ -6,7 +6,9 @@
  * cone-shadow answer for point index = pixel index; a render through the
  * executor with two workers is a PNG that libpng decodes to exactly the
  * serial image; the executor refuses too many pixels (413) and a bad
- * camera (400). A plain C program: exits nonzero when a check fails.
+ * camera (400); a large picture's image is one fresh mapping advised for
+ * huge pages that holds every array. A plain C program: exits nonzero when
+ * a check fails.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <png.h>
@@ -17,6 +19,7 @@
 #include "kdr_exec.h"
 #include "kdr_render.h"
 #include "check.h"
+#include "thp_smaps.h"
 
 /* A floor, a box on it and a floating slab: shadows and penumbrae. */
 static kdr_scene *make_scene(void) {
@@ -224,8 +227,55 @@ static void test_exec(const kdr_scene *s) {
     kdr_exec_destroy(ex);
 }
 
+/* The image of a 1024x768 picture: one 2 MiB-aligned block of whole 2 MiB
+ * pages (what kdr_render_image_bytes charges), fresh (nothing resident
+ * before the bands write it), advised for huge pages from its first byte to
+ * its last, and every array 64-byte aligned inside it, in order, apart. */
+static void test_image_block(const kdr_scene *s) {
+    kdr_render_params p = params_of(s, "shade", "1024", "768");
+    kdr_render_image img;
+    CHECK(kdr_render_alloc(&p, &img) == KDR_OK, "alloc 1024x768");
+    const size_t n = (size_t)1024 * 768;
+    const char *b = img.block;
+    CHECK(b && ((uintptr_t)b & (THP_HUGE_PAGE - 1)) == 0, "block %p not 2 MiB-aligned",
+          (const void *)b);
+    CHECK(img.block_len == kdr_render_image_bytes(&p) && img.block_len % THP_HUGE_PAGE == 0,
+          "block of %zu bytes, charged %zu", img.block_len, kdr_render_image_bytes(&p));
+    const struct {
+        const void *p;
+        size_t bytes;
+    } a[] = {{img.hits.t, n * 4},     {img.hits.prim, n * 4}, {img.hits.u, n * 4},
+             {img.hits.v, n * 4},     {img.points, n * 12},   {img.normals, n * 12},
+             {img.visibility, n * 4}, {img.rgb, n * 3}};
+    const char *end = b;
+    for (size_t i = 0; i < sizeof a / sizeof a[0]; i++) {
+        const char *q = a[i].p;
+        CHECK(q >= end && ((uintptr_t)q & 63) == 0 && q + a[i].bytes <= b + img.block_len,
+              "array %zu at offset %td overlaps, is misaligned or leaves the block", i,
+              q - b);
+        end = q + a[i].bytes;
+    }
+    char mode[256];
+    if (!thp_possible(mode, sizeof mode)) {
+        FAIL(THP_OFF_MESSAGE, mode);
+    } else {
+        const void *ends[2] = {b, b + img.block_len - 1};
+        for (int i = 0; i < 2; i++) {
+            const thp_vma v = thp_vma_of(ends[i]);
+            CHECK(v.found && v.advised, "image byte %p: not in an advised mapping", ends[i]);
+            CHECK(v.eligible == 1, "image byte %p: THPeligible %d", ends[i], v.eligible);
+        }
+        const thp_vma v = thp_vma_of(b);
+        CHECK(v.rss_kb == 0, "a new image already has %ld kB resident (reused heap memory "
+              "stays in 4 KiB pages)", v.rss_kb);
+    }
+    kdr_render_free(&img);
+    CHECK(img.block == NULL && img.rgb == NULL, "free clears the image");
+}
+
 int main(void) {
     kdr_scene *s = make_scene();
+    test_image_block(s);
     test_params();
     test_frame(s);
     test_bands_and_shadow_index(s);
