@@ -112,16 +112,14 @@ size_t kdr_render_scratch_bytes(const kdr_render_params *p) {
  * pages before anything touches it; NULL when it cannot be mapped */
 static void *map_block(size_t bytes, size_t *len) {
 #if defined(__linux__)
-    if (bytes < HUGE_PAGE || bytes > SIZE_MAX / 2)
-        return NULL;
+    if (bytes < HUGE_PAGE || bytes > SIZE_MAX / 2) return NULL;
     size_t whole = (bytes + HUGE_PAGE - 1) & ~(HUGE_PAGE - 1);
     size_t reserve = whole + HUGE_PAGE;
-    char *raw = mmap(NULL, reserve, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (raw == MAP_FAILED)
-        return NULL;
+    char *raw =
+        mmap(NULL, reserve, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (raw == MAP_FAILED) return NULL;
     char *b = (char *)(((uintptr_t)raw + HUGE_PAGE - 1) & ~(uintptr_t)(HUGE_PAGE - 1));
-    if (b > raw)
-        munmap(raw, (size_t)(b - raw));
+    if (b > raw) munmap(raw, (size_t)(b - raw));
     if (raw + reserve > b + whole)
         munmap(b + whole, (size_t)(raw + reserve - (b + whole)));
     (void)madvise(b, whole, MADV_HUGEPAGE); /* a hint: without it, 4 KiB pages */
@@ -143,8 +141,7 @@ int kdr_render_alloc(const kdr_render_params *p, kdr_render_image *img) {
     if (!b) {
         img->block_len = 0;
         b = malloc(l.bytes ? l.bytes : 1);
-        if (!b)
-            return KDR_ENOMEM;
+        if (!b) return KDR_ENOMEM;
     }
     img->block = b;
     img->hits.t = (float *)(b + l.t);
@@ -239,11 +236,12 @@ static int shadow_rows(const kdr_scene *scene, const kdr_render_params *p,
                     const size_t i = (size_t)y * w + x;
                     if (img->hits.prim[i] >= 0) order[n++] = i;
                 }
-    int rc = kdr_shadow_trace_order(scene, &q, order, n, KDR_SHADOW_CONE, img->visibility, st);
+    int rc =
+        kdr_shadow_trace_order(scene, &q, order, n, KDR_SHADOW_CONE, img->visibility, st);
     for (size_t k = 0; rc == KDR_EINVAL && k < n; k++) {
         /* some point is refused: each alone, the refused ones lit */
-        int r1 = kdr_shadow_trace(scene, &q, order[k], 1, KDR_SHADOW_CONE, img->visibility,
-                                  st);
+        int r1 = kdr_shadow_trace(scene, &q, order[k], 1, KDR_SHADOW_CONE,
+                                  img->visibility, st);
         if (r1 == KDR_EINVAL)
             img->visibility[order[k]] = 1.0f;
         else if (r1 != KDR_OK) {

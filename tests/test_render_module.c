@@ -16,9 +16,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "check.h"
 #include "kdr_exec.h"
 #include "kdr_render.h"
-#include "check.h"
 #include "thp_smaps.h"
 
 /* A floor, a box on it and a floating slab: shadows and penumbrae. */
@@ -239,7 +239,8 @@ static void test_image_block(const kdr_scene *s) {
     const char *b = img.block;
     CHECK(b && ((uintptr_t)b & (THP_HUGE_PAGE - 1)) == 0, "block %p not 2 MiB-aligned",
           (const void *)b);
-    CHECK(img.block_len == kdr_render_image_bytes(&p) && img.block_len % THP_HUGE_PAGE == 0,
+    CHECK(img.block_len == kdr_render_image_bytes(&p) &&
+              img.block_len % THP_HUGE_PAGE == 0,
           "block of %zu bytes, charged %zu", img.block_len, kdr_render_image_bytes(&p));
     const struct {
         const void *p;
@@ -262,12 +263,15 @@ static void test_image_block(const kdr_scene *s) {
         const void *ends[2] = {b, b + img.block_len - 1};
         for (int i = 0; i < 2; i++) {
             const thp_vma v = thp_vma_of(ends[i]);
-            CHECK(v.found && v.advised, "image byte %p: not in an advised mapping", ends[i]);
+            CHECK(v.found && v.advised, "image byte %p: not in an advised mapping",
+                  ends[i]);
             CHECK(v.eligible == 1, "image byte %p: THPeligible %d", ends[i], v.eligible);
         }
         const thp_vma v = thp_vma_of(b);
-        CHECK(v.rss_kb == 0, "a new image already has %ld kB resident (reused heap memory "
-              "stays in 4 KiB pages)", v.rss_kb);
+        CHECK(v.rss_kb == 0,
+              "a new image already has %ld kB resident (reused heap memory "
+              "stays in 4 KiB pages)",
+              v.rss_kb);
     }
     kdr_render_free(&img);
     CHECK(img.block == NULL && img.rgb == NULL, "free clears the image");
