@@ -180,6 +180,8 @@ void *kd_scratch_alloc(size_t bytes);
 
 /* LSD radix sort of n events by key (tmp holds n events). */
 void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n);
+/* The same, the sorted keys left in out (n events) and a clobbered. */
+void kd_radix_sort_into(kd_event *a, kd_event *out, size_t n);
 /* Sorts a few events (keys are unique); avx512: with kd_rank_sort_avx512. */
 void kd_sort_events(kd_event *a, size_t n, int avx512);
 /* Sorts n <= RANK_MAX events (keys unique): each one's place is the number
@@ -279,6 +281,11 @@ typedef struct kd_task {
     ev_list ev;      /* EXACT: lists in block; SORT: e[0], n[0] to sort,
                         e[1] room for n[0] more (the radix sort's) */
     kd_event *block; /* owned, freed when the task is done (may be NULL) */
+    int axis;        /* SORT of the root (n_out set): make the events of
+                        this axis from the triangles in e[0] first */
+    int skip_degenerate; /* ... testing each triangle (some are) */
+    size_t *n_out;   /* SORT of the root: receives the count; the sorted
+                        events go to e[1] */
     kd_frag *frag;   /* where BINNED and EXACT tasks write */
 } kd_task;
 

@@ -17,27 +17,45 @@
 #include "kd_build.h"
 
 /* LSD radix sort on bits 30..63 (position and type); stable, so events
- * generated in triangle order end up in full key order. */
-void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
+ * generated in triangle order end up in full key order. The three digits'
+ * counts come from one pass over the input, and the three scatter passes
+ * go a -> out -> a -> out, so the sorted keys land in out without a copy
+ * (the version before read the input once per digit for its counts and
+ * copied tmp back after every pass). */
+void kd_radix_sort_into(kd_event *a, kd_event *out, size_t n) {
     static const int shift[3] = {30, 41, 52};
-    static const int bits[3] = {11, 11, 12};
-    size_t count[1u << 12];
+    static const size_t nb[3] = {(size_t)1 << 11, (size_t)1 << 11, (size_t)1 << 12};
+    size_t count0[1u << 11], count1[1u << 11], count2[1u << 12];
+    size_t *count[3] = {count0, count1, count2};
+    memset(count0, 0, sizeof count0);
+    memset(count1, 0, sizeof count1);
+    memset(count2, 0, sizeof count2);
+    for (size_t i = 0; i < n; i++) {
+        const kd_event e = a[i];
+        count0[(e >> 30) & 0x7ff]++;
+        count1[(e >> 41) & 0x7ff]++;
+        count2[(e >> 52) & 0xfff]++;
+    }
+    kd_event *src = a, *dst = out;
     for (int pass = 0; pass < 3; pass++) {
-        const size_t nb = (size_t)1 << bits[pass];
-        const uint64_t mask = nb - 1;
-        memset(count, 0, nb * sizeof *count);
-        for (size_t i = 0; i < n; i++)
-            count[(a[i] >> shift[pass]) & mask]++;
-        size_t sum = 0;
-        for (size_t b = 0; b < nb; b++) {
-            size_t c = count[b];
-            count[b] = sum;
-            sum += c;
+        size_t *c = count[pass], sum = 0;
+        const uint64_t mask = nb[pass] - 1;
+        for (size_t b = 0; b < nb[pass]; b++) {
+            const size_t k = c[b];
+            c[b] = sum;
+            sum += k;
         }
         for (size_t i = 0; i < n; i++)
-            tmp[count[(a[i] >> shift[pass]) & mask]++] = a[i];
-        memcpy(a, tmp, n * sizeof *a);
+            dst[c[(src[i] >> shift[pass]) & mask]++] = src[i];
+        kd_event *t = src;
+        src = dst;
+        dst = t;
     }
+}
+
+void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
+    kd_radix_sort_into(a, tmp, n);
+    memcpy(a, tmp, n * sizeof *a);
 }
 
 /* ---- splitting the event lists ------------------------------------------------ */
