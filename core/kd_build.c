@@ -181,21 +181,25 @@ static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
     cbox[0].max[s->axis] = cbox[1].min[s->axis] = s->pos;
     ev_list ch[2];
     size_t idx = 0;
-    int err = kd_split_events(b, ev, s, box, cbox, depth, ch);
+    kd_event *own = NULL;
+    const size_t mark = b->stack_top;
+    int err = kd_split_events(b, ev, s, box, cbox, ch, &own);
     if (err != KDR_OK) {
         b->err = err;
         return;
     }
-    if (push_interior(b, s, &idx) != KDR_OK)
-        return;
-    uint32_t id;
-    const int spawned = spawn_exact(b, &cbox[1], &ch[1], depth + 1, bad, &id);
-    build_exact(b, &cbox[0], &ch[0], depth + 1, bad);
-    set_above(b, idx, s->axis);
-    if (spawned)
-        push_link(b, id);
-    else
-        build_exact(b, &cbox[1], &ch[1], depth + 1, bad);
+    if (push_interior(b, s, &idx) == KDR_OK) {
+        uint32_t id;
+        const int spawned = spawn_exact(b, &cbox[1], &ch[1], depth + 1, bad, &id);
+        build_exact(b, &cbox[0], &ch[0], depth + 1, bad);
+        set_above(b, idx, s->axis);
+        if (spawned)
+            push_link(b, id);
+        else
+            build_exact(b, &cbox[1], &ch[1], depth + 1, bad);
+    }
+    b->stack_top = mark; /* the children's lists are dead */
+    free(own);
 }
 
 static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,

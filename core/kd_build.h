@@ -98,8 +98,9 @@ typedef struct builder {
                          handed to another worker (pool != NULL) */
     kd_pool *pool;    /* NULL: everything on this thread */
     uint8_t *side; /* per triangle, valid for the node being split */
-    kd_event *lvl[KD_MAX_DEPTH + 1]; /* children of a node at depth d */
-    size_t lvl_cap[KD_MAX_DEPTH + 1];
+    kd_event *stack; /* the children's lists of the nodes on the path
+                        being built, last split on top (kd_split_events) */
+    size_t stack_cap, stack_top; /* in events */
     uint32_t *both; /* straddlers of the node being split */
     size_t both_cap;
     kd_event *add; /* their new events */
@@ -189,10 +190,13 @@ void kd_sort_events(kd_event *a, size_t n, int avx512);
 #define RANK_MAX 32
 void kd_rank_sort_avx512(kd_event *a, size_t n);
 /* Splits the node's event lists into its children's, ch[0] below and ch[1]
- * above the plane, in the scratch buffer of this depth. */
+ * above the plane, on top of the worker's stack (b->stack), or in a block
+ * of their own (*own, to free) when the stack is full. The caller pops
+ * them (b->stack_top back to its value before the call) once both
+ * children's subtrees are built. */
 int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
-                    const kdr_bounds *box, const kdr_bounds cbox[2], int depth,
-                    ev_list ch[2]);
+                    const kdr_bounds *box, const kdr_bounds cbox[2], ev_list ch[2],
+                    kd_event **own);
 
 /* ---- kd_build_clip.c ---------------------------------------------------------- */
 

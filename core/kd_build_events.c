@@ -4,9 +4,9 @@
  * partitions each list into the children's in order, and only the
  * triangles that straddle the plane get new events, which are clipped
  * (kd_build_clip.c), sorted and merged in. This is what makes the build
- * O(N log N) (Wald and Havran 2006). The children's lists live in a
- * scratch buffer per depth: the build is depth-first, so a subtree only
- * ever writes the buffers below it. A side that gets new events has its
+ * O(N log N) (Wald and Havran 2006). The children's lists go on a stack
+ * per worker: the build is depth-first, so a subtree only ever writes
+ * above its own lists, and pops what it pushed. A side that gets new events has its
  * old ones partitioned into a buffer of their own first and merged into
  * place from there (from both ends at once).
  */
@@ -249,12 +249,48 @@ static void partition(const kd_event *in, size_t n, const uint8_t *side,
     w[1] = w1;
 }
 
+/* Room for need events on top of the worker's stack. The stack is one
+ * block per worker, reused by every node and task it builds: the lists of
+ * the nodes on the current path are all it holds (a subtree only writes
+ * above its own lists), so its size is about the sum of the list sizes
+ * down one path. When need does not fit, an empty stack is reallocated
+ * (STACK_SLACK times need: room for the path below); a non-empty one
+ * cannot move, so the node gets a block of its own (*own). (Until this,
+ * every depth had a buffer of its own, grown when a later node of that
+ * depth was bigger: haus' one-thread build made 15 allocations of at least
+ * 1 MiB, 36 MB in huge pages that the kernel zeroed, for about 8 MB of
+ * lists.) */
+#define STACK_SLACK 8
+static kd_event *stack_push(builder *b, size_t need, kd_event **own) {
+    *own = NULL;
+    if (b->stack_cap - b->stack_top >= need) {
+        kd_event *p = b->stack + b->stack_top;
+        b->stack_top += need;
+        return p;
+    }
+    if (b->stack_top == 0) {
+        free(b->stack);
+        b->stack_cap = 0;
+        const size_t cap = STACK_SLACK * need;
+        b->stack = b->huge ? kd_scratch_alloc(cap * sizeof *b->stack)
+                           : malloc(cap * sizeof *b->stack);
+        if (!b->stack)
+            return NULL;
+        b->stack_cap = cap;
+        b->stack_top = need;
+        return b->stack;
+    }
+    *own = b->huge ? kd_scratch_alloc(need * sizeof **own)
+                   : malloc(need * sizeof **own);
+    return *own;
+}
+
 /* Partitions the node's events into the two children (kept in order,
- * branch-free) and merges in the straddlers' new events. The children live
- * in this depth's scratch buffer: a subtree only writes deeper buffers. */
+ * branch-free) and merges in the straddlers' new events. The children go
+ * on top of the worker's stack (stack_push); the caller pops them. */
 int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
-                    const kdr_bounds *box, const kdr_bounds cbox[2], int depth,
-                    ev_list ch[2]) {
+                    const kdr_bounds *box, const kdr_bounds cbox[2], ev_list ch[2],
+                    kd_event **own) {
     size_t nleft;
     const size_t nboth = classify(b, ev, s, &nleft);
     if (nboth == (size_t)-1)
@@ -276,10 +312,13 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
         most = ev->n[k] > most ? ev->n[k] : most;
     }
-    if (grow(b, (void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)) ||
-        grow(b, (void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event)))
+    if (grow(b, (void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event)))
         return KDR_ENOMEM;
-    kd_event *base = b->lvl[depth];
+    const size_t mark = b->stack_top;
+    kd_event *const start = stack_push(b, need, own);
+    if (!start)
+        return KDR_ENOMEM;
+    kd_event *base = start;
     for (int k = 0; k < 3; k++) {
         /* a side without new events gets its old ones in place; the others
          * in b->old (with sentinel slots), to be merged from there */
@@ -305,5 +344,9 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
     }
     ch[0].ntri = ntri[0];
     ch[1].ntri = ntri[1];
+    /* the stack keeps what the lists use (the last list's room beyond its
+     * events is free again) */
+    if (!*own)
+        b->stack_top = mark + (size_t)(ch[1].e[2] + ch[1].n[2] - start);
     return KDR_OK;
 }
