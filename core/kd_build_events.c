@@ -254,13 +254,12 @@ static void partition(const kd_event *in, size_t n, const uint8_t *side,
  * the nodes on the current path are all it holds (a subtree only writes
  * above its own lists), so its size is about the sum of the list sizes
  * down one path. When need does not fit, an empty stack is reallocated
- * (STACK_SLACK times need: room for the path below); a non-empty one
+ * (KD_STACK_SLACK times need: room for the path below); a non-empty one
  * cannot move, so the node gets a block of its own (*own). (Until this,
  * every depth had a buffer of its own, grown when a later node of that
  * depth was bigger: haus' one-thread build made 15 allocations of at least
  * 1 MiB, 36 MB in huge pages that the kernel zeroed, for about 8 MB of
  * lists.) */
-#define STACK_SLACK 8
 static kd_event *stack_push(builder *b, size_t need, kd_event **own) {
     *own = NULL;
     if (b->stack_cap - b->stack_top >= need) {
@@ -271,7 +270,7 @@ static kd_event *stack_push(builder *b, size_t need, kd_event **own) {
     if (b->stack_top == 0) {
         free(b->stack);
         b->stack_cap = 0;
-        const size_t cap = STACK_SLACK * need;
+        const size_t cap = KD_STACK_SLACK * need;
         b->stack = b->huge ? kd_scratch_alloc(cap * sizeof *b->stack)
                            : malloc(cap * sizeof *b->stack);
         if (!b->stack)
