@@ -198,6 +198,13 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
                     const kdr_bounds *box, const kdr_bounds cbox[2], ev_list ch[2],
                     kd_event **own);
 
+/* Scratch of bytes above the top of the worker's stack, valid until the
+ * next push (nothing is pushed); NULL when the stack has no such room. */
+void *kd_stack_scratch(builder *b, size_t bytes);
+/* Makes an empty stack hold at least KD_STACK_SLACK * events (a task's
+ * first node, before anything is pushed); on failure it stays as it is. */
+void kd_stack_reserve(builder *b, size_t events);
+
 /* ---- kd_build_clip.c ---------------------------------------------------------- */
 
 /* The bounds of the parts of tri inside cbox[0] and cbox[1], the halves of

@@ -284,6 +284,22 @@ static kd_event *stack_push(builder *b, size_t need, kd_event **own) {
     return *own;
 }
 
+void *kd_stack_scratch(builder *b, size_t bytes) {
+    const size_t events = (bytes + sizeof(kd_event) - 1) / sizeof(kd_event);
+    return b->stack && b->stack_cap - b->stack_top >= events ? b->stack + b->stack_top
+                                                             : NULL;
+}
+
+void kd_stack_reserve(builder *b, size_t events) {
+    if (b->stack_top != 0 || b->stack_cap >= events)
+        return;
+    free(b->stack);
+    const size_t cap = KD_STACK_SLACK * events;
+    b->stack = b->huge ? kd_scratch_alloc(cap * sizeof *b->stack)
+                       : malloc(cap * sizeof *b->stack);
+    b->stack_cap = b->stack ? cap : 0;
+}
+
 /* Partitions the node's events into the two children (kept in order,
  * branch-free) and merges in the straddlers' new events. The children go
  * on top of the worker's stack (stack_push); the caller pops them. */
@@ -311,13 +327,23 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
         most = ev->n[k] > most ? ev->n[k] : most;
     }
-    if (grow(b, (void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event)))
-        return KDR_ENOMEM;
     const size_t mark = b->stack_top;
     kd_event *const start = stack_push(b, need, own);
     if (!start)
         return KDR_ENOMEM;
     kd_event *base = start;
+    /* the old events wait above the children's lists while there is room
+     * (memory the path below touches anyway), else in a buffer of their own */
+    kd_event *oldbuf = kd_stack_scratch(b, 2 * (most + 2) * sizeof(kd_event));
+    if (!oldbuf) {
+        if (grow(b, (void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event))) {
+            b->stack_top = mark;
+            free(*own);
+            *own = NULL;
+            return KDR_ENOMEM;
+        }
+        oldbuf = b->old;
+    }
     for (int k = 0; k < 3; k++) {
         /* a side without new events gets its old ones in place; the others
          * in b->old (with sentinel slots), to be merged from there */
@@ -325,7 +351,7 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         for (int side = 0; side < 2; side++) {
             ch[side].e[k] = base;
             base += ev->n[k] + nadd[3 * side + k];
-            old[side] = nadd[3 * side + k] ? b->old + (size_t)side * (most + 2) + 1
+            old[side] = nadd[3 * side + k] ? oldbuf + (size_t)side * (most + 2) + 1
                                             : ch[side].e[k];
             w[side] = old[side];
         }
