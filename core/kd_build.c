@@ -181,21 +181,25 @@ static void make_interior(builder *b, const kdr_bounds *box, const ev_list *ev,
     cbox[0].max[s->axis] = cbox[1].min[s->axis] = s->pos;
     ev_list ch[2];
     size_t idx = 0;
-    int err = kd_split_events(b, ev, s, box, cbox, depth, ch);
+    kd_event *own = NULL;
+    const size_t mark = b->stack_top;
+    int err = kd_split_events(b, ev, s, box, cbox, ch, &own);
     if (err != KDR_OK) {
         b->err = err;
         return;
     }
-    if (push_interior(b, s, &idx) != KDR_OK)
-        return;
-    uint32_t id;
-    const int spawned = spawn_exact(b, &cbox[1], &ch[1], depth + 1, bad, &id);
-    build_exact(b, &cbox[0], &ch[0], depth + 1, bad);
-    set_above(b, idx, s->axis);
-    if (spawned)
-        push_link(b, id);
-    else
-        build_exact(b, &cbox[1], &ch[1], depth + 1, bad);
+    if (push_interior(b, s, &idx) == KDR_OK) {
+        uint32_t id;
+        const int spawned = spawn_exact(b, &cbox[1], &ch[1], depth + 1, bad, &id);
+        build_exact(b, &cbox[0], &ch[0], depth + 1, bad);
+        set_above(b, idx, s->axis);
+        if (spawned)
+            push_link(b, id);
+        else
+            build_exact(b, &cbox[1], &ch[1], depth + 1, bad);
+    }
+    b->stack_top = mark; /* the children's lists are dead */
+    free(own);
 }
 
 static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
@@ -304,10 +308,38 @@ static void build_binned(builder *b, const kdr_bounds *box, kd_prims *p,
     p->p = NULL;
 }
 
+/* The root's events on axis k, in triangle order (ev_add's, one axis):
+ * each root SORT task makes its own axis, so with threads the three are
+ * made in parallel. Returns their count. */
+static size_t root_axis_events(const builder *b, int k, int skip_degenerate,
+                               kd_event *out) {
+    size_t n = 0;
+    for (size_t i = 0; i < b->ntris; i++) {
+        const float *t = b->tris + 9 * i;
+        if (skip_degenerate && kd_tri_degenerate(t))
+            continue;
+        const float lo = min3(t[k], t[3 + k], t[6 + k]);
+        const float hi = max3(t[k], t[3 + k], t[6 + k]);
+        if (lo == hi) {
+            out[n++] = ev_make(lo, EV_PLANAR, (uint32_t)i);
+        } else {
+            out[n++] = ev_make(lo, EV_START, (uint32_t)i);
+            out[n++] = ev_make(hi, EV_END, (uint32_t)i);
+        }
+    }
+    return n;
+}
+
 void kd_run_task(builder *b, kd_task *t) {
     switch (t->kind) {
     case KD_TASK_SORT:
-        kd_radix_sort(t->ev.e[0], t->ev.e[1], t->ev.n[0]);
+        if (t->n_out) {
+            const size_t n = root_axis_events(b, t->axis, t->skip_degenerate, t->ev.e[0]);
+            kd_radix_sort_into(t->ev.e[0], t->ev.e[1], n);
+            *t->n_out = n;
+        } else {
+            kd_radix_sort(t->ev.e[0], t->ev.e[1], t->ev.n[0]);
+        }
         break;
     case KD_TASK_EXACT:
         b->frag = t->frag;
@@ -396,11 +428,13 @@ static void pad_root(kdr_scene *s) {
     s->diagonal = (float)sqrt(d2);
 }
 
-/* The root's sorted event lists (exact build from the root): made in
- * triangle order, each axis sorted on its own (SORT tasks, in parallel when
- * there are threads). The three lists and the three sorts' scratch are one
- * block (the root task's, freed when it is done): one allocation, in huge
- * pages (kd_scratch_alloc, kd_mem.c), instead of six fresh ones. */
+/* The root's sorted event lists (exact build from the root): three SORT
+ * tasks, each making one axis' events in triangle order and radix-sorting
+ * them (in parallel when there are threads). The block holds, per axis,
+ * the unsorted events and then the sorted ones (the sort's output, the
+ * lists of the root task), and is the root task's, freed when it is done:
+ * one allocation, in huge pages (kd_scratch_alloc, kd_mem.c), instead of
+ * six fresh ones. */
 static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev,
                        kd_event **block, kd_task sort[3]) {
     const size_t per = 2 * nvalid + 1;
@@ -410,25 +444,15 @@ static int root_events(const kdr_scene *s, size_t nvalid, ev_list *ev,
     *block = m;
     if (!m)
         return KDR_ENOMEM;
-    for (int k = 0; k < 3; k++)
-        ev->e[k] = m + (size_t)k * per;
-    for (size_t i = 0; i < s->ntris; i++) {
-        const float *t = s->tris + 9 * i;
-        if (kd_tri_degenerate(t))
-            continue;
-        kdr_bounds bb;
-        for (int k = 0; k < 3; k++) {
-            bb.min[k] = min3(t[k], t[3 + k], t[6 + k]);
-            bb.max[k] = max3(t[k], t[3 + k], t[6 + k]);
-        }
-        ev_add(ev->e, ev->n, &bb, (uint32_t)i);
-    }
     ev->ntri = nvalid;
     for (int k = 0; k < 3; k++) {
+        ev->e[k] = m + (size_t)(3 + k) * per;
         sort[k].kind = KD_TASK_SORT;
-        sort[k].ev.e[0] = ev->e[k];
-        sort[k].ev.n[0] = ev->n[k];
-        sort[k].ev.e[1] = m + (size_t)(3 + k) * per;
+        sort[k].axis = k;
+        sort[k].skip_degenerate = nvalid < s->ntris;
+        sort[k].n_out = &ev->n[k];
+        sort[k].ev.e[0] = m + (size_t)k * per;
+        sort[k].ev.e[1] = ev->e[k];
     }
     return KDR_OK;
 }

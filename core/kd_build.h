@@ -98,8 +98,9 @@ typedef struct builder {
                          handed to another worker (pool != NULL) */
     kd_pool *pool;    /* NULL: everything on this thread */
     uint8_t *side; /* per triangle, valid for the node being split */
-    kd_event *lvl[KD_MAX_DEPTH + 1]; /* children of a node at depth d */
-    size_t lvl_cap[KD_MAX_DEPTH + 1];
+    kd_event *stack; /* the children's lists of the nodes on the path
+                        being built, last split on top (kd_split_events) */
+    size_t stack_cap, stack_top; /* in events */
     uint32_t *both; /* straddlers of the node being split */
     size_t both_cap;
     kd_event *add; /* their new events */
@@ -180,6 +181,8 @@ void *kd_scratch_alloc(size_t bytes);
 
 /* LSD radix sort of n events by key (tmp holds n events). */
 void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n);
+/* The same, the sorted keys left in out (n events) and a clobbered. */
+void kd_radix_sort_into(kd_event *a, kd_event *out, size_t n);
 /* Sorts a few events (keys are unique); avx512: with kd_rank_sort_avx512. */
 void kd_sort_events(kd_event *a, size_t n, int avx512);
 /* Sorts n <= RANK_MAX events (keys unique): each one's place is the number
@@ -187,10 +190,20 @@ void kd_sort_events(kd_event *a, size_t n, int avx512);
 #define RANK_MAX 32
 void kd_rank_sort_avx512(kd_event *a, size_t n);
 /* Splits the node's event lists into its children's, ch[0] below and ch[1]
- * above the plane, in the scratch buffer of this depth. */
+ * above the plane, on top of the worker's stack (b->stack), or in a block
+ * of their own (*own, to free) when the stack is full. The caller pops
+ * them (b->stack_top back to its value before the call) once both
+ * children's subtrees are built. */
 int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
-                    const kdr_bounds *box, const kdr_bounds cbox[2], int depth,
-                    ev_list ch[2]);
+                    const kdr_bounds *box, const kdr_bounds cbox[2], ev_list ch[2],
+                    kd_event **own);
+
+/* Scratch of bytes above the top of the worker's stack, valid until the
+ * next push (nothing is pushed); NULL when the stack has no such room. */
+void *kd_stack_scratch(builder *b, size_t bytes);
+/* Makes an empty stack hold at least KD_STACK_SLACK * events (a task's
+ * first node, before anything is pushed); on failure it stays as it is. */
+void kd_stack_reserve(builder *b, size_t events);
 
 /* ---- kd_build_clip.c ---------------------------------------------------------- */
 
@@ -279,6 +292,11 @@ typedef struct kd_task {
     ev_list ev;      /* EXACT: lists in block; SORT: e[0], n[0] to sort,
                         e[1] room for n[0] more (the radix sort's) */
     kd_event *block; /* owned, freed when the task is done (may be NULL) */
+    int axis;        /* SORT of the root (n_out set): make the events of
+                        this axis from the triangles in e[0] first */
+    int skip_degenerate; /* ... testing each triangle (some are) */
+    size_t *n_out;   /* SORT of the root: receives the count; the sorted
+                        events go to e[1] */
     kd_frag *frag;   /* where BINNED and EXACT tasks write */
 } kd_task;
 

@@ -4,9 +4,9 @@
  * partitions each list into the children's in order, and only the
  * triangles that straddle the plane get new events, which are clipped
  * (kd_build_clip.c), sorted and merged in. This is what makes the build
- * O(N log N) (Wald and Havran 2006). The children's lists live in a
- * scratch buffer per depth: the build is depth-first, so a subtree only
- * ever writes the buffers below it. A side that gets new events has its
+ * O(N log N) (Wald and Havran 2006). The children's lists go on a stack
+ * per worker: the build is depth-first, so a subtree only ever writes
+ * above its own lists, and pops what it pushed. A side that gets new events has its
  * old ones partitioned into a buffer of their own first and merged into
  * place from there (from both ends at once).
  */
@@ -17,27 +17,45 @@
 #include "kd_build.h"
 
 /* LSD radix sort on bits 30..63 (position and type); stable, so events
- * generated in triangle order end up in full key order. */
-void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
+ * generated in triangle order end up in full key order. The three digits'
+ * counts come from one pass over the input, and the three scatter passes
+ * go a -> out -> a -> out, so the sorted keys land in out without a copy
+ * (the version before read the input once per digit for its counts and
+ * copied tmp back after every pass). */
+void kd_radix_sort_into(kd_event *a, kd_event *out, size_t n) {
     static const int shift[3] = {30, 41, 52};
-    static const int bits[3] = {11, 11, 12};
-    size_t count[1u << 12];
+    static const size_t nb[3] = {(size_t)1 << 11, (size_t)1 << 11, (size_t)1 << 12};
+    size_t count0[1u << 11], count1[1u << 11], count2[1u << 12];
+    size_t *count[3] = {count0, count1, count2};
+    memset(count0, 0, sizeof count0);
+    memset(count1, 0, sizeof count1);
+    memset(count2, 0, sizeof count2);
+    for (size_t i = 0; i < n; i++) {
+        const kd_event e = a[i];
+        count0[(e >> 30) & 0x7ff]++;
+        count1[(e >> 41) & 0x7ff]++;
+        count2[(e >> 52) & 0xfff]++;
+    }
+    kd_event *src = a, *dst = out;
     for (int pass = 0; pass < 3; pass++) {
-        const size_t nb = (size_t)1 << bits[pass];
-        const uint64_t mask = nb - 1;
-        memset(count, 0, nb * sizeof *count);
-        for (size_t i = 0; i < n; i++)
-            count[(a[i] >> shift[pass]) & mask]++;
-        size_t sum = 0;
-        for (size_t b = 0; b < nb; b++) {
-            size_t c = count[b];
-            count[b] = sum;
-            sum += c;
+        size_t *c = count[pass], sum = 0;
+        const uint64_t mask = nb[pass] - 1;
+        for (size_t b = 0; b < nb[pass]; b++) {
+            const size_t k = c[b];
+            c[b] = sum;
+            sum += k;
         }
         for (size_t i = 0; i < n; i++)
-            tmp[count[(a[i] >> shift[pass]) & mask]++] = a[i];
-        memcpy(a, tmp, n * sizeof *a);
+            dst[c[(src[i] >> shift[pass]) & mask]++] = src[i];
+        kd_event *t = src;
+        src = dst;
+        dst = t;
     }
+}
+
+void kd_radix_sort(kd_event *a, kd_event *tmp, size_t n) {
+    kd_radix_sort_into(a, tmp, n);
+    memcpy(a, tmp, n * sizeof *a);
 }
 
 /* ---- splitting the event lists ------------------------------------------------ */
@@ -231,12 +249,63 @@ static void partition(const kd_event *in, size_t n, const uint8_t *side,
     w[1] = w1;
 }
 
+/* Room for need events on top of the worker's stack. The stack is one
+ * block per worker, reused by every node and task it builds: the lists of
+ * the nodes on the current path are all it holds (a subtree only writes
+ * above its own lists), so its size is about the sum of the list sizes
+ * down one path. When need does not fit, an empty stack is reallocated
+ * (KD_STACK_SLACK times need: room for the path below); a non-empty one
+ * cannot move, so the node gets a block of its own (*own). (Until this,
+ * every depth had a buffer of its own, grown when a later node of that
+ * depth was bigger: haus' one-thread build made 15 allocations of at least
+ * 1 MiB, 36 MB in huge pages that the kernel zeroed, for about 8 MB of
+ * lists.) */
+static kd_event *stack_push(builder *b, size_t need, kd_event **own) {
+    *own = NULL;
+    if (b->stack_cap - b->stack_top >= need) {
+        kd_event *p = b->stack + b->stack_top;
+        b->stack_top += need;
+        return p;
+    }
+    if (b->stack_top == 0) {
+        free(b->stack);
+        b->stack_cap = 0;
+        const size_t cap = KD_STACK_SLACK * need;
+        b->stack = b->huge ? kd_scratch_alloc(cap * sizeof *b->stack)
+                           : malloc(cap * sizeof *b->stack);
+        if (!b->stack)
+            return NULL;
+        b->stack_cap = cap;
+        b->stack_top = need;
+        return b->stack;
+    }
+    *own = b->huge ? kd_scratch_alloc(need * sizeof **own)
+                   : malloc(need * sizeof **own);
+    return *own;
+}
+
+void *kd_stack_scratch(builder *b, size_t bytes) {
+    const size_t events = (bytes + sizeof(kd_event) - 1) / sizeof(kd_event);
+    return b->stack && b->stack_cap - b->stack_top >= events ? b->stack + b->stack_top
+                                                             : NULL;
+}
+
+void kd_stack_reserve(builder *b, size_t events) {
+    if (b->stack_top != 0 || b->stack_cap >= events)
+        return;
+    free(b->stack);
+    const size_t cap = KD_STACK_SLACK * events;
+    b->stack = b->huge ? kd_scratch_alloc(cap * sizeof *b->stack)
+                       : malloc(cap * sizeof *b->stack);
+    b->stack_cap = b->stack ? cap : 0;
+}
+
 /* Partitions the node's events into the two children (kept in order,
- * branch-free) and merges in the straddlers' new events. The children live
- * in this depth's scratch buffer: a subtree only writes deeper buffers. */
+ * branch-free) and merges in the straddlers' new events. The children go
+ * on top of the worker's stack (stack_push); the caller pops them. */
 int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
-                    const kdr_bounds *box, const kdr_bounds cbox[2], int depth,
-                    ev_list ch[2]) {
+                    const kdr_bounds *box, const kdr_bounds cbox[2], ev_list ch[2],
+                    kd_event **own) {
     size_t nleft;
     const size_t nboth = classify(b, ev, s, &nleft);
     if (nboth == (size_t)-1)
@@ -258,10 +327,23 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         need += 2 * ev->n[k] + nadd[k] + nadd[3 + k];
         most = ev->n[k] > most ? ev->n[k] : most;
     }
-    if (grow(b, (void **)&b->lvl[depth], &b->lvl_cap[depth], need, sizeof(kd_event)) ||
-        grow(b, (void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event)))
+    const size_t mark = b->stack_top;
+    kd_event *const start = stack_push(b, need, own);
+    if (!start)
         return KDR_ENOMEM;
-    kd_event *base = b->lvl[depth];
+    kd_event *base = start;
+    /* the old events wait above the children's lists while there is room
+     * (memory the path below touches anyway), else in a buffer of their own */
+    kd_event *oldbuf = kd_stack_scratch(b, 2 * (most + 2) * sizeof(kd_event));
+    if (!oldbuf) {
+        if (grow(b, (void **)&b->old, &b->old_cap, 2 * (most + 2), sizeof(kd_event))) {
+            b->stack_top = mark;
+            free(*own);
+            *own = NULL;
+            return KDR_ENOMEM;
+        }
+        oldbuf = b->old;
+    }
     for (int k = 0; k < 3; k++) {
         /* a side without new events gets its old ones in place; the others
          * in b->old (with sentinel slots), to be merged from there */
@@ -269,7 +351,7 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         for (int side = 0; side < 2; side++) {
             ch[side].e[k] = base;
             base += ev->n[k] + nadd[3 * side + k];
-            old[side] = nadd[3 * side + k] ? b->old + (size_t)side * (most + 2) + 1
+            old[side] = nadd[3 * side + k] ? oldbuf + (size_t)side * (most + 2) + 1
                                             : ch[side].e[k];
             w[side] = old[side];
         }
@@ -287,5 +369,9 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
     }
     ch[0].ntri = ntri[0];
     ch[1].ntri = ntri[1];
+    /* the stack keeps what the lists use (the last list's room beyond its
+     * events is free again) */
+    if (!*own)
+        b->stack_top = mark + (size_t)(ch[1].e[2] + ch[1].n[2] - start);
     return KDR_OK;
 }

@@ -171,8 +171,7 @@ static void discard(kd_task *t) {
 
 static void free_scratch(builder *b) {
     free(b->side);
-    for (int d = 0; d <= KD_MAX_DEPTH; d++)
-        free(b->lvl[d]);
+    free(b->stack);
     free(b->both);
     free(b->add);
     free(b->old);

@@ -117,7 +117,13 @@ int kd_find_split(builder *b, const kdr_bounds *box, const ev_list *ev,
     size_t need = ev->n[0];
     need = ev->n[1] > need ? ev->n[1] : need;
     need = ev->n[2] > need ? ev->n[2] : need;
-    if (need > b->groups_cap) {
+    /* the groups live above the top of the worker's stack when there is
+     * room (a task's first node sizes the stack for that); else in a
+     * buffer of their own */
+    kd_stack_reserve(b, 2 * (ev->n[0] + ev->n[1] + ev->n[2]));
+    size_t stride = need + KD_GROUP_PAD;
+    uint32_t *gm = kd_stack_scratch(b, 4 * stride * sizeof *gm);
+    if (!gm && need > b->groups_cap) {
         size_t cap = b->groups_cap ? b->groups_cap : 4096;
         while (cap < need)
             cap *= 2;
@@ -130,9 +136,11 @@ int kd_find_split(builder *b, const kdr_bounds *box, const ev_list *ev,
             return 0;
         }
     }
-    const size_t stride = b->groups_cap + KD_GROUP_PAD;
-    const kd_groups g = {b->groups, b->groups + stride, b->groups + 2 * stride,
-                         b->groups + 3 * stride};
+    if (!gm) {
+        gm = b->groups;
+        stride = b->groups_cap + KD_GROUP_PAD;
+    }
+    const kd_groups g = {gm, gm + stride, gm + 2 * stride, gm + 3 * stride};
     for (int k = 0; k < 3; k++)
         sweep_axis(box, b, ev, k, &g, best);
     return best->axis >= 0;

@@ -62,6 +62,14 @@
 /* Build scratch arrays (kd_scratch_alloc, kd_mem.c) of at least this many bytes go to
  * 2 MiB transparent huge pages. */
 #define KD_SCRATCH_HUGE_MIN ((size_t)1 << 20)
+/* A worker's stack of children's event lists (kd_build_events.c) is made
+ * this many times the first split's worst case: room for the lists down a
+ * path (haus needed more than 3; pages that are never touched cost
+ * nothing). A node that does not fit gets a block of its own instead.
+ * test_core_build_stack1 builds with 1, so that every path overflows. */
+#ifndef KD_STACK_SLACK
+#define KD_STACK_SLACK 8
+#endif
 
 /* ---- single rays (kd_traverse_single.c) ----------------------------------- */
 

@@ -37,6 +37,19 @@ add_test(NAME test_core_build COMMAND test_core_build)
 
 # The build's scratch memory: large arrays 2 MiB-aligned and advised for
 # transparent huge pages.
+# The same program with the event-list stack of kd_build_events.c made as
+# small as it can be (KD_STACK_SLACK 1): below each task's first split every
+# node overflows it and takes the block-of-its-own path, which must build
+# the same trees (the pinned digests). Only kd_build_events.c is compiled
+# differently; the linker takes it before the library's copy.
+add_executable(test_core_build_stack1 ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build.c
+               ${CMAKE_SOURCE_DIR}/core/kd_build_events.c)
+target_compile_definitions(test_core_build_stack1 PRIVATE KD_STACK_SLACK=1)
+target_link_libraries(test_core_build_stack1 PRIVATE kdray_core)
+add_test(NAME test_core_build_stack1 COMMAND test_core_build_stack1)
+# a stack mix-up may loop rather than crash: fail it in minutes, not ctest's default
+set_tests_properties(test_core_build_stack1 PROPERTIES TIMEOUT 300)
+
 add_executable(test_core_build_mem ${CMAKE_CURRENT_SOURCE_DIR}/test_core_build_mem.c)
 target_include_directories(test_core_build_mem PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
 target_link_libraries(test_core_build_mem PRIVATE kdray_core)
