@@ -176,8 +176,11 @@ static void encode_prefix(kdr_render_png_stream *st, double (*now)(void), int al
     uint32_t y0, y1, e0, e1;
     kdr_render_band_rows(st->p, st->next < st->nbands ? st->next : 0, &y0, &y1);
     kdr_render_band_rows(st->p, end ? end - 1 : 0, &e0, &e1);
-    if (!all && (end == st->next || (e1 - y0 < PNG_BATCH_ROWS && end < st->nbands)))
-        return;
+    /* near the end the batches shrink to what is still to come, so the
+     * last band's worker has few rows left to deflate while the others
+     * wait */
+    const uint32_t pending = e1 - y0, left = st->img->height - e1;
+    if (!all && (end == st->next || (pending < PNG_BATCH_ROWS && pending < left))) return;
     for (uint32_t y = y0; end > st->next && y < e1; y++)
         png_write_row(st->png, st->img->rgb + (size_t)y * stride);
     st->next = end;
