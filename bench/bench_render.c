@@ -12,7 +12,11 @@
  * CPU summed over the threads, each thread's share, and the tail: how long
  * the first thread to run out of bands waited for the last one. That line
  * is what tells a slow picture's causes apart (more CPU per band when two
- * run at once, an uneven split, or a long last band).
+ * run at once, an uneven split, or a long last band). It is printed for
+ * the PNG encoded after the bands ("png at end") and for the PNG streamed
+ * band by band as kdrayd does ("png stream": the workers deflate the done
+ * prefix as they go, render/kdr_png.c), the two alternated picture by
+ * picture in this one process, with the ratio of their median walls.
  *
  * Usage: kdray-bench-render [--width W] [--height H] [--samples S]
  *                           [--mode M] [--repeat N] [--threads N] SCENE.glb...
@@ -56,6 +60,7 @@ typedef struct par_job {
     size_t nbands;
     atomic_size_t next;
     atomic_int failed;
+    kdr_render_png_stream *png; /* NULL: the PNG after the bands */
 } par_job;
 
 typedef struct par_worker {
@@ -72,6 +77,8 @@ static void *par_main(void *arg) {
     for (size_t b; (b = atomic_fetch_add(&j->next, 1)) < j->nbands;) {
         if (kdr_render_band(j->scene, j->p, j->img, b, cpu_now, &w->st) != KDR_OK)
             atomic_store(&j->failed, 1);
+        else if (j->png)
+            kdr_render_png_stream_band(j->png, b, cpu_now);
         w->bands++;
     }
     w->cpu = cpu_now() - c0;
@@ -80,23 +87,27 @@ static void *par_main(void *arg) {
 }
 
 typedef struct par_run {
-    double wall, bands_wall, png, cpu, tail, cpu_min, cpu_max;
+    double wall, bands_wall, png, png_after, cpu, tail, cpu_min, cpu_max;
     size_t bands_min, bands_max;
 } par_run;
 
-/* One picture on `threads` threads; the PNG after the last band, as the
- * executor's encode runs on the thread that finished last. */
+/* One picture on `threads` threads; the PNG after the last band (on the
+ * thread that finished last, as the executor's encode), or streamed. */
 static int par_one(const kdr_scene *s, const kdr_render_params *p, int threads,
-                   par_run *r) {
+                   int stream, par_run *r) {
     kdr_render_image img;
     if (kdr_render_alloc(p, &img) != KDR_OK) return -1;
     par_job j = {.scene = s, .p = p, .img = &img, .nbands = kdr_render_band_count(p)};
+    const double t0 = wall_now();
+    if (stream && kdr_render_png_stream_open(p, &img, &j.png) != KDR_OK) {
+        kdr_render_free(&img);
+        return -1;
+    }
     atomic_init(&j.next, 0);
     atomic_init(&j.failed, 0);
     par_worker w[MAX_THREADS];
     pthread_t tid[MAX_THREADS];
     memset(w, 0, sizeof w);
-    const double t0 = wall_now();
     int started = 0;
     for (; started < threads; started++) {
         w[started].job = &j;
@@ -108,8 +119,11 @@ static int par_one(const kdr_scene *s, const kdr_render_params *p, int threads,
     unsigned char *png = NULL;
     size_t len, cap;
     const double c1 = cpu_now();
-    const int rc = kdr_render_png(&img, &png, &len, &cap);
-    r->png = cpu_now() - c1;
+    const int rc = j.png ? kdr_render_png_stream_close(j.png, cpu_now, &png, &len, &cap)
+                         : kdr_render_png(&img, &png, &len, &cap);
+    r->png_after = cpu_now() - c1;
+    r->png = j.png ? kdr_render_png_stream_cpu(j.png) : r->png_after;
+    kdr_render_png_stream_discard(j.png);
     r->wall = wall_now() - t0;
     r->bands_wall = t1 - t0;
     free(png);
@@ -243,24 +257,34 @@ int main(int argc, char **argv) {
                best.png * 1e3, best.one_call * 1e3,
                (unsigned long long)(best.st.shadow.rays_traced + best.st.ao_rays));
         if (threads > 1) {
-            /* median wall of --repeat pictures, and that picture's split */
-            par_run pr[64];
+            /* median wall of --repeat pictures each way, alternated */
+            par_run pr[2][64];
             const int n = repeat < 64 ? repeat : 64;
             for (int k = 0; k < n; k++)
-                if (par_one(s, &q, threads, &pr[k]) != 0) return 1;
-            for (int k = 1; k < n; k++) /* insertion sort by wall time */
-                for (int m = k; m > 0 && pr[m].wall < pr[m - 1].wall; m--) {
-                    par_run t = pr[m];
-                    pr[m] = pr[m - 1];
-                    pr[m - 1] = t;
-                }
-            const par_run *md = &pr[n / 2];
-            printf("  %d threads, median of %d: wall %.1f ms (bands %.1f, png %.1f), "
-                   "CPU %.1f ms summed (per thread %.1f-%.1f, %zu-%zu bands), "
-                   "tail %.1f ms; fastest wall %.1f ms\n",
-                   threads, n, md->wall * 1e3, md->bands_wall * 1e3, md->png * 1e3,
-                   md->cpu * 1e3, md->cpu_min * 1e3, md->cpu_max * 1e3, md->bands_min,
-                   md->bands_max, md->tail * 1e3, pr[0].wall * 1e3);
+                for (int m = 0; m < 2; m++)
+                    if (par_one(s, &q, threads, (k + m) % 2, &pr[(k + m) % 2][k]) != 0)
+                        return 1;
+            double med[2];
+            for (int v = 0; v < 2; v++) {
+                par_run *x = pr[v];
+                for (int k = 1; k < n; k++) /* insertion sort by wall time */
+                    for (int m = k; m > 0 && x[m].wall < x[m - 1].wall; m--) {
+                        par_run t = x[m];
+                        x[m] = x[m - 1];
+                        x[m - 1] = t;
+                    }
+                const par_run *md = &x[n / 2];
+                med[v] = md->wall;
+                printf("  %d threads, png %s, median of %d: wall %.1f ms (bands %.1f, "
+                       "png %.1f CPU, %.1f of it after the bands), "
+                       "CPU %.1f ms summed (per thread %.1f-%.1f, %zu-%zu bands), "
+                       "tail %.1f ms; fastest wall %.1f ms\n",
+                       threads, v ? "stream" : "at end", n, md->wall * 1e3,
+                       md->bands_wall * 1e3, md->png * 1e3, md->png_after * 1e3,
+                       md->cpu * 1e3, md->cpu_min * 1e3, md->cpu_max * 1e3, md->bands_min,
+                       md->bands_max, md->tail * 1e3, x[0].wall * 1e3);
+            }
+            printf("  median wall, png stream / png at end: %.3f\n", med[1] / med[0]);
         }
         kdr_scene_free(s);
         kdr_gltf_free(&g);

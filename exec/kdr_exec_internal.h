@@ -101,7 +101,8 @@ struct kdr_exec_job {
         struct {
             kdr_render_params p; /* framed */
             kdr_render_image img;
-            kdr_render_stats *stats; /* one per band, summed by encode */
+            kdr_render_stats *stats;    /* one per band, summed by encode */
+            kdr_render_png_stream *png; /* fed by each band as it ends */
         } render;
         struct {
             kdr_closest_request req;

@@ -3,7 +3,8 @@
  * charged, chunked, timed and stopped like every query. The "parse" frames
  * the caller's parameters on the scene (render/); a chunk is one band of
  * the image (primary rays, shadows or ao, shading: render/kdr_render.c);
- * the encode is the PNG. Pixels count as rays against the ray limit.
+ * the PNG is deflated by the workers as the bands end (render/kdr_png.c's
+ * stream), and the encode finishes it. Pixels count as rays against the ray limit.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdlib.h>
@@ -46,7 +47,9 @@ static int render_parse(kdr_exec_job *j) {
 static int render_alloc(kdr_exec_job *j) {
     j->k.render.stats = calloc(j->nchunks ? j->nchunks : 1, sizeof(kdr_render_stats));
     if (!j->k.render.stats) return KDR_ENOMEM;
-    return kdr_render_alloc(&j->k.render.p, &j->k.render.img);
+    int rc = kdr_render_alloc(&j->k.render.p, &j->k.render.img);
+    if (rc != KDR_OK) return rc;
+    return kdr_render_png_stream_open(&j->k.render.p, &j->k.render.img, &j->k.render.png);
 }
 
 /* Stages are timed in the worker's CPU time: on a shared machine a wall
@@ -58,8 +61,10 @@ static double thread_cpu_s(void) {
 }
 
 static void render_chunk(kdr_exec_job *j, size_t c) {
-    kdr_exec_note_rc(j, kdr_render_band(j->q->scene, &j->k.render.p, &j->k.render.img, c,
-                                        thread_cpu_s, &j->k.render.stats[c]));
+    int rc = kdr_render_band(j->q->scene, &j->k.render.p, &j->k.render.img, c,
+                             thread_cpu_s, &j->k.render.stats[c]);
+    kdr_exec_note_rc(j, rc);
+    if (rc == KDR_OK) kdr_render_png_stream_band(j->k.render.png, c, thread_cpu_s);
 }
 
 static int render_encode(kdr_exec_job *j) {
@@ -79,11 +84,10 @@ static int render_encode(kdr_exec_job *j) {
         sum->shadow_s += s->shadow_s;
         sum->shade_s += s->shade_s;
     }
-    double t0 = thread_cpu_s();
     unsigned char *png = NULL;
     size_t len = 0, cap = 0;
-    int rc = kdr_render_png(&j->k.render.img, &png, &len, &cap);
-    j->q->result.png_s = thread_cpu_s() - t0;
+    int rc = kdr_render_png_stream_close(j->k.render.png, thread_cpu_s, &png, &len, &cap);
+    j->q->result.png_s = kdr_render_png_stream_cpu(j->k.render.png);
     if (rc != KDR_OK) {
         kdr_exec_fail(j, 503, "out of memory while encoding the PNG");
         return -1;
@@ -95,6 +99,8 @@ static int render_encode(kdr_exec_job *j) {
 }
 
 static void render_release(kdr_exec_job *j) {
+    kdr_render_png_stream_discard(j->k.render.png);
+    j->k.render.png = NULL;
     kdr_render_free(&j->k.render.img);
     free(j->k.render.stats);
     j->k.render.stats = NULL;

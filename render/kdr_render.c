@@ -54,6 +54,17 @@ size_t kdr_render_band_count(const kdr_render_params *p) {
     return (tiles_y(p) + r - 1) / r;
 }
 
+void kdr_render_band_rows(const kdr_render_params *p, size_t band, uint32_t *y0,
+                          uint32_t *y1) {
+    const size_t rows = band_rows(p), ty = tiles_y(p);
+    const size_t r0 = band * rows < ty ? band * rows : ty;
+    const size_t r1 = r0 + rows < ty ? r0 + rows : ty;
+    *y0 = (uint32_t)(r0 * KDR_RENDER_TILE < p->cam.height ? r0 * KDR_RENDER_TILE
+                                                          : p->cam.height);
+    *y1 = (uint32_t)(r1 * KDR_RENDER_TILE < p->cam.height ? r1 * KDR_RENDER_TILE
+                                                          : p->cam.height);
+}
+
 static size_t pixels(const kdr_render_params *p) {
     return (size_t)p->cam.width * p->cam.height;
 }
@@ -433,10 +444,8 @@ int kdr_render_band(const kdr_scene *scene, const kdr_render_params *p,
     const size_t rows = band_rows(p), tx = tiles_x(p);
     const size_t r0 = band * rows, r1 = r0 + rows < tiles_y(p) ? r0 + rows : tiles_y(p);
     if (r0 >= r1) return KDR_EINVAL;
-    const uint32_t y0 = (uint32_t)(r0 * KDR_RENDER_TILE);
-    const uint32_t y1 =
-        (uint32_t)(r1 * KDR_RENDER_TILE < p->cam.height ? r1 * KDR_RENDER_TILE
-                                                        : p->cam.height);
+    uint32_t y0, y1;
+    kdr_render_band_rows(p, band, &y0, &y1);
     double t0 = now ? now() : 0;
     kdr_trav_stats ts = {0};
     int rc = kdr_frustum_trace(scene, &p->cam, KDR_RENDER_TILE, r0 * tx, (r1 - r0) * tx,

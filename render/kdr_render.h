@@ -36,11 +36,12 @@
 extern "C" {
 #endif
 
-#define KDR_RENDER_TILE 8u          /* frustum tile of the primary rays */
-#define KDR_RENDER_SHADOW_TILE 4u   /* shadow points go square by square */
-#define KDR_RENDER_SEED 1u          /* cone-shadow and ao sample seed */
-#define KDR_RENDER_EPSILON 1e-4f    /* shadow offset, times the scene diagonal
-                                       (KDR_OFFSET_DIAGONAL, a numeric
+#define KDR_RENDER_TILE 8u        /* frustum tile of the primary rays */
+#define KDR_RENDER_SHADOW_TILE 4u /* shadow points go square by square */
+#define KDR_RENDER_SEED 1u        /* cone-shadow and ao sample seed */
+#define KDR_RENDER_EPSILON                                                               \
+    1e-4f                           /* shadow offset, times the scene diagonal           \
+                                       (KDR_OFFSET_DIAGONAL, a numeric                   \
                                        "epsilon" in the API) */
 #define KDR_RENDER_MAX_SAMPLES 4096 /* as the cone-shadow query */
 #define KDR_RENDER_MAX_SIDE 16384   /* width and height, as the frustum query */
@@ -123,6 +124,9 @@ void kdr_render_free(kdr_render_image *img);
 /* Bands: whole rows of primary tiles, about KDR_RENDER_BAND_PIXELS each. */
 #define KDR_RENDER_BAND_PIXELS 8192u
 size_t kdr_render_band_count(const kdr_render_params *p);
+/* The pixel rows [*y0, *y1) of band b (b < kdr_render_band_count). */
+void kdr_render_band_rows(const kdr_render_params *p, size_t band, uint32_t *y0,
+                          uint32_t *y1);
 /* Renders band b (primary, shadow or ao, shade). now() times the stages
  * (seconds on any clock, e.g. the thread's CPU time; NULL: not timed).
  * KDR_OK or a core error. */
@@ -134,6 +138,26 @@ int kdr_render_band(const kdr_scene *scene, const kdr_render_params *p,
  * into *out (malloc'd, *len bytes). KDR_OK or KDR_ENOMEM. */
 int kdr_render_png(const kdr_render_image *img, unsigned char **out, size_t *len,
                    size_t *cap);
+
+/* The same PNG (the same bytes) as a stream, encoded while the bands are
+ * still being rendered: open before the first band; after each band call
+ * kdr_render_png_stream_band from the thread that rendered it (any number
+ * of threads at once: the worker that gets the encoder deflates the done
+ * prefix of bands, the others return at once); close once every band is
+ * done (it encodes what is left and hands over the bytes, KDR_OK, KDR_ENOMEM,
+ * or KDR_EINVAL when a band was never marked done); then discard, which
+ * also ends a stream that is never closed. now() times the encoding
+ * (NULL: not timed); kdr_render_png_stream_cpu sums it over threads. The
+ * stream reads p and img's rgb and keeps pointers to both. */
+typedef struct kdr_render_png_stream kdr_render_png_stream;
+int kdr_render_png_stream_open(const kdr_render_params *p, const kdr_render_image *img,
+                               kdr_render_png_stream **out);
+void kdr_render_png_stream_band(kdr_render_png_stream *st, size_t band,
+                                double (*now)(void));
+int kdr_render_png_stream_close(kdr_render_png_stream *st, double (*now)(void),
+                                unsigned char **out, size_t *len, size_t *cap);
+double kdr_render_png_stream_cpu(const kdr_render_png_stream *st);
+void kdr_render_png_stream_discard(kdr_render_png_stream *st);
 
 const char *kdr_render_mode_name(kdr_render_mode m);
 
