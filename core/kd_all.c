@@ -172,14 +172,7 @@ static void all_chunk(const kdr_scene *scene, const kdr_ray_batch *batch, size_t
         uint32_t nh = 0;
         all_batch_ray(batch, i, &r);
         kdr_intersect_all1(scene, &r, max_hits, local, &nh, stats);
-        out->nhits[i] = nh;
-        const size_t base = i * (size_t)max_hits;
-        for (uint32_t k = 0; k < nh; k++) {
-            out->t[base + k] = local[k].t;
-            out->prim[base + k] = local[k].prim;
-            out->u[base + k] = local[k].u;
-            out->v[base + k] = local[k].v;
-        }
+        all_put_list(out, i, max_hits, local, nh);
     }
 }
 

@@ -243,6 +243,34 @@ static void add_stats(kdr_trav_stats *st, const all_sink *s) {
     st->tri_tests += s->tests;
 }
 
+/* Ray i's list of nh hits into out (slots i * max_hits on). */
+static inline void all_put_list(kdr_all_hits *out, size_t i, uint32_t max_hits,
+                                const kdr_hit *h, uint32_t nh) {
+    out->nhits[i] = nh;
+    const size_t base = i * (size_t)max_hits;
+    for (uint32_t k = 0; k < nh; k++) {
+        out->t[base + k] = h[k].t;
+        out->prim[base + k] = h[k].prim;
+        out->u[base + k] = h[k].u;
+        out->v[base + k] = h[k].v;
+    }
+}
+
+/* A batch walk's answer for ray i from its sink: the list into out, or
+ * (max_hits 0) the count into counts (0, and KDR_ENOMEM into *rc, when the
+ * sink ran out of memory); adds the sink's work to stats. */
+static inline void all_answer(all_sink *s, size_t i, uint32_t max_hits, kdr_all_hits *out,
+                              uint32_t *counts, kdr_trav_stats *stats, int *rc) {
+    add_stats(stats, s);
+    if (!max_hits) {
+        const uint32_t d = all_distinct(s);
+        if (s->oom) *rc = KDR_ENOMEM;
+        counts[i] = s->oom ? 0 : d;
+        return;
+    }
+    all_put_list(out, i, max_hits, s->hits, s->n);
+}
+
 /* The ray i of a batch (kd_batch.c reads batches the same way). */
 static void all_batch_ray(const kdr_ray_batch *b, size_t i, kdr_ray *r) {
     const float *o = b->org + (b->org_stride ? 3 * i : 0);

@@ -69,25 +69,9 @@ typedef struct kl_src {
     int avx2, rc;
 } kl_src;
 
-/* Writes lane l's answer and its stats (kd_all_stream.c's ka_finish). */
+/* Writes lane l's answer and its stats. */
 static void kl_finish(kl_src *c, kl_lane *l) {
-    add_stats(c->stats, &l->s);
-    const size_t i = l->id;
-    if (!c->max_hits) {
-        const uint32_t d = all_distinct(&l->s);
-        if (l->s.oom) c->rc = KDR_ENOMEM;
-        c->counts[i] = l->s.oom ? 0 : d;
-        return;
-    }
-    const uint32_t nh = l->s.n;
-    c->out->nhits[i] = nh;
-    const size_t base = i * (size_t)c->max_hits;
-    for (uint32_t k = 0; k < nh; k++) {
-        c->out->t[base + k] = l->s.hits[k].t;
-        c->out->prim[base + k] = l->s.hits[k].prim;
-        c->out->u[base + k] = l->s.hits[k].u;
-        c->out->v[base + k] = l->s.hits[k].v;
-    }
+    all_answer(&l->s, l->id, c->max_hits, c->out, c->counts, c->stats, &c->rc);
 }
 
 /* Puts the batch's next traceable ray into lane j (rays that cannot be
@@ -132,12 +116,9 @@ KD_AVX512 __attribute__((noinline)) static int kl_fill(kl_src *c, kl_lanes *w, i
  * starts at or before kd_term_bound(bound), i.e. the ray is done. */
 KD_AVX512 static inline int kl_pop(kl_lanes *w, int j, const int32_t *spv) {
     const unsigned bit = 1u << j;
-    const float bound = kd_term_bound(w->lane[j].s.bound);
-    int sp = spv[j];
-    do {
-        if (sp == 0) return 0;
-        --sp;
-    } while (!(w->stk_tn[sp][j] <= bound));
+    const int sp =
+        kd_lane_pop_depth(&w->stk_tn[0][0], KL_W, j, spv[j], kd_term_bound(w->lane[j].s.bound));
+    if (sp < 0) return 0;
     w->node = i16_put(w->node, bit, w->stk_node[sp][j]);
     w->tn = f16_put(w->tn, bit, w->stk_tn[sp][j]);
     w->tf = f16_put(w->tf, bit, w->stk_tf[sp][j]);

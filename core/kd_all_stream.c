@@ -58,23 +58,7 @@ typedef struct ka_src {
 
 /* Writes slot k's answer and its stats. */
 static void ka_finish(ka_src *c, ka_ray *r) {
-    add_stats(c->stats, &r->s);
-    const size_t i = r->id;
-    if (!c->max_hits) {
-        const uint32_t d = all_distinct(&r->s);
-        if (r->s.oom) c->rc = KDR_ENOMEM;
-        c->counts[i] = r->s.oom ? 0 : d;
-        return;
-    }
-    const uint32_t nh = r->s.n;
-    c->out->nhits[i] = nh;
-    const size_t base = i * (size_t)c->max_hits;
-    for (uint32_t k = 0; k < nh; k++) {
-        c->out->t[base + k] = r->s.hits[k].t;
-        c->out->prim[base + k] = r->s.hits[k].prim;
-        c->out->u[base + k] = r->s.hits[k].u;
-        c->out->v[base + k] = r->s.hits[k].v;
-    }
+    all_answer(&r->s, r->id, c->max_hits, c->out, c->counts, c->stats, &c->rc);
 }
 
 /* Takes ray id into slot k; returns 0 (answer written) when the ray cannot
