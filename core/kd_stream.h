@@ -44,6 +44,19 @@ void kd_stream_trace16(const kdr_scene *s, const kdr_ray_batch *b, const size_t 
  * path with it). */
 #define KD_STREAM_STAGE 1
 
+/* The interleaved walks' pop for lane j (walk()'s pop): the depth below
+ * sp of the deepest stacked entry whose start stk_tn[depth * width + j] is
+ * at or before bound, or -1 when there is none (the ray is done). The
+ * stacks are [depth][width] arrays in lane columns. */
+static inline int kd_lane_pop_depth(const float *stk_tn, int width, int j, int sp,
+                                    float bound) {
+    do {
+        if (sp == 0) return -1;
+        --sp;
+    } while (!(stk_tn[sp * width + j] <= bound));
+    return sp;
+}
+
 /* 1 if the CPU (and OS) run AVX-512 F, DQ, BW and VL code. */
 int kd_cpu_has_avx512(void);
 

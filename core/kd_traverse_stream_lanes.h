@@ -152,12 +152,9 @@ KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
  * starts at or before kd_term_bound(best t), i.e. the ray is done. */
 KD_FN int KD_WN(ks_pop)(KD_WN(ks_lanes) * w, int j, const int32_t *spv) {
     const unsigned bit = (unsigned)(1u << j);
-    const float bound = kd_term_bound(w->lane[j].o.t);
-    int sp = spv[j];
-    do {
-        if (sp == 0) return 0;
-        --sp;
-    } while (!(w->stk_tn[sp][j] <= bound));
+    const int sp =
+        kd_lane_pop_depth(&w->stk_tn[0][0], KD_W, j, spv[j], kd_term_bound(w->lane[j].o.t));
+    if (sp < 0) return 0;
     w->node = IV(put)(w->node, bit, w->stk_node[sp][j]);
     w->tn = V(put)(w->tn, bit, w->stk_tn[sp][j]);
     w->tf = V(put)(w->tf, bit, w->stk_tf[sp][j]);
