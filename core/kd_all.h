@@ -4,7 +4,9 @@
  * interleaved walk of a batch (kd_all_stream.c, kdr_all_batch /
  * kdr_count_batch): the to-do entry, where accepted hits go (the sink: a
  * sorted, prim-unique list for "all", a growing list of prims for "count"),
- * a leaf's test (1, 4 or 8 references at a time) and the ray's set-up. Both
+ * a leaf's test (1, 4 or 8 references at a time; on scenes of many
+ * references per triangle first filtered by the ray's mailbox of prims it
+ * tested already) and the ray's set-up. Both
  * walks call exactly these, so their answers are the same bits. Internal
  * to core/.
  */
@@ -26,6 +28,17 @@
 /* Leaves of at least this many references are tested eight at a time on
  * AVX2 CPUs (one call where two groups of four cost more). */
 #define KD_ALL_LEAF8_MIN 5
+/* The per-ray mailbox of tested prims (direct-mapped by prim's low bits;
+ * a power of two), and the longest leaf it filters (longer ones are tested
+ * whole: the filtered list lives on the stack). */
+#define KD_ALL_MBOX_SLOTS 64
+#define KD_ALL_MBOX_LEAF 64
+/* Walks use the mailbox on scenes of at least KD_ALL_MBOX_REFS_NUM /
+ * KD_ALL_MBOX_REFS_DEN references per triangle, where repeated tests are
+ * common enough to pay for it (docs/TRAVERSAL.md, round 6: haus 3.28 and
+ * engine9 2.93 gained, 2CylinderEngine 2.39 even, duck 2.16 lost). */
+#define KD_ALL_MBOX_REFS_NUM 5
+#define KD_ALL_MBOX_REFS_DEN 2
 
 /* Where accepted hits go: a sorted, prim-unique list of at most cap hits
  * (all), or a growing list of prims (count). */
@@ -37,7 +50,18 @@ typedef struct all_sink {
     int heap, oom;
     float bound; /* triangle tests use [tmin, bound] */
     uint64_t nodes, tests;
+    /* the ray's mailbox, KD_ALL_MBOX_SLOTS entries (all_mbox_start), or
+     * NULL: none. Entry prim % KD_ALL_MBOX_SLOTS holds prim + 1 of the last
+     * prim tested there (0: none). */
+    uint32_t *mbox;
 } all_sink;
+
+/* Gives the sink the mailbox mb, emptied (the walk's own storage, once
+ * per ray, on scenes where all_use_mbox or KD_ALL_MBOX says so). */
+static inline void all_mbox_start(all_sink *s, uint32_t *mb) {
+    memset(mb, 0, KD_ALL_MBOX_SLOTS * sizeof *mb);
+    s->mbox = mb;
+}
 
 /* all: inserts (t, prim) unless it is already held or cannot be among the
  * first cap hits. The walk goes front to back, so a new hit mostly
@@ -157,14 +181,35 @@ test_leaf8(const kdr_scene *sc, const uint32_t *ref, uint32_t count,
  * KD_ALL_LEAF8_MIN references eight at a time (test_leaf8), of at least
  * KD_LEAF_SIMD_MIN four at a time, smaller ones one by one. prefetch:
  * request the leaf's triangles first (sc->prefetch_leaves; 0 where a
- * staged walk requested them already). */
+ * staged walk requested them already). With a mailbox (s->mbox) the
+ * references whose prim it holds are dropped first; s->tests counts the
+ * tests made. */
 static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *pre,
                       const kd_ntri_pre4 *pre4, int avx2, float tmin, all_sink *s,
                       int prefetch) {
     const uint32_t *ref = sc->refs + n->u.first;
-    const uint32_t count = kd_count(n);
-    s->tests += count;
+    uint32_t count = kd_count(n);
     if (prefetch) kd_prefetch_tris(sc, ref, count);
+    /* Each triangle once per ray: references whose prim the mailbox says
+     * this ray tested already (in an earlier leaf: a triangle straddling
+     * several) are dropped. Exact: the test depends only on the ray, the
+     * triangle, tmin and the bound, and the bound only shrinks, so the
+     * dropped test would be rejected or found again in the sink as the
+     * same hit (keep_all's duplicate, a count's repeated prim). */
+    uint32_t fresh[KD_ALL_MBOX_LEAF];
+    if (s->mbox && count <= KD_ALL_MBOX_LEAF) {
+        uint32_t m = 0;
+        for (uint32_t i = 0; i < count; i++) {
+            const uint32_t p = ref[i];
+            uint32_t *slot = &s->mbox[p & (KD_ALL_MBOX_SLOTS - 1)];
+            fresh[m] = p;
+            m += *slot != p + 1;
+            *slot = p + 1;
+        }
+        ref = fresh;
+        count = m;
+    }
+    s->tests += count;
     if (avx2 && count >= KD_ALL_LEAF8_MIN) {
         test_leaf8(sc, ref, count, pre, pre4, tmin, s);
         return;
@@ -181,6 +226,11 @@ static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *p
                              &v))
             keep(s, t, prim, u, v);
     }
+}
+
+/* Whether walks on sc use the sink's mailbox (test_leaf's mbox). */
+static inline int all_use_mbox(const kdr_scene *sc) {
+    return KD_ALL_MBOX_REFS_DEN * sc->nrefs >= KD_ALL_MBOX_REFS_NUM * sc->ntris;
 }
 
 /* The ray's set-up as kd_all.c's walk() writes it out (the single-ray

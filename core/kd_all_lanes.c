@@ -39,6 +39,7 @@ typedef struct kl_lane {
     kd_ray_pre pre;
     kd_ntri_pre4 pre4;
     all_sink s;
+    uint32_t mb[KD_ALL_MBOX_SLOTS];  /* its mailbox, when c->mbox */
     uint32_t local[KD_COUNT_STACK]; /* a count's first prims */
 } kl_lane;
 
@@ -66,7 +67,7 @@ typedef struct kl_src {
     uint32_t *counts;
     kdr_trav_stats *stats;
     unsigned stage; /* every lane when leaves are staged */
-    int avx2, rc;
+    int avx2, mbox, rc;
 } kl_src;
 
 /* Writes lane l's answer and its stats. */
@@ -90,6 +91,7 @@ KD_AVX512 __attribute__((noinline)) static int kl_fill(kl_src *c, kl_lanes *w, i
                               .bound = ray.tmax};
         else
             l->s = (all_sink){.prims = l->local, .pcap = KD_COUNT_STACK, .bound = ray.tmax};
+        if (c->mbox) all_mbox_start(&l->s, l->mb);
         float inv[3], ss[3], tn, tf;
         if (!all_setup(c->sc, &ray, inv, ss, &tn, &tf, &l->pre, &l->pre4)) {
             kl_finish(c, l);
@@ -233,8 +235,19 @@ KD_AVX512 int kd_all_lanes16(const kdr_scene *sc, const kdr_ray_batch *b, size_t
                              kdr_all_hits *out, uint32_t *counts, int flags,
                              kdr_trav_stats *stats) {
     const int stage = (flags & KD_ALL_STAGE) || sc->stats.bytes >= KD_STREAM_STAGE_MIN_BYTES;
-    kl_src c = {sc,   b,     first, first + count, max_hits, buf, out, counts, stats,
-                stage ? KL_ALL : 0u, __builtin_cpu_supports("avx2") ? 1 : 0, KDR_OK};
+    kl_src c = {sc,
+                b,
+                first,
+                first + count,
+                max_hits,
+                buf,
+                out,
+                counts,
+                stats,
+                stage ? KL_ALL : 0u,
+                __builtin_cpu_supports("avx2") ? 1 : 0,
+                (flags & KD_ALL_MBOX) || all_use_mbox(sc),
+                KDR_OK};
     kl_lanes w;
     w.node = w.sp = w.visits = i16_set1(0);
     w.tn = w.tf = f16_set1(0.0f);

@@ -41,6 +41,7 @@ typedef struct ka_ray {
     kd_ray_pre pre;
     kd_ntri_pre4 pre4;
     all_sink s;
+    uint32_t mb[KD_ALL_MBOX_SLOTS]; /* its mailbox, when c->mbox */
     uint32_t local[KD_COUNT_STACK];
     kd_todo stack[KD_MAX_DEPTH];
 } ka_ray;
@@ -53,7 +54,7 @@ typedef struct ka_src {
     kdr_all_hits *out;
     uint32_t *counts;
     kdr_trav_stats *stats;
-    int stage, avx2, rc;
+    int stage, avx2, mbox, rc;
 } ka_src;
 
 /* Writes slot k's answer and its stats. */
@@ -73,6 +74,7 @@ static int ka_start(ka_src *c, ka_ray *r, int k, size_t id) {
                           .bound = ray.tmax};
     else
         r->s = (all_sink){.prims = r->local, .pcap = KD_COUNT_STACK, .bound = ray.tmax};
+    if (c->mbox) all_mbox_start(&r->s, r->mb);
     if (!all_setup(c->sc, &ray, r->inv, r->ss, &r->tn, &r->tf, &r->pre, &r->pre4)) {
         ka_finish(c, r);
         return 0;
@@ -135,7 +137,7 @@ int kd_all_stream(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
                   uint32_t *counts, int flags, kdr_trav_stats *stats) {
     if (!(flags & KD_ALL_SCALAR) && kd_cpu_has_avx512())
         return kd_all_lanes16(sc, b, first, count, max_hits, buf, out, counts,
-                              flags & KD_ALL_STAGE, stats);
+                              flags & (KD_ALL_STAGE | KD_ALL_MBOX), stats);
     ka_ray slot[KD_ALL_RAYS];
     int live_slot[KD_ALL_RAYS];
     ka_src c = {sc,
@@ -147,6 +149,7 @@ int kd_all_stream(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
                 stats,
                 (flags & KD_ALL_STAGE) || sc->stats.bytes >= KD_STREAM_STAGE_MIN_BYTES,
                 __builtin_cpu_supports("avx2") ? 1 : 0,
+                (flags & KD_ALL_MBOX) || all_use_mbox(sc),
                 KDR_OK};
     size_t next = first;
     const size_t end = first + count;

@@ -31,6 +31,10 @@
 /* kd_all_stream takes its scalar form even on AVX-512 CPUs (tests compare
  * both forms with the one-ray walk). */
 #define KD_ALL_SCALAR 2
+/* The walk drops tests the ray's mailbox says it made already (kd_all.h,
+ * test_leaf's mbox) whatever the scene's references per triangle
+ * (all_use_mbox decides otherwise; tests put every scene through it). */
+#define KD_ALL_MBOX 4
 /* kdr_all_batch and kdr_count_batch stage leaves (KD_ALL_STAGE) on scenes
  * of at least this many bytes: staged against not, scattered chunks
  * (bench/ab, sets ball and bcount, --rays 32768 --rounds 5, B/A median):
@@ -46,8 +50,9 @@
  * (arguments checked by the caller): with max_hits > 0 each ray's hits, as
  * kdr_intersect_all1 finds them, into out (buf: KD_ALL_RAYS * max_hits
  * entries of scratch); else each ray's count, as kdr_count1 finds it, into
- * counts[i]. Stats as the one-ray calls sum them. flags: KD_ALL_STAGE,
- * KD_ALL_SCALAR, both or 0. On AVX-512 CPUs, unless flags has KD_ALL_SCALAR,
+ * counts[i]. Stats as the one-ray calls sum them (with KD_ALL_MBOX on a
+ * scene where all_use_mbox says no, fewer triangle tests). flags: any of
+ * KD_ALL_STAGE, KD_ALL_SCALAR, KD_ALL_MBOX, or 0. On AVX-512 CPUs, unless flags has KD_ALL_SCALAR,
  * the node steps run in the lanes of kd_all_lanes16 (kd_all_lanes.c), else
  * one ray at a time in turn (kd_all_stream.c). Returns KDR_OK, or
  * KDR_ENOMEM when a count's list could not grow (that ray's count is 0;
@@ -55,7 +60,7 @@
 int kd_all_stream(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
                   size_t count, uint32_t max_hits, kdr_hit *buf, kdr_all_hits *out,
                   uint32_t *counts, int flags, kdr_trav_stats *stats);
-/* The lanes form, same contract (flags: KD_ALL_STAGE or 0); only after
+/* The lanes form, same contract (flags: KD_ALL_STAGE, KD_ALL_MBOX); only after
  * kd_cpu_has_avx512() said yes. */
 int kd_all_lanes16(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
                    size_t count, uint32_t max_hits, kdr_hit *buf, kdr_all_hits *out,
