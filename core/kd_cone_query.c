@@ -266,9 +266,14 @@ static int trace_run(const kdr_scene *scene, const kdr_shadow_query *q, size_t j
         const size_t slot = point_at(ws, j0 + sel[j]) * q->nlights + l;
         if (!lit_group && !kd_walk_pays(q->samples, fr[sel[j]].sin_a, ws->policy))
             rc = unwalked_add(scene, &fr[sel[j]], q->samples, slot, u, visibility, ws);
-        else
+        else {
+            int deferred = 0;
             rc = kd_pair_visibility(scene, &fr[sel[j]], q->samples, ws, &ws->lights[l],
-                                    g == GROUP_LIST ? &ws->gl : NULL, &visibility[slot]);
+                                    g == GROUP_LIST ? &ws->gl : NULL, &visibility[slot],
+                                    &deferred);
+            if (rc == KDR_OK && deferred)
+                rc = unwalked_add(scene, &fr[sel[j]], q->samples, slot, u, visibility, ws);
+        }
     }
     return rc;
 }
@@ -321,7 +326,7 @@ static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q, size_
                 rc = kd_pair_visibility_rays(scene, &f, q->samples, ws, vis);
             } else if (rc == KDR_OK) {
                 rc = kd_pair_visibility(scene, &f, q->samples, ws, &ws->lights[l], NULL,
-                                        vis);
+                                        vis, NULL);
             }
             if (rc != KDR_OK)
                 return rc;
