@@ -83,7 +83,8 @@ typedef struct bench_section {
 } bench_section;
 
 extern const bench_section bench_core_section, bench_bundle_section,
-    bench_frustum_section, bench_cone_section, bench_queries_section;
+    bench_frustum_section, bench_cone_section, bench_cone_split_section,
+    bench_queries_section;
 
 /* Parses the flags above; runs the selected sections on every selected
  * scene; prints the summary CSV. Returns the process exit code (nonzero if

@@ -27,6 +27,7 @@
 #include <string.h>
 
 #include "bench.h"
+#include "kd_cone.h" /* kd_shadow_trace_policy: cone_split's forced walks */
 #include "rival.h"
 
 /* The contract's default offset ("auto", API v1.1); CONE_OFFSET
@@ -398,3 +399,159 @@ static void cone_finish(const bench_opts *o) {
 }
 
 const bench_section bench_cone_section = {"cone", cone_run, cone_finish};
+
+/* ---- where the time goes (section "cone_split") ------------------------------- */
+
+/* The same points, lights and samples as "cone", broken down (issue 12,
+ * item 1): the share of points lit / in umbra / in penumbra (kd_rays'
+ * answers at that sample count), what one sample costs the single-ray walk
+ * (nodes and triangle tests, from kdr_occluded1's counters, by class), and
+ * the query under each walk policy: the daemon's (auto), no walks (every
+ * sample to the any-hit bundles) and forced walks, timed (CPU, best of
+ * --repeat rounds of at least SPLIT_MIN_MS) with rays traced and nodes per
+ * point; then each point alone under a forced walk (no light state carried
+ * from its neighbours), to see what a walk decides in each class. Every
+ * policy's answers must equal kd_rays' (bench_fail otherwise). No Embree:
+ * its per-sample time is the "cone" section's table. */
+
+#define SPLIT_MIN_MS 60.0
+
+enum { CLS_LIT, CLS_UMBRA, CLS_PEN, CLS_N };
+static const char *const cls_name[CLS_N] = {"lit", "umbra", "penumbra"};
+
+static int cls_of(float v) { return v == 1.0f ? CLS_LIT : v == 0.0f ? CLS_UMBRA : CLS_PEN; }
+
+typedef struct split_row {
+    double ms;
+    kdr_shadow_stats st;
+} split_row;
+
+/* Times kd_shadow_trace_policy over every point (best round); its stats
+ * from one more untimed call; its answers compared with ref. */
+static int split_policy(const bench_scene *s, const kdr_shadow_query *q, kdr_shadow_mode mode,
+                        kd_walk_policy pol, int repeat, const float *ref, float *vis,
+                        split_row *row) {
+    row->ms = INFINITY;
+    for (int r = 0; r < repeat; r++) {
+        const double t0 = bench_cpu_ms();
+        int calls = 0;
+        do {
+            if (kd_shadow_trace_policy(s->kd, q, 0, q->n, mode, pol, vis, NULL))
+                return -1;
+            calls++;
+        } while (bench_cpu_ms() - t0 < SPLIT_MIN_MS);
+        row->ms = fmin(row->ms, (bench_cpu_ms() - t0) / calls);
+    }
+    memset(&row->st, 0, sizeof row->st);
+    if (kd_shadow_trace_policy(s->kd, q, 0, q->n, mode, pol, vis, &row->st))
+        return -1;
+    if (ref && memcmp(vis, ref, q->n * sizeof *vis)) {
+        bench_fail("%s cone_split %u spp: walk policy %d differs from kd_rays", s->name,
+                   q->samples, (int)pol);
+        return -1;
+    }
+    return 0;
+}
+
+static int split_count(const bench_scene *s, kdr_shadow_query *q, const bench_opts *o,
+                       float *ref, float *vis) {
+    const size_t n = q->n;
+    split_row rays, rows[3];
+    if (split_policy(s, q, KDR_SHADOW_RAYS, KD_WALK_AUTO, o->repeat, NULL, ref, &rays))
+        return -1;
+    size_t npts[CLS_N] = {0};
+    uint64_t nodes[CLS_N] = {0}, tests[CLS_N] = {0};
+    for (size_t i = 0; i < n; i++) { /* the single-ray walk's work per sample */
+        const int c = cls_of(ref[i]);
+        npts[c]++;
+        for (uint32_t k = 0; k < q->samples; k++) {
+            kdr_ray r;
+            kdr_trav_stats ts = {0};
+            if (kdr_shadow_ray(s->kd, q, i, 0, k, &r))
+                return -1;
+            kdr_occluded1(s->kd, &r, &ts);
+            nodes[c] += ts.nodes_visited;
+            tests[c] += ts.tri_tests;
+        }
+    }
+    static const kd_walk_policy pols[3] = {KD_WALK_AUTO, KD_WALK_NEVER, KD_WALK_ALWAYS};
+    static const char *const pname[3] = {"auto", "never", "always"};
+    for (int p = 0; p < 3; p++)
+        if (split_policy(s, q, KDR_SHADOW_CONE, pols[p], o->repeat, ref, vis, &rows[p]))
+            return -1;
+    printf("\n%u spp, %zu points: lit %.1f%%, umbra %.1f%%, penumbra %.1f%% (kd_rays' "
+           "answers); kd_rays %.3f ms\n",
+           q->samples, n, 100.0 * npts[CLS_LIT] / n, 100.0 * npts[CLS_UMBRA] / n,
+           100.0 * npts[CLS_PEN] / n, rays.ms);
+    for (int c = 0; c < CLS_N; c++)
+        if (npts[c])
+            printf("  single-ray walk per sample, %-8s points: %6.1f nodes %6.1f "
+                   "triangle tests\n",
+                   cls_name[c], (double)nodes[c] / (npts[c] * (double)q->samples),
+                   (double)tests[c] / (npts[c] * (double)q->samples));
+    printf("  %-8s %9s %9s %12s %12s %9s\n", "policy", "ms", "x auto", "rays/point",
+           "nodes/point", "decided");
+    for (int p = 0; p < 3; p++)
+        printf("  %-8s %9.3f %8.2fx %12.1f %12.1f %8.1f%%\n", pname[p], rows[p].ms,
+               rows[0].ms / rows[p].ms, (double)rows[p].st.rays_traced / n,
+               (double)rows[p].st.nodes_visited / n,
+               100.0 * (double)rows[p].st.cones_decided / n);
+    /* each point alone, forced to walk: what the walk decides per class */
+    size_t dec[CLS_N] = {0};
+    uint64_t traced[CLS_N] = {0}, walked[CLS_N] = {0};
+    for (size_t i = 0; i < n; i++) {
+        kdr_shadow_stats st = {0};
+        if (kd_shadow_trace_policy(s->kd, q, i, 1, KDR_SHADOW_CONE, KD_WALK_ALWAYS, vis, &st))
+            return -1;
+        if (vis[i] != ref[i]) {
+            bench_fail("%s cone_split %u spp: point %zu alone differs from kd_rays",
+                       s->name, q->samples, i);
+            return -1;
+        }
+        const int c = cls_of(ref[i]);
+        dec[c] += st.cones_decided;
+        traced[c] += st.rays_traced;
+        walked[c] += st.nodes_visited;
+    }
+    for (int c = 0; c < CLS_N; c++)
+        if (npts[c])
+            printf("  alone, forced walk, %-8s points: %5.1f%% decided, %6.1f rays traced "
+                   "and %7.1f nodes a point\n",
+                   cls_name[c], 100.0 * dec[c] / npts[c], (double)traced[c] / npts[c],
+                   (double)walked[c] / npts[c]);
+    return 0;
+}
+
+static int split_run(const bench_scene *s, const bench_opts *o) {
+    printf("\n== %s: %zu triangles, where cone-shadow time goes (%dx%d camera hits)\n",
+           s->name, s->ntris, o->res, o->res);
+    int rc = 0;
+    for (int large = 0; large < 2 && !rc; large++) {
+        point_set ps;
+        kdr_sphere_light li;
+        rc = camera_points(s->kd, o->res, &ps);
+        if (!rc) {
+            light_for(s->kd, large, &li);
+            points_outside(&ps, &li);
+            printf("\n%s, %s light", s->name, large ? "large" : "small");
+        }
+        kdr_shadow_query q = {.n = ps.count, .points = ps.p, .normals = ps.n,
+                              .lights = &li, .nlights = 1, .seed = 0x5eed,
+                              .offset = CONE_OFFSET, .epsilon = CONE_EPSILON};
+        float *ref = rc ? NULL : malloc(q.n * sizeof *ref);
+        float *vis = rc ? NULL : malloc(q.n * sizeof *vis);
+        rc = rc || !ref || !vis;
+        for (int k = 0; k < o->nsamples && !rc; k++) {
+            q.samples = o->samples[k];
+            rc = split_count(s, &q, o, ref, vis);
+        }
+        free(ref);
+        free(vis);
+        free(ps.p);
+        free(ps.n);
+    }
+    fflush(stdout);
+    return rc;
+}
+
+const bench_section bench_cone_split_section = {"cone_split", split_run, NULL};

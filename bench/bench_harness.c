@@ -279,7 +279,7 @@ static void usage(const char *program) {
             "       [--rays N] [--repeat R] [--quick] [--frame N] [--samples A,B,..]\n"
             "       [--ref-samples N] [--res N] [--out PREFIX] [--method PREFIX]...\n"
             "       [--csv PATH]\n"
-            "sections: core, bundle, frustum, cone, queries (see bench/bench.h)\n",
+            "sections: core, bundle, frustum, cone, cone_split, queries (see bench/bench.h)\n",
             program);
 }
 
@@ -287,7 +287,7 @@ static void usage(const char *program) {
 
 static const bench_section *const g_sections[] = {
     &bench_core_section, &bench_bundle_section, &bench_frustum_section,
-    &bench_cone_section, &bench_queries_section};
+    &bench_cone_section, &bench_cone_split_section, &bench_queries_section};
 #define NSECTIONS (sizeof g_sections / sizeof *g_sections)
 
 static int listed(const char *const *list, int n, const char *name) {

@@ -32,12 +32,13 @@ endforeach()
 # Smoke test (not a measurement): every section in one quick run on the two
 # smallest rungs, in the normal and the ASan/UBSan build. It fails if a
 # section fails, if a rival API's answers disagree with kdray's (the ray
-# conversion), or if kd_cone and kd_rays differ. The ladder comes from the
+# conversion), or if kd_cone and kd_rays differ (cone_split: under any walk
+# policy, or for any point traced alone). The ladder comes from the
 # scenes_fetch fixture (tests/scenes.cmake); KDRAY_SCENE_DIR is set by
 # tests/CMakeLists.txt, which is read after this file, hence the path.
 add_test(NAME bench_smoke
   COMMAND kdray_bench --dir ${CMAKE_BINARY_DIR}/scene-ladder --only box --only teapots
-          --section core --section bundle --section frustum --section cone --section queries --quick
+          --section core --section bundle --section frustum --section cone --section cone_split --section queries --quick
           --rays 4096 --frame 64 --res 16 --samples 1,16 --ref-samples 64 --repeat 1)
 set_tests_properties(bench_smoke PROPERTIES FIXTURES_REQUIRED scenes_fetch)
 

@@ -363,10 +363,12 @@ typedef struct kd_shadow_ws {
 int kd_walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy);
 /* KDR_SHADOW_CONE's visibility of one (point, light) into *vis; group: the
  * list of its group's shared walk (kd_cone_group.c), or NULL for its own
- * walk. KDR_OK or KDR_ENOMEM. */
+ * walk. deferred non-NULL: a busy cone whose packets would be wide is not
+ * traced; *deferred = 1 and *vis is left for the caller, who traces the
+ * pair's samples (its chunks). KDR_OK or KDR_ENOMEM. */
 int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
                        uint32_t nsamples, kd_shadow_ws *ws, kd_light_state *ls,
-                       const kd_cand_list *group, float *vis);
+                       const kd_cand_list *group, float *vis, int *deferred);
 /* KDR_SHADOW_RAYS: every sample traced alone (the reference). */
 int kd_pair_visibility_rays(const kdr_scene *scene, const kd_shadow_frame *f,
                             uint32_t nsamples, kd_shadow_ws *ws, float *vis);

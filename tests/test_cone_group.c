@@ -530,6 +530,10 @@ static void test_answers(void) {
     const kdr_sphere_light straddle = {{0.0f, 0.35f, 0.0f}, 0.04f}; /* among the soup */
     const kdr_sphere_light two[2] = {{{0.3f, 3.0f, 0.2f}, 0.1f},
                                      {{-2.0f, 2.0f, 1.0f}, 0.3f}};
+    /* a narrow light whose points walk beside a wide one whose points (at 32
+     * to CONE_WALK_WIDE_FROM spp) join the unwalked chunks: the chunks'
+     * answers land in the right (point, light) slots among walked ones */
+    const kdr_sphere_light mixed[2] = {small, large};
     const struct {
         const char *label;
         const points *p;
@@ -542,6 +546,9 @@ static void test_answers(void) {
         {"floor, large light, 128 spp", &fp, &large, 1, 128},
         {"floor, straddling light, 32 spp", &fp, &straddle, 1, 32},
         {"floor, two lights, 64 spp", &fp, two, 2, 64},
+        {"floor, large light, 64 spp", &fp, &large, 1, 64},
+        {"floor, small and large lights, 64 spp", &fp, mixed, 2, 64},
+        {"sphere, small and large lights, 32 spp", &sp, mixed, 2, 32},
         {"floor, small light, 8 spp", &fp, &small, 1, 8},
         {"sphere, small light, 64 spp", &sp, &small, 1, 64},
         {"sphere, two lights, 32 spp", &sp, two, 2, 32},
