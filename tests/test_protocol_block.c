@@ -64,6 +64,12 @@ static void test_block(void) {
     check_huge("2 MiB block", edge, KDR_BLOCK_HUGE_MIN);
     CHECK(usable == KDR_BLOCK_HUGE_MIN, "2 MiB block: usable %zu", usable);
     free(edge);
+    /* past KDR_BLOCK_HUGE_MAX: malloc's own (mapped fresh, not kept warm) */
+    const size_t big = KDR_BLOCK_HUGE_MAX + ((size_t)1 << 20);
+    void *over = kdr_block_alloc(big, &usable);
+    CHECK(over && usable == big, "block over the maximum: %p, usable %zu (want %zu)",
+          over, usable, big);
+    free(over);
 }
 
 /* A buffer grown by appends past 2 MiB moves into a block, bytes intact. */
