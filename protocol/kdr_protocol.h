@@ -99,6 +99,17 @@ typedef struct kdr_buf {
     size_t len, cap;
 } kdr_buf;
 
+/* A block for a large body or answer, freed with free() (and resizable
+ * with realloc): from KDR_BLOCK_HUGE_MIN to KDR_BLOCK_HUGE_MAX bytes it is
+ * 2 MiB-aligned, rounded up to whole 2 MiB pages (*usable, when not NULL,
+ * gets the rounded size) and advised for transparent huge pages before
+ * anything touches it, so that its first touch faults 2 MiB at a time;
+ * outside that range, plain malloc (kdr_buf.c says why not above). NULL
+ * when out of memory. kdr_buf's growth uses it. */
+#define KDR_BLOCK_HUGE_MIN ((size_t)2 << 20)
+#define KDR_BLOCK_HUGE_MAX ((size_t)28 << 20)
+void *kdr_block_alloc(size_t bytes, size_t *usable);
+
 void kdr_buf_init(kdr_buf *b);
 void kdr_buf_free(kdr_buf *b); /* frees data, leaves an empty buffer */
 /* Makes room for extra more bytes; 0 or KDR_ENOMEM. */

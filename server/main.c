@@ -47,9 +47,18 @@ static const rlim_t SPARE_FILES = 64;
  * default trims that from the thread's arena after every request, so the next
  * one page-faults all of it in again (~13K faults/s, a few % of a 64K base64
  * request). Keep up to TRIM of free heap; only blocks over MMAP (near-limit
- * bodies) are mapped and returned at once. Peak-bounded, not growth. */
-static const int MALLOC_TRIM_BYTES = 32 << 20;
-static const int MALLOC_MMAP_BYTES = 16 << 20;
+ * bodies) are mapped and returned at once. Peak-bounded, not growth.
+ * A 1M-ray request's answer (16.8 MB in CBOR) and body (24 MiB) are
+ * huge-page blocks (kdr_block_alloc) of 18-28 MiB with the alignment: at a
+ * 16 MiB MMAP they were mapped and unmapped per request, so every request
+ * faulted them in again. 32 MiB is glibc's largest fixed threshold (half
+ * a non-main arena's 64 MiB heap). TRIM 128 MiB keeps glibc from deleting
+ * a worker arena's freed heap (it does when the heap's free space plus the
+ * arena's unused reserve pass TRIM): ten 1M-ray "transport only" requests
+ * faulted 2827 times at 128 MiB, 22405 at 32 MiB, 6101 before (perf stat
+ * -e page-faults). Idle RSS stays at the largest request's working set. */
+static const int MALLOC_TRIM_BYTES = 128 << 20;
+static const int MALLOC_MMAP_BYTES = 32 << 20;
 
 /* Fills the registry from --scene flags, or the bundled default. */
 static int add_scenes(kdr_registry *r, const kdr_options *o, char *default_path,

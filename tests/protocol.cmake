@@ -81,3 +81,10 @@ foreach(t cbor cbor_errors fields meter)
   target_link_libraries(test_protocol_${t} PRIVATE kdray_protocol)
   add_test(NAME protocol_${t} COMMAND test_protocol_${t})
 endforeach()
+
+# Large bodies and answers in 2 MiB-aligned, huge-page-advised blocks
+# (kdr_block_alloc; issue 16, svc8 round). Needs THP (fails without it).
+add_executable(test_protocol_block ${CMAKE_CURRENT_SOURCE_DIR}/test_protocol_block.c)
+target_include_directories(test_protocol_block PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/support)
+target_link_libraries(test_protocol_block PRIVATE kdray_protocol)
+add_test(NAME protocol_block COMMAND test_protocol_block)
