@@ -17,6 +17,12 @@
  *    on one list and not the other must be a proven rounding case;
  *  - 300 stacked squares across one ray (many_hits): 300 hits in t order
  *    uncapped and counted, the first 16 when capped.
+ * The stress scenes have under 2.5 references per triangle, so their walks
+ * run without the per-ray mailbox (kd_all.h, all_use_mbox); "blades" (long
+ * thin triangles in random directions, asserted >= 2.5 references per
+ * triangle) puts every check above through it, and mbox_between_rays
+ * checks that a ray's mailbox does not outlive it (the same ray twice in a
+ * row; 64 copies of it through the interleaved walk's slots).
  * Exit 1 on any unexplained difference.
  */
 #include <math.h>
@@ -25,6 +31,7 @@
 #include <string.h>
 
 #include "compare.h"
+#include "kd_all_stream.h"
 #include "kd_traverse.h"
 #include "kd_tri.h"
 #include "kdray.h"
@@ -316,6 +323,126 @@ static int many_hits(void) {
     return bad;
 }
 
+/* Long thin blades in random directions across a box (seeded): the tree
+ * clips each into many leaves, so the scene has >= 2.5 references per
+ * triangle and every walk of all hits filters its leaves through the
+ * per-ray mailbox (kd_all.h, all_use_mbox). Returns NULL on failure; the
+ * caller checks the ratio. */
+static float *blades_make(uint64_t seed, size_t n) {
+    float *tris = malloc(9 * n * sizeof *tris);
+    if (!tris) return NULL;
+    stress_rng rng;
+    stress_rng_seed(&rng, seed);
+    for (size_t i = 0; i < n; i++) {
+        float c[3], d[3], e[3], x[3];
+        for (int k = 0; k < 3; k++)
+            c[k] = 10.0f * stress_rng_float(&rng);
+        stress_rng_dir(&rng, d);
+        stress_rng_dir(&rng, x);
+        /* e: x's part across d, a width of 0.4 */
+        const float dx = d[0] * x[0] + d[1] * x[1] + d[2] * x[2];
+        float len = 0.0f;
+        for (int k = 0; k < 3; k++) {
+            e[k] = x[k] - dx * d[k];
+            len += e[k] * e[k];
+        }
+        len = sqrtf(len) > 1e-3f ? 0.4f / sqrtf(len) : 0.0f;
+        float *t = tris + 9 * i;
+        for (int k = 0; k < 3; k++) {
+            t[k] = c[k] - 4.0f * d[k];
+            t[3 + k] = c[k] + 4.0f * d[k];
+            t[6 + k] = c[k] + len * e[k];
+        }
+    }
+    return tris;
+}
+
+/* Rays through the blades' box: the stress corpus's mixed kinds (aimed at
+ * vertices and edges, axis-aligned, odd intervals) built from the
+ * triangles alone. */
+static void blades_rays(float *tris, size_t ntris, size_t n, kdr_ray *rays) {
+    stress_scene s = {STRESS_SOUP, tris, ntris, NULL, 0};
+    stress_rays(&s, STRESS_RAYS_MIXED, SEED + 77, n, rays);
+}
+
+/* References per triangle of sc's tree. */
+static double refs_per_tri(const kdr_scene *sc, size_t ntris) {
+    kdr_tree_stats st;
+    kdr_scene_tree_stats(sc, &st);
+    return ntris ? (double)st.refs / (double)ntris : 0.0;
+}
+
+/* The mailbox is per ray: the same ray walked again right after itself
+ * (the one-ray walk; its mailbox would still name every triangle it
+ * tested) and 64 copies of it in one batch through the interleaved walk's
+ * both forms (a slot's mailbox would outlive its ray) must give the first
+ * walk's list and count. A mailbox kept across rays drops every repeated
+ * test and answers fewer hits. Returns the number of failed checks. */
+static int mbox_between_rays(const float *tris, size_t ntris, const kdr_ray *rays,
+                             size_t nrays) {
+    kdr_scene *sc = NULL;
+    if (kdr_scene_build(tris, ntris, NULL, NULL, NULL, &sc) != KDR_OK) return 1;
+    enum { COPIES = 64, K = 64 };
+    static kdr_hit first[K], again[K];
+    static float org[3 * COPIES], dir[3 * COPIES], ht[COPIES * K], hu[COPIES * K],
+        hv[COPIES * K];
+    static int32_t hp[COPIES * K];
+    static uint32_t nh[COPIES], cnt[COPIES];
+    kdr_hit buf[KD_ALL_RAYS * K];
+    int fails = 0, tried = 0;
+    for (size_t i = 0; i < nrays && tried < 40; i++) {
+        kdr_ray r = rays[i];
+        r.tmin = 0.0f;
+        r.tmax = INFINITY;
+        uint32_t n1 = 0, n2 = 0, c1 = 0, c2 = 0;
+        kdr_intersect_all1(sc, &r, K, first, &n1, NULL);
+        if (n1 < 2) continue; /* rays that hit something, through several leaves */
+        tried++;
+        kdr_intersect_all1(sc, &r, K, again, &n2, NULL);
+        kdr_count1(sc, &r, &c1, NULL);
+        kdr_count1(sc, &r, &c2, NULL);
+        if (n2 != n1 || memcmp(first, again, n1 * sizeof *first) != 0 || c1 != c2 ||
+            c1 < n1) {
+            fprintf(stderr, "mbox_between_rays: ray %zu walked again: %u then %u hits, "
+                            "counts %u then %u\n", i, n1, n2, c1, c2);
+            fails++;
+        }
+        for (int k = 0; k < COPIES; k++) {
+            memcpy(org + 3 * k, r.org, sizeof r.org);
+            memcpy(dir + 3 * k, r.dir, sizeof r.dir);
+        }
+        const kdr_ray_batch b = {COPIES, org, 3, dir, NULL, 0, NULL, 0};
+        kdr_all_hits out = {nh, ht, hu, hv, hp};
+        static const int forms[] = {KD_ALL_SCALAR | KD_ALL_MBOX, KD_ALL_MBOX};
+        for (int f = 0; f < 2; f++) {
+            memset(nh, 0, sizeof nh);
+            memset(cnt, 0, sizeof cnt);
+            kd_all_stream(sc, &b, 0, COPIES, K, buf, &out, NULL, forms[f], NULL);
+            kd_all_stream(sc, &b, 0, COPIES, 0, NULL, NULL, cnt, forms[f], NULL);
+            int bad_copies = 0;
+            for (int k = 0; k < COPIES; k++) {
+                int ok = nh[k] == n1 && cnt[k] == c1;
+                for (uint32_t j = 0; ok && j < n1; j++)
+                    ok = ht[k * K + j] == first[j].t && hp[k * K + j] == first[j].prim &&
+                         hu[k * K + j] == first[j].u && hv[k * K + j] == first[j].v;
+                bad_copies += !ok;
+            }
+            if (bad_copies) {
+                fprintf(stderr, "mbox_between_rays: ray %zu, %d of %d copies differ "
+                                "(interleaved walk, flags %d)\n",
+                        i, bad_copies, COPIES, forms[f]);
+                fails++;
+            }
+        }
+    }
+    kdr_scene_free(sc);
+    if (tried < 40) {
+        fprintf(stderr, "mbox_between_rays: only %d rays with 2+ hits\n", tried);
+        fails++;
+    }
+    return fails;
+}
+
 int main(int argc, char **argv) {
     const size_t nrays = argc > 1 ? (size_t)atol(argv[1]) : 1500;
     int fails = api_errors() + shared_edge() + many_hits();
@@ -329,6 +456,24 @@ int main(int argc, char **argv) {
         fails += run_scene(stress_scene_name((stress_scene_kind)k), s.tris, s.ntris, rays,
                            nrays + ni, &total);
         stress_scene_free(&s);
+    }
+    { /* blades: >= 2.5 references per triangle, every walk with the mailbox */
+        enum { NB = 600 };
+        float *bt = blades_make(SEED + 5, NB);
+        kdr_scene *bs = NULL;
+        if (!bt || kdr_scene_build(bt, NB, NULL, NULL, NULL, &bs) != KDR_OK) return 1;
+        const double ratio = refs_per_tri(bs, NB);
+        kdr_scene_free(bs);
+        printf("blades: %.2f references per triangle\n", ratio);
+        if (!(ratio >= 2.5)) {
+            fprintf(stderr, "blades: %.2f references per triangle, under the mailbox's "
+                            "2.5: the scene no longer covers it\n", ratio);
+            fails++;
+        }
+        blades_rays(bt, NB, nrays, rays);
+        fails += run_scene("blades", bt, NB, rays, nrays, &total);
+        fails += mbox_between_rays(bt, NB, rays, nrays);
+        free(bt);
     }
 #ifdef KDRAY_HAVE_GLTF
     if (argc > 2) { /* a real scene: random rays through its box */
