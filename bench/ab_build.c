@@ -16,7 +16,16 @@
  * must share its layout (bench/ab_build is for build changes).
  *
  *   kdray_ab_build [--dir DIR] [--only NAME]... [--rounds R] [--threads T]...
- *                  [--same]
+ *                  [--same] [--side A|B]
+ *
+ * --side A (or B) builds only that side, R times, and prints one line per
+ * scene and thread count: "side SCENE TRIS T" and then process CPU, wall
+ * and idle>= ms of the first build and the best of the R, and the digests.
+ * idle>= is the build's CPU outside its parallel phase plus that phase's
+ * busiest thread (from the build's log line), a lower bound of the wall
+ * time on an idle machine. bench/ab_build --separate N runs N such
+ * processes per side, alternated, so that neither revision's build reuses
+ * the pages the other one faulted in and freed.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdint.h>
@@ -76,25 +85,61 @@ typedef struct args {
     const char *dir;
     const char *only[MAX_ONLY];
     int nonly, rounds, same;
+    int side; /* -1: both, alternating; 0 or 1: --side A or B alone */
     int threads[MAX_THREADS_SET], nthreads;
 } args;
 
-/* One build of side c: its CPU and wall ms and the tree's digests. */
+/* The build's log line "... (CPU: busiest thread X ms, all Y ms)". */
+static void log_cpu(void *user, const char *msg) {
+    const char *p = strstr(msg, "busiest thread ");
+    double *v = user;
+    if (p && sscanf(p, "busiest thread %lf ms, all %lf", &v[0], &v[1]) != 2)
+        v[0] = v[1] = 0;
+}
+
+/* One build of side c: its CPU and wall ms, its idle>= bound (NULL: not
+ * wanted) and the tree's digests. */
 static int build_one(int c, const float *tris, size_t ntris, int threads,
-                     double *cpu, double *wall, uint64_t dig[2]) {
+                     double *cpu, double *wall, double *idle, uint64_t dig[2]) {
     kdr_build_opts o;
     cores[c].defaults(&o);
     o.threads = threads;
     kdr_scene *s = NULL;
+    double busy[2] = {0, 0};
     const double c0 = th_clock_ms(CLOCK_PROCESS_CPUTIME_ID), w0 = th_clock_ms(CLOCK_MONOTONIC);
-    const int err = cores[c].build(tris, ntris, &o, NULL, NULL, &s);
+    const int err = cores[c].build(tris, ntris, &o, idle ? log_cpu : NULL, busy, &s);
     *wall = th_clock_ms(CLOCK_MONOTONIC) - w0;
     *cpu = th_clock_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
+    if (idle)
+        *idle = busy[1] > 0 ? *cpu - busy[1] + busy[0] : *cpu;
     if (err != KDR_OK)
         return err;
     th_tree_digest(s, dig);
     cores[c].release(s);
     return KDR_OK;
+}
+
+/* --side: a->rounds builds of one side; the first and the best. */
+static int run_side(const args *a, const ladder_entry *e, const float *tris,
+                    size_t ntris) {
+    for (int ti = 0; ti < a->nthreads; ti++) {
+        double cpu[MAX_ROUNDS] = {0}, wall[MAX_ROUNDS] = {0}, idle[MAX_ROUNDS] = {0};
+        uint64_t dig[2] = {0, 0};
+        for (int r = 0; r < a->rounds; r++) {
+            if (build_one(a->side, tris, ntris, a->threads[ti], &cpu[r], &wall[r],
+                          &idle[r], dig) != KDR_OK) {
+                fprintf(stderr, "%s: build %c failed\n", e->name, 'A' + a->side);
+                return 1;
+            }
+        }
+        printf("side %c %s %zu %d first %.3f %.3f %.3f best %.3f %.3f %.3f %016llx "
+               "%016llx\n",
+               'A' + a->side, e->name, ntris, a->threads[ti], cpu[0], wall[0], idle[0],
+               best(cpu, a->rounds), best(wall, a->rounds), best(idle, a->rounds),
+               (unsigned long long)dig[0], (unsigned long long)dig[1]);
+        fflush(stdout);
+    }
+    return 0;
 }
 
 static int run_scene(const args *a, const ladder_entry *e) {
@@ -105,15 +150,20 @@ static int run_scene(const args *a, const ladder_entry *e) {
         fprintf(stderr, "%s: %s\n", e->name, err);
         return 1;
     }
+    if (a->side >= 0) {
+        const int bad = run_side(a, e, tris, ntris);
+        free(tris);
+        return bad;
+    }
     int bad = 0;
     for (int ti = 0; ti < a->nthreads; ti++) {
         double cpu[2][MAX_ROUNDS], wall[2][MAX_ROUNDS], rc[MAX_ROUNDS], rw[MAX_ROUNDS];
-        uint64_t dig[2][2];
+        uint64_t dig[2][2] = {{0, 0}, {0, 0}};
         for (int r = 0; r < a->rounds; r++) {
             for (int i = 0; i < 2; i++) {
                 const int c = (r + i) % 2; /* A first on even rounds */
                 if (build_one(c, tris, ntris, a->threads[ti], &cpu[c][r], &wall[c][r],
-                              dig[c]) != KDR_OK) {
+                              NULL, dig[c]) != KDR_OK) {
                     fprintf(stderr, "%s: build %c failed\n", e->name, 'A' + c);
                     free(tris);
                     return 1;
@@ -148,6 +198,7 @@ static int parse(int argc, char **argv, args *a) {
     memset(a, 0, sizeof *a);
     a->dir = ladder_default_dir();
     a->rounds = 5;
+    a->side = -1;
     for (int i = 1; i < argc; i++) {
         const char *f = argv[i];
         if (strcmp(f, "--same") == 0) {
@@ -165,6 +216,8 @@ static int parse(int argc, char **argv, args *a) {
             a->rounds = atoi(v);
         else if (strcmp(f, "--threads") == 0 && a->nthreads < MAX_THREADS_SET)
             a->threads[a->nthreads++] = atoi(v);
+        else if (strcmp(f, "--side") == 0 && (strcmp(v, "A") == 0 || strcmp(v, "B") == 0))
+            a->side = v[0] - 'A';
         else
             return -1;
     }
@@ -183,7 +236,7 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &a) != 0) {
         fprintf(stderr,
                 "usage: %s [--dir DIR] [--only NAME]... [--rounds R (1-%d, default 5)] "
-                "[--threads T]... [--same]\n",
+                "[--threads T]... [--same] [--side A|B]\n",
                 argv[0], MAX_ROUNDS);
         return 2;
     }
@@ -194,13 +247,15 @@ int main(int argc, char **argv) {
         fprintf(stderr, "%s\n", err);
         return 1;
     }
-    printf("build A vs B, %d rounds (order alternating); ms: best and median of "
-           "process CPU, best and median wall; B/A: median of per-round CPU ratios "
-           "(range), median wall ratio; B's digests\n",
-           a.rounds);
-    printf("%-10s %8s %2s | %8s %8s %8s %8s | %8s %8s %8s %8s | %s\n", "scene", "tris",
-           "T", "A cpu", "A cpu~", "A wall", "A wall~", "B cpu", "B cpu~", "B wall",
-           "B wall~", "B/A cpu (range) wall | nodes, refs digest");
+    if (a.side < 0) {
+        printf("build A vs B, %d rounds (order alternating); ms: best and median of "
+               "process CPU, best and median wall; B/A: median of per-round CPU "
+               "ratios (range), median wall ratio; B's digests\n",
+               a.rounds);
+        printf("%-10s %8s %2s | %8s %8s %8s %8s | %8s %8s %8s %8s | %s\n", "scene",
+               "tris", "T", "A cpu", "A cpu~", "A wall", "A wall~", "B cpu", "B cpu~",
+               "B wall", "B wall~", "B/A cpu (range) wall | nodes, refs digest");
+    }
     int bad = 0;
     for (int i = 0; i < n; i++) {
         int want = a.nonly == 0;
