@@ -8,8 +8,9 @@
  * kd_pair_visibility_rays). KDR_SHADOW_CONE (kd_pair_visibility) first
  * asks a cheap test whether the point's cone walk can pay (kd_walk_pays:
  * not below CONE_WALK_FROM samples, nor toward wide lights below
- * CONE_WALK_WIDE_FROM); when it cannot, the point's samples go straight to
- * any-hit bundles (kdr_trace_batch). Otherwise it decides the (point,
+ * CONE_WALK_WIDE_FROM on scenes under CONE_WIDE_WALK_MIN_BYTES); when it
+ * cannot, the point's samples go straight to any-hit bundles
+ * (kdr_trace_batch). Otherwise it decides the (point,
  * light) by cones, from the whole light down to small groups of samples,
  * and traces only what no cone decides (a group's shared walk, when the
  * caller made one, replaces step 1's walk: kd_cone_group.c):
@@ -316,13 +317,17 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
  * CONE_WALK_FROM samples never (no cone set-up either: the query's points
  * then go through trace_unwalked in chunks); wide cones (penumbra-heavy:
  * the walk goes over budget, and a decided cone is rare) only from
- * CONE_WALK_WIDE_FROM samples on. */
-int kd_walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
+ * CONE_WALK_WIDE_FROM samples on, except on scenes of
+ * CONE_WIDE_WALK_MIN_BYTES and more, where each ray costs more nodes and
+ * the walk repays from CONE_WALK_FROM on. */
+int kd_walk_pays(const kdr_scene *scene, uint32_t nsamples, double sin_a,
+                 kd_walk_policy policy) {
     if (policy != KD_WALK_AUTO)
         return policy == KD_WALK_ALWAYS || policy == KD_WALK_GROUPS;
     if (nsamples < CONE_WALK_FROM)
         return 0;
-    return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM;
+    return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM ||
+           scene->stats.bytes >= CONE_WIDE_WALK_MIN_BYTES;
 }
 
 /* The whole light's candidate budget for a point that walks: a full one,
@@ -357,7 +362,7 @@ int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
         *vis = 1.0f;
         return KDR_OK;
     }
-    if (!kd_walk_pays(nsamples, f->sin_a, ws->policy)) {
+    if (!kd_walk_pays(scene, nsamples, f->sin_a, ws->policy)) {
         /* a wide cone at moderate samples: straight to the bundles */
         make_samples(f, nsamples, ws);
         *vis = (float)lit_by_tree(scene, ws, ws->idx, nsamples) / (float)nsamples;
@@ -383,11 +388,15 @@ int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
     } else if (rc == KDR_OK && pr.max_cands == CONE_MAX_CANDS) {
         ls->backoff = 0;
     }
-    if (rc == KD_CONE_OVER && deferred && busy_is_wide(f, ws, nsamples)) {
+    if (rc == KD_CONE_OVER && deferred && busy_is_wide(f, ws, nsamples) &&
+        scene->stats.bytes < CONE_WIDE_WALK_MIN_BYTES) {
         /* a wide busy cone: its samples go to the caller's chunks, with
          * other points' (cone8: callgrind -5.6% default / -2.8%
          * 2CylinderEngine at 128-256 spp against lit_busy's blockers and
-         * one batch a point) */
+         * one batch a point). Not on large scenes, where a ray costs more
+         * nodes and lit_busy's last blocker and learned blockers spare more
+         * of them (bench_cone cone_split, engine9, large light, 32 spp: 644
+         * nodes a point deferred, 417 in lit_busy) */
         *deferred = 1;
         return KDR_OK;
     }

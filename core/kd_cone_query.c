@@ -8,8 +8,9 @@
  * GROUP_POINTS consecutive points toward one light share one walk of their
  * group's cone (trace_grouped, kd_cone_group.c) and each point judges that
  * list (kd_pair_visibility in kd_cone.c); a point of such a run whose walk
- * does not pay (kd_walk_pays: a wide light below CONE_WALK_WIDE_FROM) joins
- * the same chunks as the unwalked ones. KDR_SHADOW_RAYS traces every
+ * does not pay (kd_walk_pays: a wide light below CONE_WALK_WIDE_FROM on a
+ * scene under CONE_WIDE_WALK_MIN_BYTES) joins the same chunks as the
+ * unwalked ones. KDR_SHADOW_RAYS traces every
  * sample alone, point by point.
  *
  * kdr_shadow_trace_order takes the points as a list of indices: the j-th
@@ -158,7 +159,7 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
     kd_cone gc;
     /* points that will not walk (kd_walk_pays) gain only from an empty list,
      * rare where walks do not pay: no group walk for them */
-    if (n < 2 || !kd_walk_pays(nsamples, fs[0]->sin_a, ws->policy))
+    if (n < 2 || !kd_walk_pays(scene, nsamples, fs[0]->sin_a, ws->policy))
         return GROUP_NONE;
     if (!kd_group_cone(scene, fs, n, spread, &gc))
         return GROUP_SPREAD;
@@ -264,7 +265,7 @@ static int trace_run(const kdr_scene *scene, const kdr_shadow_query *q, size_t j
     const int lit_group = g == GROUP_LIST && ws->gl.n == 0;
     for (size_t j = 0; rc == KDR_OK && j < m; j++) {
         const size_t slot = point_at(ws, j0 + sel[j]) * q->nlights + l;
-        if (!lit_group && !kd_walk_pays(q->samples, fr[sel[j]].sin_a, ws->policy))
+        if (!lit_group && !kd_walk_pays(scene, q->samples, fr[sel[j]].sin_a, ws->policy))
             rc = unwalked_add(scene, &fr[sel[j]], q->samples, slot, u, visibility, ws);
         else {
             int deferred = 0;
