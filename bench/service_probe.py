@@ -40,22 +40,13 @@ import urllib.request
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from bench_service import F32, cbor_body, start_daemon  # noqa: E402
+from bench_service import F32, _cpu_ms as cpu_ms, cbor_body, start_daemon  # noqa: E402
 
-LADDER_ENGINE = "/work/main/build/scene-ladder/engine/2CylinderEngine.glb"
+# the scene ladder of this checkout (scenes/fetch build/scene-ladder)
+LADDER_ENGINE = os.path.join(os.path.dirname(HERE), "build", "scene-ladder", "engine",
+                             "2CylinderEngine.glb")
 KINDS = ("frustum", "bundle24", "transport24")
 STEPS = ("body", "queue", "parse", "trace", "encode")
-
-
-def cpu_ms(pid):
-    total = 0
-    for tid in os.listdir("/proc/%d/task" % pid):
-        try:
-            with open("/proc/%d/task/%s/schedstat" % (pid, tid)) as f:
-                total += int(f.read().split()[0])
-        except OSError:
-            pass  # a thread that just ended
-    return total / 1e6
 
 
 def post(sock, path, body, ctype, buf):
