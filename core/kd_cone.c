@@ -8,9 +8,8 @@
  * kd_pair_visibility_rays). KDR_SHADOW_CONE (kd_pair_visibility) first
  * asks a cheap test whether the point's cone walk can pay (kd_walk_pays:
  * not below CONE_WALK_FROM samples, nor toward wide lights below
- * CONE_WALK_WIDE_FROM on scenes under CONE_WIDE_WALK_MIN_BYTES); when it
- * cannot, the point's samples go straight to any-hit bundles
- * (kdr_trace_batch). Otherwise it decides the (point,
+ * CONE_WALK_WIDE_FROM); when it cannot, the point's samples go straight to
+ * any-hit bundles (kdr_trace_batch). Otherwise it decides the (point,
  * light) by cones, from the whole light down to small groups of samples,
  * and traces only what no cone decides (a group's shared walk, when the
  * caller made one, replaces step 1's walk: kd_cone_group.c):
@@ -29,10 +28,9 @@
  *     samples test them in packets against their candidates.
  *  4. A busy cone (the walk over budget): the samples are sorted along a
  *     Morton curve of the light's disc and packets of 4/8 neighbours walk
- *     their own cones, or, where those would be wide, the caller traces
- *     them in its chunks with other points' (*deferred; without a caller
- *     that can, a few closest hits learn blockers and the rest go through
- *     the tree in bundles, kdr_trace_batch). A busy cone makes the next points of that light
+ *     their own cones, or, where those would be wide, a few closest hits
+ *     learn blockers and the rest go through the tree in bundles
+ *     (kdr_trace_batch). A busy cone makes the next points of that light
  *     skip step 1 for a while (back-off): neighbours see the same busy
  *     cone.
  *
@@ -282,14 +280,6 @@ static void make_samples(const kd_shadow_frame *f, uint32_t n, kd_shadow_ws *ws)
     }
 }
 
-/* Whether a busy cone's packets of 4/8 neighbouring samples would be wide
- * (a packet covers about width/n of the light's disc): then lit_busy
- * learns blockers and bundles the rest instead. */
-static int busy_is_wide(const kd_shadow_frame *f, const kd_shadow_ws *ws, uint32_t n) {
-    const uint32_t width = ws->wide ? 8u : 4u;
-    return asin(f->sin_a) * sqrt((double)width / n) > GROUP_MAX_ANGLE;
-}
-
 /* A cone too busy to decide (its walk went over budget): the samples are
  * sorted along a Morton curve of the light's disc and packets of 4/8
  * neighbours walk their own narrow cones; when those would be wide, a few
@@ -300,7 +290,8 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
     uint32_t lit = 0;
     make_samples(f, n, ws);
     const uint32_t width = ws->wide ? 8u : 4u;
-    if (busy_is_wide(f, ws, n)) {
+    /* a packet covers about width/n of the light's disc */
+    if (asin(f->sin_a) * sqrt((double)width / n) > GROUP_MAX_ANGLE) {
         uint32_t m = filter_by_last(scene, ws, ws->idx, n, last);
         ws->st.rays_traced += n - m;
         m = learn_blockers(scene, ws, ws->idx, m, last, &lit);
@@ -317,17 +308,13 @@ static uint32_t lit_busy(const kdr_scene *scene, const kd_shadow_frame *f,
  * CONE_WALK_FROM samples never (no cone set-up either: the query's points
  * then go through trace_unwalked in chunks); wide cones (penumbra-heavy:
  * the walk goes over budget, and a decided cone is rare) only from
- * CONE_WALK_WIDE_FROM samples on, except on scenes of
- * CONE_WIDE_WALK_MIN_BYTES and more, where each ray costs more nodes and
- * the walk repays from CONE_WALK_FROM on. */
-int kd_walk_pays(const kdr_scene *scene, uint32_t nsamples, double sin_a,
-                 kd_walk_policy policy) {
+ * CONE_WALK_WIDE_FROM samples on. */
+int kd_walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy) {
     if (policy != KD_WALK_AUTO)
         return policy == KD_WALK_ALWAYS || policy == KD_WALK_GROUPS;
     if (nsamples < CONE_WALK_FROM)
         return 0;
-    return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM ||
-           scene->stats.bytes >= CONE_WIDE_WALK_MIN_BYTES;
+    return sin_a <= CONE_WIDE_SIN || nsamples >= CONE_WALK_WIDE_FROM;
 }
 
 /* The whole light's candidate budget for a point that walks: a full one,
@@ -347,9 +334,7 @@ static size_t cand_budget(uint32_t nsamples, kd_light_state *ls) {
 
 int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
                        uint32_t nsamples, kd_shadow_ws *ws, kd_light_state *ls,
-                       const kd_cand_list *group, float *vis, int *deferred) {
-    if (deferred)
-        *deferred = 0;
+                       const kd_cand_list *group, float *vis) {
     uint32_t lit = 0;
     const uint64_t traced = ws->st.rays_traced;
     int rc = ws_reserve(ws, nsamples);
@@ -362,7 +347,7 @@ int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
         *vis = 1.0f;
         return KDR_OK;
     }
-    if (!kd_walk_pays(scene, nsamples, f->sin_a, ws->policy)) {
+    if (!kd_walk_pays(nsamples, f->sin_a, ws->policy)) {
         /* a wide cone at moderate samples: straight to the bundles */
         make_samples(f, nsamples, ws);
         *vis = (float)lit_by_tree(scene, ws, ws->idx, nsamples) / (float)nsamples;
@@ -387,18 +372,6 @@ int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
         ls->skip = ls->backoff;
     } else if (rc == KDR_OK && pr.max_cands == CONE_MAX_CANDS) {
         ls->backoff = 0;
-    }
-    if (rc == KD_CONE_OVER && deferred && busy_is_wide(f, ws, nsamples) &&
-        scene->stats.bytes < CONE_WIDE_WALK_MIN_BYTES) {
-        /* a wide busy cone: its samples go to the caller's chunks, with
-         * other points' (cone8: callgrind -5.6% default / -2.8%
-         * 2CylinderEngine at 128-256 spp against lit_busy's blockers and
-         * one batch a point). Not on large scenes, where a ray costs more
-         * nodes and lit_busy's last blocker and learned blockers spare more
-         * of them (bench_cone cone_split, engine9, large light, 32 spp: 644
-         * nodes a point deferred, 417 in lit_busy) */
-        *deferred = 1;
-        return KDR_OK;
     }
     if (rc == KD_CONE_OVER) {
         lit = lit_busy(scene, f, ws, nsamples, &ls->last);

@@ -359,18 +359,14 @@ typedef struct kd_shadow_ws {
 } kd_shadow_ws;
 
 /* The cheap test: does a point with this many samples toward a light of
- * this angular size (sin_a = r / D) walk its whole light's cone in this
- * scene (its size: CONE_WIDE_WALK_MIN_BYTES)? */
-int kd_walk_pays(const kdr_scene *scene, uint32_t nsamples, double sin_a,
-                 kd_walk_policy policy);
+ * this angular size (sin_a = r / D) walk its whole light's cone? */
+int kd_walk_pays(uint32_t nsamples, double sin_a, kd_walk_policy policy);
 /* KDR_SHADOW_CONE's visibility of one (point, light) into *vis; group: the
  * list of its group's shared walk (kd_cone_group.c), or NULL for its own
- * walk. deferred non-NULL: a busy cone whose packets would be wide is not
- * traced; *deferred = 1 and *vis is left for the caller, who traces the
- * pair's samples (its chunks). KDR_OK or KDR_ENOMEM. */
+ * walk. KDR_OK or KDR_ENOMEM. */
 int kd_pair_visibility(const kdr_scene *scene, const kd_shadow_frame *f,
                        uint32_t nsamples, kd_shadow_ws *ws, kd_light_state *ls,
-                       const kd_cand_list *group, float *vis, int *deferred);
+                       const kd_cand_list *group, float *vis);
 /* KDR_SHADOW_RAYS: every sample traced alone (the reference). */
 int kd_pair_visibility_rays(const kdr_scene *scene, const kd_shadow_frame *f,
                             uint32_t nsamples, kd_shadow_ws *ws, float *vis);

@@ -7,10 +7,7 @@
  * chunk at a time (trace_unwalked). From there on, runs of up to
  * GROUP_POINTS consecutive points toward one light share one walk of their
  * group's cone (trace_grouped, kd_cone_group.c) and each point judges that
- * list (kd_pair_visibility in kd_cone.c); a point of such a run whose walk
- * does not pay (kd_walk_pays: a wide light below CONE_WALK_WIDE_FROM on a
- * scene under CONE_WIDE_WALK_MIN_BYTES) joins the same chunks as the
- * unwalked ones. KDR_SHADOW_RAYS traces every
+ * list (kd_pair_visibility in kd_cone.c). KDR_SHADOW_RAYS traces every
  * sample alone, point by point.
  *
  * kdr_shadow_trace_order takes the points as a list of indices: the j-th
@@ -41,108 +38,59 @@ static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
     return first <= q->n && count <= q->n - first;
 }
 
-/* Pairs that do not walk their cones, a chunk at a time: the samples of
- * consecutive (point, light) pairs (toward the same lights, from nearby
- * surfaces: the bundles stay coherent) go through the tree in one
- * kdr_trace_batch, whose set-up is then paid per chunk, not per pair. */
-typedef struct unwalked {
-    float *org, *dir, *tmax;
-    uint8_t *hit;
-    size_t *slot; /* pair p's answer is visibility[slot[p]] */
-    size_t cap, m;          /* samples: room for, pending */
-    size_t maxpairs, npairs; /* pairs: room for, pending */
-} unwalked;
-
-/* The chunk's size; its buffers come with its first pair (a query whose
- * points all walk allocates nothing). */
-static void unwalked_init(unwalked *u, uint32_t nsamples) {
-    size_t pairs = UNWALKED_CHUNK_RAYS / nsamples;
-    pairs = pairs ? pairs : 1;
-    *u = (unwalked){.cap = pairs * nsamples, .maxpairs = pairs};
-}
-
-static int unwalked_alloc(unwalked *u) {
-    u->org = malloc(3 * u->cap * sizeof *u->org);
-    u->dir = malloc(3 * u->cap * sizeof *u->dir);
-    u->tmax = malloc(u->cap * sizeof *u->tmax);
-    u->hit = malloc(u->cap);
-    u->slot = malloc(u->maxpairs * sizeof *u->slot);
-    return u->org && u->dir && u->tmax && u->hit && u->slot ? KDR_OK : KDR_ENOMEM;
-}
-
-static void unwalked_free(unwalked *u) {
-    free(u->org);
-    free(u->dir);
-    free(u->tmax);
-    free(u->hit);
-    free(u->slot);
-}
-
-/* Traces the pending pairs and writes their answers. */
-static int unwalked_flush(const kdr_scene *scene, uint32_t n, unwalked *u,
-                          float *visibility, kd_shadow_ws *ws) {
-    if (u->m == 0)
-        return KDR_OK;
-    kdr_ray_batch b = {.n = u->m, .org = u->org, .org_stride = 3, .dir = u->dir,
-                       .tmax = u->tmax, .tmax_stride = 1};
-    kdr_hits out = {.hit = u->hit};
-    kdr_trav_stats ts = {0};
-    const int rc = kdr_trace_batch(scene, &b, 0, u->m, KDR_ANY, KDR_TRAV_AUTO, &out, &ts);
-    ws->st.rays_traced += u->m;
-    ws->st.nodes_visited += ts.nodes_visited;
-    for (size_t p = 0; rc == KDR_OK && p < u->npairs; p++) {
-        uint32_t lit = 0;
-        for (uint32_t s = 0; s < n; s++)
-            lit += u->hit[p * n + s] ? 0u : 1u;
-        visibility[u->slot[p]] = (float)lit / (float)n;
-    }
-    u->m = u->npairs = 0;
-    return rc;
-}
-
-/* Adds the samples of the pair of frame f (answer slot: visibility[slot]),
- * tracing the chunk first if they would not fit. */
-static int unwalked_add(const kdr_scene *scene, const kd_shadow_frame *f, uint32_t n,
-                        size_t slot, unwalked *u, float *visibility, kd_shadow_ws *ws) {
-    if (!u->org && unwalked_alloc(u) != KDR_OK)
-        return KDR_ENOMEM;
-    if (u->m + n > u->cap) {
-        const int rc = unwalked_flush(scene, n, u, visibility, ws);
-        if (rc != KDR_OK)
-            return rc;
-    }
-    for (uint32_t s = 0; s < n; s++, u->m++) {
-        kdr_ray r;
-        kd_shadow_frame_ray(f, s, n, &r);
-        for (int k = 0; k < 3; k++) {
-            u->org[3 * u->m + k] = r.org[k];
-            u->dir[3 * u->m + k] = r.dir[k];
-        }
-        u->tmax[u->m] = r.tmax; /* tmin is 0 for every sample */
-    }
-    u->slot[u->npairs++] = slot;
-    return KDR_OK;
-}
-
-/* Below CONE_WALK_FROM samples (or with walks forced off): every pair
- * through the chunks. */
+/* Points that do not walk their cones, a chunk at a time: the samples of
+ * consecutive points (toward the same lights, from nearby surfaces: the
+ * bundles stay coherent) go through the tree in one kdr_trace_batch, whose
+ * set-up is then paid per chunk, not per point. */
 static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
                           size_t count, float *visibility, kd_shadow_ws *ws) {
-    unwalked u;
-    int rc = KDR_OK;
-    unwalked_init(&u, q->samples);
-    for (size_t j = 0; rc == KDR_OK && j < count; j++)
-        for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
-            kd_shadow_frame f;
-            const size_t i = point_at(ws, j);
-            rc = kd_shadow_frame_init(scene, q, i, l, &f);
-            if (rc == KDR_OK)
-                rc = unwalked_add(scene, &f, q->samples, i * q->nlights + l, &u,
-                                  visibility, ws);
+    const uint32_t n = q->samples;
+    const size_t per_point = (size_t)n * q->nlights;
+    size_t step = UNWALKED_CHUNK_RAYS / per_point;
+    step = step ? step : 1;
+    const size_t cap = step * per_point;
+    float *org = malloc(3 * cap * sizeof *org), *dir = malloc(3 * cap * sizeof *dir);
+    float *tmax = malloc(cap * sizeof *tmax);
+    uint8_t *hit = malloc(cap);
+    int rc = org && dir && tmax && hit ? KDR_OK : KDR_ENOMEM;
+    for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += step) {
+        const size_t j1 = count - j0 < step ? count : j0 + step;
+        size_t m = 0;
+        for (size_t j = j0; rc == KDR_OK && j < j1; j++)
+            for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
+                kd_shadow_frame f;
+                rc = kd_shadow_frame_init(scene, q, point_at(ws, j), l, &f);
+                for (uint32_t s = 0; rc == KDR_OK && s < n; s++, m++) {
+                    kdr_ray r;
+                    kd_shadow_frame_ray(&f, s, n, &r);
+                    for (int k = 0; k < 3; k++) {
+                        org[3 * m + k] = r.org[k];
+                        dir[3 * m + k] = r.dir[k];
+                    }
+                    tmax[m] = r.tmax; /* tmin is 0 for every sample */
+                }
+            }
+        if (rc != KDR_OK)
+            break;
+        kdr_ray_batch b = {.n = m, .org = org, .org_stride = 3, .dir = dir,
+                           .tmax = tmax, .tmax_stride = 1};
+        kdr_hits out = {.hit = hit};
+        kdr_trav_stats ts = {0};
+        rc = kdr_trace_batch(scene, &b, 0, m, KDR_ANY, KDR_TRAV_AUTO, &out, &ts);
+        ws->st.rays_traced += m;
+        ws->st.nodes_visited += ts.nodes_visited;
+        for (size_t k = 0, pair = 0; rc == KDR_OK && k < m; k += n, pair++) {
+            uint32_t lit = 0;
+            for (uint32_t s = 0; s < n; s++)
+                lit += hit[k + s] ? 0u : 1u;
+            const size_t i = point_at(ws, j0 + pair / q->nlights);
+            visibility[i * q->nlights + pair % q->nlights] = (float)lit / (float)n;
         }
-    if (rc == KDR_OK)
-        rc = unwalked_flush(scene, q->samples, &u, visibility, ws);
-    unwalked_free(&u);
+    }
+    free(org);
+    free(dir);
+    free(tmax);
+    free(hit);
     return rc;
 }
 
@@ -159,7 +107,7 @@ static int group_list(const kdr_scene *scene, const kd_shadow_frame *const *fs, 
     kd_cone gc;
     /* points that will not walk (kd_walk_pays) gain only from an empty list,
      * rare where walks do not pay: no group walk for them */
-    if (n < 2 || !kd_walk_pays(scene, nsamples, fs[0]->sin_a, ws->policy))
+    if (n < 2 || !kd_walk_pays(nsamples, fs[0]->sin_a, ws->policy))
         return GROUP_NONE;
     if (!kd_group_cone(scene, fs, n, spread, &gc))
         return GROUP_SPREAD;
@@ -243,7 +191,7 @@ static size_t split_by_apex(const kd_shadow_frame *fr, size_t *sel, size_t m) {
  * on its own. */
 static int trace_run(const kdr_scene *scene, const kdr_shadow_query *q, size_t j0, size_t l,
                      const kd_shadow_frame *fr, size_t *sel, size_t m, int splits,
-                     float *visibility, kd_shadow_ws *ws, unwalked *u) {
+                     float *visibility, kd_shadow_ws *ws) {
     const kd_shadow_frame *fs[GROUP_POINTS];
     int rc = KDR_OK;
     for (size_t j = 0; j < m; j++)
@@ -254,28 +202,17 @@ static int trace_run(const kdr_scene *scene, const kdr_shadow_query *q, size_t j
     if (g == GROUP_SPREAD && splits > 0 && m >= 2 * GROUP_SPLIT_MIN) {
         const size_t h = split_by_apex(fr, sel, m);
         if (h >= GROUP_SPLIT_MIN && m - h >= GROUP_SPLIT_MIN) {
-            rc = trace_run(scene, q, j0, l, fr, sel, h, splits - 1, visibility, ws, u);
+            rc = trace_run(scene, q, j0, l, fr, sel, h, splits - 1, visibility, ws);
             if (rc == KDR_OK)
                 rc = trace_run(scene, q, j0, l, fr, sel + h, m - h, splits - 1, visibility,
-                               ws, u);
+                               ws);
             return rc;
         }
     }
-    /* an empty group list decides even the points that do not walk */
-    const int lit_group = g == GROUP_LIST && ws->gl.n == 0;
-    for (size_t j = 0; rc == KDR_OK && j < m; j++) {
-        const size_t slot = point_at(ws, j0 + sel[j]) * q->nlights + l;
-        if (!lit_group && !kd_walk_pays(scene, q->samples, fr[sel[j]].sin_a, ws->policy))
-            rc = unwalked_add(scene, &fr[sel[j]], q->samples, slot, u, visibility, ws);
-        else {
-            int deferred = 0;
-            rc = kd_pair_visibility(scene, &fr[sel[j]], q->samples, ws, &ws->lights[l],
-                                    g == GROUP_LIST ? &ws->gl : NULL, &visibility[slot],
-                                    &deferred);
-            if (rc == KDR_OK && deferred)
-                rc = unwalked_add(scene, &fr[sel[j]], q->samples, slot, u, visibility, ws);
-        }
-    }
+    for (size_t j = 0; rc == KDR_OK && j < m; j++)
+        rc = kd_pair_visibility(scene, &fr[sel[j]], q->samples, ws, &ws->lights[l],
+                                g == GROUP_LIST ? &ws->gl : NULL,
+                                &visibility[point_at(ws, j0 + sel[j]) * q->nlights + l]);
     return rc;
 }
 
@@ -287,9 +224,7 @@ static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size
                          float *visibility, kd_shadow_ws *ws) {
     kd_shadow_frame fr[GROUP_POINTS];
     size_t sel[GROUP_POINTS];
-    unwalked u;
     int rc = KDR_OK;
-    unwalked_init(&u, q->samples);
     for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += GROUP_POINTS) {
         const size_t n = count - j0 < GROUP_POINTS ? count - j0 : GROUP_POINTS;
         for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
@@ -298,13 +233,9 @@ static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size
                 sel[j] = j;
             }
             if (rc == KDR_OK)
-                rc = trace_run(scene, q, j0, l, fr, sel, n, GROUP_SPLITS, visibility, ws,
-                               &u);
+                rc = trace_run(scene, q, j0, l, fr, sel, n, GROUP_SPLITS, visibility, ws);
         }
     }
-    if (rc == KDR_OK)
-        rc = unwalked_flush(scene, q->samples, &u, visibility, ws);
-    unwalked_free(&u);
     return rc;
 }
 
@@ -327,7 +258,7 @@ static int trace_points(const kdr_scene *scene, const kdr_shadow_query *q, size_
                 rc = kd_pair_visibility_rays(scene, &f, q->samples, ws, vis);
             } else if (rc == KDR_OK) {
                 rc = kd_pair_visibility(scene, &f, q->samples, ws, &ws->lights[l], NULL,
-                                        vis, NULL);
+                                        vis);
             }
             if (rc != KDR_OK)
                 return rc;

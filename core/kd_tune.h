@@ -211,28 +211,14 @@
 #define CONE_WALK_FROM 32u
 /* From CONE_WALK_FROM samples on, a point whose light is wider than
  * CONE_WIDE_SIN (sin of the cone's half-angle; 0.1 is 5.7 degrees) walks
- * only from CONE_WALK_WIDE_FROM samples on; below, its samples join the
- * same chunks as the unwalked points' (kd_cone_query.c; one
- * kdr_trace_batch per point until cone8: its bundle work -3.3% in
- * instructions, callgrind of the default scene at 64 spp). Tuned on the benchmark's two light sizes only (small:
+ * only from CONE_WALK_WIDE_FROM samples on; below, its samples go straight
+ * to the bundles. Tuned on the benchmark's two light sizes only (small:
  * about 2 degrees, large: about 27), large lights, walks against bundles
  * (every point unwalked): default 0.35 / 0.48 / 0.64 / 0.79x against 0.50 /
  * 0.53 / 0.56 / 0.59x at 32 / 64 / 128 / 256 spp, 2CylinderEngine 0.44 /
  * 0.57 / 0.73 / 0.87x against 0.76 / 0.76 / 0.78 / 0.83x. */
 #define CONE_WIDE_SIN 0.1
 #define CONE_WALK_WIDE_FROM 128u
-/* On a scene of CONE_WIDE_WALK_MIN_BYTES and more (tree and triangles,
- * kdr_scene's stats.bytes) a wide light walks from CONE_WALK_FROM samples on
- * like any other, and its busy cones stay in lit_busy (kd_cone.c) instead
- * of joining the chunks: a sample's ray there costs more nodes (27-38 a ray
- * on engine3 / engine9 against 16-26 on default / 2CylinderEngine, single
- * rays) while the walk's cost stays local to the cone, so the walk and the
- * learned blockers repay sooner. Forced walks against the round-8 policy
- * (bench_cone --section cone_split, large light, 32 / 64 spp): engine3
- * (19.2 MB) 1.15 / 1.55x, engine9 (59.2 MB) 1.11 / 1.55x, but
- * 2CylinderEngine (6.1 MB) 0.58 / 0.74x and default (0.3 MB) 0.75 / 0.97x;
- * the threshold sits between 6.1 and 19.2 MB. */
-#define CONE_WIDE_WALK_MIN_BYTES ((size_t)12 << 20)
 #define UNWALKED_CHUNK_RAYS 1024u
 /* Shared walks (kd_cone_query.c trace_grouped, kd_cone_group.c): up to
  * GROUP_POINTS consecutive points walk one cone toward a light when the

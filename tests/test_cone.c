@@ -313,83 +313,6 @@ static void test_ranges(void) {
     free(b.v);
 }
 
-/* The cheap test's scene size (kd_walk_pays, CONE_WIDE_WALK_MIN_BYTES): the
- * roof scene of test_analytic alone (small), and the same with a dense
- * soup far to the side that takes the tree past CONE_WIDE_WALK_MIN_BYTES
- * (large). Toward the wide light (sin 0.5, beside the points, open) at
- * CONE_WALK_FROM..CONE_WALK_WIDE_FROM-1 samples only the large scene
- * walks, and its walk decides every open cone without a ray; the narrow
- * light (sin 0.05) walks on both, and below CONE_WALK_FROM neither walks.
- * Answers equal the never-walk policy's bit for bit. Before the size
- * rule the large scene's wide cones did not walk (decided 0). */
-static void test_walk_by_size(void) {
-    tri_buf small = {0}, large = {0};
-    tb_rect(&small, 2, 1.0f, -50, 50, -50, 50);  /* roof at z = 1 */
-    tb_rect(&small, 2, -3.0f, -50, 50, -50, 50); /* floor below the points */
-    rng_state = 12;
-    tb_soup(&large, 320000, 40.0f, 0.8f);
-    for (size_t k = 0; k < large.n; k++)
-        large.v[9 * k] += 200.0f, large.v[9 * k + 3] += 200.0f, large.v[9 * k + 6] += 200.0f;
-    for (size_t k = 0; k < small.n; k++)
-        tb_add(&large, small.v + 9 * k);
-    kdr_scene *ss = build(&small), *sl = build(&large);
-    CHECK(ss->stats.bytes < CONE_WIDE_WALK_MIN_BYTES, "small scene: %zu bytes",
-          ss->stats.bytes);
-    CHECK(sl->stats.bytes >= CONE_WIDE_WALK_MIN_BYTES, "large scene: %zu bytes",
-          sl->stats.bytes);
-    const double wide = 0.5, narrow = 0.05;
-    CHECK(wide > CONE_WIDE_SIN && narrow <= CONE_WIDE_SIN, "light sizes");
-    const uint32_t mid[3] = {CONE_WALK_FROM, (CONE_WALK_FROM + CONE_WALK_WIDE_FROM) / 2,
-                             CONE_WALK_WIDE_FROM - 1};
-    for (int k = 0; k < 3; k++) {
-        CHECK(!kd_walk_pays(ss, mid[k], wide, KD_WALK_AUTO), "small, wide, %u", mid[k]);
-        CHECK(kd_walk_pays(sl, mid[k], wide, KD_WALK_AUTO), "large, wide, %u", mid[k]);
-        CHECK(kd_walk_pays(ss, mid[k], narrow, KD_WALK_AUTO), "small, narrow, %u", mid[k]);
-        CHECK(kd_walk_pays(sl, mid[k], narrow, KD_WALK_AUTO), "large, narrow, %u", mid[k]);
-    }
-    CHECK(kd_walk_pays(ss, CONE_WALK_WIDE_FROM, wide, KD_WALK_AUTO), "small, wide, from");
-    CHECK(!kd_walk_pays(sl, CONE_WALK_FROM - 1, wide, KD_WALK_AUTO), "large, wide, few");
-    CHECK(!kd_walk_pays(sl, CONE_WALK_FROM - 1, narrow, KD_WALK_AUTO), "large, narrow, few");
-    CHECK(!kd_walk_pays(sl, mid[0], wide, KD_WALK_NEVER), "never stays never");
-
-    float pts[3 * 16];
-    for (int i = 0; i < 16; i++) {
-        pts[3 * i] = (float)(i % 4) - 1.5f;
-        pts[3 * i + 1] = (float)(i / 4) - 1.5f;
-        pts[3 * i + 2] = 0.0f;
-    }
-    /* open, below the roof: sin = 1 / 2 from the middle points */
-    const kdr_sphere_light li = {{0, 0, -1}, 0.5f};
-    kdr_shadow_query q = make_query(pts, 16, &li, 1, mid[0]);
-    for (int big = 0; big < 2; big++) {
-        kdr_scene *s = big ? sl : ss;
-        float vis[16], ref[16];
-        kdr_shadow_stats st = {0};
-        CHECK(kd_shadow_trace_policy(s, &q, 0, 16, KDR_SHADOW_CONE, KD_WALK_AUTO, vis,
-                                     &st) == KDR_OK, "auto");
-        CHECK(kd_shadow_trace_policy(s, &q, 0, 16, KDR_SHADOW_CONE, KD_WALK_NEVER, ref,
-                                     NULL) == KDR_OK, "never");
-        CHECK(memcmp(vis, ref, sizeof vis) == 0, "%s scene: auto differs from never",
-              big ? "large" : "small");
-        for (int i = 0; i < 16; i++)
-            CHECK(vis[i] == 1.0f, "open light: %g", vis[i]);
-        if (big)
-            CHECK(st.cones_decided == 16 && st.rays_traced == 0,
-                  "large scene walks the wide cones at %u spp: decided %llu, rays %llu",
-                  mid[0], (unsigned long long)st.cones_decided,
-                  (unsigned long long)st.rays_traced);
-        else
-            CHECK(st.cones_decided == 0 && st.rays_traced == 16u * mid[0],
-                  "small scene traces the wide cones at %u spp: decided %llu, rays %llu",
-                  mid[0], (unsigned long long)st.cones_decided,
-                  (unsigned long long)st.rays_traced);
-    }
-    kdr_scene_free(ss);
-    kdr_scene_free(sl);
-    free(small.v);
-    free(large.v);
-}
-
 int main(int argc, char **argv) {
     if (argc > 1) {
         fprintf(stderr, "usage: %s\n", argv[0]);
@@ -401,6 +324,5 @@ int main(int argc, char **argv) {
     test_normals();
     test_offsets();
     test_ranges();
-    test_walk_by_size();
     return check_exit("test_cone");
 }

@@ -531,8 +531,8 @@ static void test_answers(void) {
     const kdr_sphere_light two[2] = {{{0.3f, 3.0f, 0.2f}, 0.1f},
                                      {{-2.0f, 2.0f, 1.0f}, 0.3f}};
     /* a narrow light whose points walk beside a wide one whose points (at 32
-     * to CONE_WALK_WIDE_FROM spp) join the unwalked chunks: the chunks'
-     * answers land in the right (point, light) slots among walked ones */
+     * to CONE_WALK_WIDE_FROM spp) do not walk: their answers land in the
+     * right (point, light) slots among walked ones */
     const kdr_sphere_light mixed[2] = {small, large};
     const struct {
         const char *label;
