@@ -17,6 +17,7 @@ and that query answers carry Server-Timing (body, queue, parse, trace,
 encode).
 """
 
+import array
 import json
 import os
 import re
@@ -297,6 +298,31 @@ def test_server_timing(t, c, b):
             "no Server-Timing on an error answer")
 
 
+def test_arrays_not_lists(t, c, b):
+    """A binary client with lists=False answers with array.array objects of
+    the typed arrays' element types (float32 "f", int32 "i", uint8 "B"),
+    holding what the list-decoding client gets; one-piece and streamed."""
+    bounds = c.scene(SCENE)["bounds"]
+    o, d = lib.rays_into_box(bounds, RAYS, seed=5)
+    want_type = {"t": "f", "u": "f", "v": "f", "prim": "i", "hit": "B"}
+    for stream in (False, True):
+        a = Client(b.url, binary=True, stream=stream, lists=False)
+        for query in ("closest", "any"):
+            what = "bundle %s stream=%s" % (query, stream)
+            ls = b.bundle(SCENE, o, d, query=query)
+            ar = a.bundle(SCENE, o, d, query=query)
+            t.eq(sorted(ar), sorted(ls), what + ": members")
+            for key, value in ls.items():
+                if isinstance(value, list):
+                    got = ar[key]
+                    t.check(isinstance(got, array.array) and
+                            got.typecode == want_type[key],
+                            "%s: %s is %r" % (what, key, type(got)))
+                    t.eq(got.tolist(), value, "%s: %s" % (what, key))
+                else:
+                    t.eq(ar[key], value, "%s: %s" % (what, key))
+
+
 def main():
     t = lib.Runner()
     d = lib.Daemon(KDRAYD, ["--threads", "2"])
@@ -304,7 +330,7 @@ def main():
     try:
         for fn in (test_every_kind_both_ways, test_negotiation, test_fields,
                    test_bad_bodies, test_misaligned_typed_array, test_trace_reads_cbor,
-                   test_server_timing):
+                   test_server_timing, test_arrays_not_lists):
             t.run(fn, c, b)
     finally:
         rc = d.stop()
