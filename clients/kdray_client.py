@@ -127,39 +127,54 @@ def _f32_array(values):
     return a
 
 
-def _typed(a):
-    """array('f') -> the CBOR item: tag 85 over its little-endian bytes."""
-    return _cbor2().CBORTag(85, a.tobytes())
+def _head(major, n):
+    """A CBOR head: major type and argument n, in the shortest form."""
+    if n < 24:
+        return bytes([major << 5 | n])
+    for extra, fmt in ((24, ">B"), (25, ">H"), (26, ">I"), (27, ">Q")):
+        if n < 1 << (8 * struct.calcsize(fmt)):
+            return bytes([major << 5 | extra]) + struct.pack(fmt, n)
+    raise ValueError("CBOR argument too large: %d" % n)
 
 
 def cbor_body(payload):
     """A request map as CBOR bytes. array('f') values become float32 typed
-    arrays (tag 85) whose bytes start at a multiple of 4 from the body's
-    start, so kdrayd reads them in place; that takes a padding member
-    ("_pad0", "_pad1", ...: unknown members are ignored) before an array
-    that would otherwise be misaligned."""
+    arrays (tag 85 over their little-endian bytes, as _f32_array makes
+    them) whose bytes start at a multiple of 4 from the body's start, so
+    kdrayd reads them in place; that takes a padding member ("_pad0",
+    "_pad1", ...: unknown members are ignored) before an array that would
+    otherwise be misaligned. An array's bytes are copied once, into the
+    body (a 1M-ray bundle's 12 MiB of directions; encoding it through
+    cbor2 and concatenating copied them four times)."""
     cbor2 = _cbor2()
-    members = []  # encoded (key, value) pairs
-    offset = 1    # the map head (fewer than 24 members)
+    parts = [b""]  # the map head, once the members are counted
+    members = 0
+    offset = 1     # the map head (fewer than 24 members)
     for key, value in payload.items():
         k = cbor2.dumps(key)
         if isinstance(value, array.array):
-            v = cbor2.dumps(_typed(value))
-            start = offset + len(k) + len(v) - len(value) * value.itemsize
+            data = memoryview(value).cast("B")
+            head = b"\xd8\x55" + _head(2, len(data))  # tag 85, byte string
+            start = offset + len(k) + len(head)
             if start % 4:
-                pad_key = cbor2.dumps("_pad%d" % len(members))
+                pad_key = cbor2.dumps("_pad%d" % members)
                 # pad member: key, then a text head (1 byte) and n characters
                 n = (4 - (start + len(pad_key) + 1) % 4) % 4
                 pad = pad_key + cbor2.dumps("x" * n)
-                members.append(pad)
+                parts.append(pad)
+                members += 1
                 offset += len(pad)
+            parts += [k, head, data]
+            offset += len(k) + len(head) + len(data)
         else:
             v = cbor2.dumps(value)
-        members.append(k + v)
-        offset += len(k) + len(v)
-    if len(members) >= 24:
+            parts.append(k + v)
+            offset += len(k) + len(v)
+        members += 1
+    if members >= 24:
         raise ValueError("cbor_body: too many members")
-    return bytes([0xA0 + len(members)]) + b"".join(members)
+    parts[0] = bytes([0xA0 + members])
+    return b"".join(parts)
 
 
 def _typed_array(tag):
