@@ -26,9 +26,11 @@
  * Before the passes each kdrayd request of the workload is sent W times
  * untimed (default 1): a fresh daemon's first large answers and bodies
  * land in heap it has not touched yet, and on this VM a first-touched 2 MiB
- * page can cost 5-15 ms (docs/BENCHMARKS.md, round svc9), so a best of 3
- * could still hold a cold 80 ms encode. The slowest warm-up encode is
- * printed under the rows, so the cold cost stays in sight; --verbose
+ * page can cost 5-40 ms (docs/BENCHMARKS.md, round svc9), so a best of 3
+ * could still hold a cold 80 ms encode. The warm-up takes the first
+ * requests' cold memory, not every thread's (a timed pass can still meet
+ * some); the slowest warm-up encode is printed under the rows, so the
+ * cold cost stays in sight; --verbose
  * prints every kdrayd request's Server-Timing to stderr.
  * Both are wall time (T threads each). kdrayd's Server-Timing header splits
  * its time into the body's arrival, parse, trace and encode; the rest is
