@@ -18,8 +18,9 @@ loopback connection:
 The client is a raw socket that reads the answer with recv_into into one
 buffer reused for every request, so that what is timed is kdrayd and the
 loopback, not the client's copies. Each request prints its wall time, the
-daemon's CPU time for it (all threads, /proc/PID/task/*/schedstat) and
-kdrayd's Server-Timing split (body arrival, queue, parse, trace, encode);
+daemon's CPU time for it (all threads, /proc/PID/task/*/schedstat), the
+system part of it and its minor page faults (/proc/PID/stat; sys is in
+clock ticks, 10 ms here) and kdrayd's Server-Timing split (body arrival, queue, parse, trace, encode);
 the summary gives the medians per daemon and request kind, and the
 largest encode (cold memory shows there). With --faults each daemon's
 minor page faults over its requests are counted with `perf stat -e
@@ -47,6 +48,14 @@ LADDER_ENGINE = os.path.join(os.path.dirname(HERE), "build", "scene-ladder", "en
                              "2CylinderEngine.glb")
 KINDS = ("frustum", "bundle24", "transport24")
 STEPS = ("body", "queue", "parse", "trace", "encode")
+
+
+def proc_stat(pid):
+    """(minor faults, system CPU ms) of pid so far: /proc/PID/stat fields 10
+    and 15, after the command name (which may hold spaces)."""
+    with open("/proc/%d/stat" % pid) as f:
+        rest = f.read().rsplit(")", 1)[1].split()
+    return int(rest[7]), int(rest[12]) * 1e3 / os.sysconf("SC_CLK_TCK")
 
 
 def post(sock, path, body, ctype, buf):
@@ -122,16 +131,19 @@ def run_daemon(kdrayd, scene, kinds, reps, bodies, faults, rows):
         for kind in kinds:
             path, body, ctype = bodies[0][kind]
             for _ in range(reps):
-                c0 = cpu_ms(proc.pid)
+                c0, (f0, s0) = cpu_ms(proc.pid), proc_stat(proc.pid)
                 status, wall, timing, clen = post(sock, path, body, ctype, buf)
                 cpu = cpu_ms(proc.pid) - c0
+                f1, s1 = proc_stat(proc.pid)
                 if status != 200:
                     raise SystemExit("%s: HTTP %d" % (kind, status))
                 rows.append((kdrayd, kind, wall, cpu, timing))
-                print("%-22s %-12s wall %7.1f ms cpu %6.1f ms answer %5.1f MB  %s" % (
-                    os.path.basename(kdrayd)[-22:], kind, wall, cpu, clen / 1e6,
-                    " ".join("%s %.1f" % (k, timing.get(k, float("nan"))) for k in STEPS)),
-                    flush=True)
+                print("%-22s %-12s wall %7.1f ms cpu %6.1f ms (sys %5.0f) minflt %5d "
+                      "answer %5.1f MB  %s" % (
+                          os.path.basename(kdrayd)[-22:], kind, wall, cpu, s1 - s0,
+                          f1 - f0, clen / 1e6,
+                          " ".join("%s %.1f" % (k, timing.get(k, float("nan")))
+                                   for k in STEPS)), flush=True)
         sock.close()
         if perf:
             time.sleep(0.2)

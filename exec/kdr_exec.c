@@ -129,7 +129,7 @@ static void finish_job(kdr_exec_job *j) {
      * kdr_exec_query_done. */
     if (!q->stream) {
         j->ops->release(j);
-        if (q->claim) kdr_exec_settle(ex, q->claim, q->len + r->body.len);
+        if (q->claim) kdr_exec_settle(ex, q->claim, kdr_exec_body_held(q) + r->body.cap);
     }
     r->stopped = stop;
     r->deadline_ms = j->deadline_ms;

@@ -178,6 +178,10 @@ typedef struct kdr_exec_query {
     const char *body; /* not NUL-terminated; a CBOR body's float arrays
                          are read in place, so it must outlive q (above) */
     size_t len;
+    /* bytes the body's buffer really holds, charged while the query lives:
+     * a kdr_block_alloc block's kdr_block_size(len), a grown buffer's
+     * capacity; 0 (or less than len) means len */
+    size_t body_held;
     kdr_media media;        /* the body's type (Content-Type); JSON is 0 */
     kdr_media answer_media; /* the answer's (Accept, kdr_proto_answer_media):
                                CBOR, or JSON for the JSON or base64 text the

@@ -21,7 +21,7 @@
  * of the query. */
 static size_t hits_estimate(size_t n, kdr_query q, unsigned fields, kdr_encoding enc) {
     size_t arrays = q == KDR_ANY ? n : n * (3 * sizeof(float) + sizeof(int32_t));
-    return arrays + kdr_proto_hits_answer_max(n, q, fields, enc);
+    return arrays + kdr_exec_answer_block(kdr_proto_hits_answer_max(n, q, fields, enc));
 }
 
 static int hits_alloc(kdr_hits *h, size_t n, kdr_query q) {
@@ -175,9 +175,11 @@ static int bundle_parse(kdr_exec_job *j) {
     if (r->query == KDR_ALL) /* slots, offsets, attributes, answer */
         j->answer_estimate = b->n * (size_t)r->max_hits * 16 + (2 * b->n + 1) * 4 +
                              attrs_bytes(r->fields, b->n * (size_t)r->max_hits) +
-                             kdr_proto_all_answer_max(b->n, r->max_hits, r->fields, enc);
+                             kdr_exec_answer_block(kdr_proto_all_answer_max(
+                                 b->n, r->max_hits, r->fields, enc));
     else if (r->query == KDR_COUNT)
-        j->answer_estimate = b->n * 4 + kdr_proto_counts_answer_max(b->n, enc);
+        j->answer_estimate =
+            b->n * 4 + kdr_exec_answer_block(kdr_proto_counts_answer_max(b->n, enc));
     else
         j->answer_estimate =
             hits_estimate(b->n, r->query, r->fields, enc) + attrs_bytes(r->fields, b->n);

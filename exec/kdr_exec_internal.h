@@ -158,6 +158,14 @@ int kdr_exec_stream_check(kdr_exec_job *j);
 void kdr_exec_stream_finish(kdr_exec_job *j);
 /* Chunks a windowed stream may trace ahead of the items taken. */
 #define KDR_EXEC_STREAM_WINDOW 16
+
+/* What q's body holds (kdr_exec_query.body_held, at least its length). */
+static inline size_t kdr_exec_body_held(const kdr_exec_query *q) {
+    return q->body_held > q->len ? q->body_held : q->len;
+}
+/* What an answer encoded into an empty kdr_buf holds: the encoder reserves
+ * the answer's bound at once, in a kdr_block_alloc block. */
+static inline size_t kdr_exec_answer_block(size_t bound) { return kdr_block_size(bound); }
 /* The one-shot CBOR answer of hits [first, first + count) (kdr_exec_hits.c). */
 int kdr_exec_hits_slice(const kdr_exec_query *q, const kdr_hits *h, size_t first,
                         size_t count, kdr_query query, unsigned fields, kdr_buf *out);

@@ -168,7 +168,8 @@ static int parse_grow(void *ctx, kdr_proto_meter *m, size_t need) {
 static int metered_parse(kdr_exec_job *j) {
     kdr_exec_claim *c = j->q->claim;
     if (!c) return j->ops->parse(j);
-    kdr_proto_meter m = {.limit = c->bytes > j->q->len ? c->bytes - j->q->len : 0,
+    const size_t held = kdr_exec_body_held(j->q);
+    kdr_proto_meter m = {.limit = c->bytes > held ? c->bytes - held : 0,
                          .grow = parse_grow,
                          .ctx = j};
     kdr_proto_meter *outer = kdr_proto_meter_set(&m);
@@ -192,7 +193,7 @@ void kdr_exec_prepare_work(kdr_exec *ex, kdr_exec_job *j) {
     /* before the charge: a stream's answer estimate is its own */
     if (ok && q->stream) ok = kdr_exec_stream_check(j) == 0;
     if (ok && q->claim) {
-        kdr_exec_settle(ex, q->claim, q->len + j->parsed_bytes);
+        kdr_exec_settle(ex, q->claim, kdr_exec_body_held(q) + j->parsed_bytes);
         kdr_admit a = kdr_exec_charge(ex, q->claim, j->answer_estimate);
         if (a == KDR_ADMIT_TOO_LARGE)
             kdr_exec_fail(j, 413,

@@ -68,8 +68,8 @@ static int shadow_parse(kdr_exec_job *j) {
                       q->nlights * sizeof(kdr_sphere_light);
     j->answer_estimate =
         nvis * sizeof(float) + j->nchunks * sizeof(kdr_shadow_stats) +
-        kdr_proto_shadow_answer_max(q->n, q->nlights, r->want_stats,
-                                    kdr_exec_answer_encoding(j, r->encoding));
+        kdr_exec_answer_block(kdr_proto_shadow_answer_max(
+            q->n, q->nlights, r->want_stats, kdr_exec_answer_encoding(j, r->encoding)));
     j->deadline_ms = r->deadline_ms;
     return 0;
 }
@@ -157,7 +157,8 @@ static int closest_parse(kdr_exec_job *j) {
     /* results, the encoder's per-member copy, the answer */
     j->answer_estimate =
         r->n * sizeof(kdr_closest) + 3 * r->n * sizeof(float) +
-        kdr_proto_closest_answer_max(r->n, kdr_exec_answer_encoding(j, r->encoding));
+        kdr_exec_answer_block(
+            kdr_proto_closest_answer_max(r->n, kdr_exec_answer_encoding(j, r->encoding)));
     j->nchunks = kdr_exec_chunks_of(r->n, KDR_EXEC_CHUNK_CLOSEST);
     j->work_rays = r->n * (r->is_signed ? 1 + (uint64_t)KDR_OCCUPANCY_RAYS : 1);
     j->deadline_ms = r->deadline_ms;
@@ -218,8 +219,8 @@ static int occupancy_parse(kdr_exec_job *j) {
         return -1;
     }
     j->parsed_bytes = r->owned_points ? 3 * r->n * sizeof(float) : 0;
-    j->answer_estimate = r->n + kdr_proto_occupancy_answer_max(
-                                    r->n, kdr_exec_answer_encoding(j, r->encoding));
+    j->answer_estimate = r->n + kdr_exec_answer_block(kdr_proto_occupancy_answer_max(
+                                    r->n, kdr_exec_answer_encoding(j, r->encoding)));
     j->nchunks = kdr_exec_chunks_of(r->n, KDR_EXEC_CHUNK_OCCUPANCY);
     j->work_rays = r->n * (uint64_t)KDR_OCCUPANCY_RAYS;
     j->deadline_ms = r->deadline_ms;

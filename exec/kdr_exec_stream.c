@@ -43,7 +43,9 @@ int kdr_exec_stream_check(kdr_exec_job *j) {
         const size_t n = j->window * KDR_EXEC_CHUNK_RAYS, per = KDR_EXEC_CHUNK_RAYS;
         j->answer_estimate =
             (r->query == KDR_ANY ? n : 16 * n) + per * 24 +
-            kdr_proto_hits_answer_max(per, r->query, r->fields, KDR_ENCODING_CBOR) + 64;
+            kdr_exec_answer_block(
+                kdr_proto_hits_answer_max(per, r->query, r->fields, KDR_ENCODING_CBOR)) +
+            64;
         return 0;
     }
     case KDR_EXEC_FRUSTUM: {
@@ -51,15 +53,18 @@ int kdr_exec_stream_check(kdr_exec_job *j) {
         const size_t n = r->rays, per = frustum_item_rows(r) * r->camera.width;
         j->answer_estimate =
             (r->query == KDR_ANY ? n : 16 * n) + per * 24 +
-            kdr_proto_hits_answer_max(per, r->query, r->fields, KDR_ENCODING_CBOR) + 64;
+            kdr_exec_answer_block(
+                kdr_proto_hits_answer_max(per, r->query, r->fields, KDR_ENCODING_CBOR)) +
+            64;
         return 0;
     }
     case KDR_EXEC_CONE_SHADOW: {
         const kdr_shadow_query *s = &j->k.shadow.req.query;
         j->answer_estimate =
             s->n * s->nlights * sizeof(float) + j->nchunks * sizeof(kdr_shadow_stats) +
-            kdr_proto_shadow_answer_max(j->k.shadow.per_chunk, s->nlights, 0,
-                                        KDR_ENCODING_CBOR) +
+            kdr_exec_answer_block(kdr_proto_shadow_answer_max(j->k.shadow.per_chunk,
+                                                              s->nlights, 0,
+                                                              KDR_ENCODING_CBOR)) +
             64;
         return 0;
     }

@@ -43,10 +43,24 @@
 #define KDR_BUF_MIN_CAP 256
 #define KDR_HUGE_PAGE ((size_t)2 << 20)
 
+/* Whole huge pages only where kdr_block_alloc takes them. */
+static int block_is_huge(size_t bytes) {
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    return bytes >= KDR_BLOCK_HUGE_MIN && bytes <= KDR_BLOCK_HUGE_MAX;
+#else
+    return 0;
+#endif
+}
+
+size_t kdr_block_size(size_t bytes) {
+    return block_is_huge(bytes) ? (bytes + KDR_HUGE_PAGE - 1) & ~(KDR_HUGE_PAGE - 1)
+                                : bytes;
+}
+
 void *kdr_block_alloc(size_t bytes, size_t *usable) {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
-    if (bytes >= KDR_BLOCK_HUGE_MIN && bytes <= KDR_BLOCK_HUGE_MAX) {
-        const size_t whole = (bytes + KDR_HUGE_PAGE - 1) & ~(KDR_HUGE_PAGE - 1);
+    if (block_is_huge(bytes)) {
+        const size_t whole = kdr_block_size(bytes);
         void *p = NULL;
         if (posix_memalign(&p, KDR_HUGE_PAGE, whole) == 0) {
             (void)madvise(p, whole, MADV_HUGEPAGE); /* a hint: else 4 KiB pages */

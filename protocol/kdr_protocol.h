@@ -109,6 +109,10 @@ typedef struct kdr_buf {
 #define KDR_BLOCK_HUGE_MIN ((size_t)2 << 20)
 #define KDR_BLOCK_HUGE_MAX ((size_t)28 << 20)
 void *kdr_block_alloc(size_t bytes, size_t *usable);
+/* The bytes kdr_block_alloc(bytes) really allocates (its *usable): what a
+ * caller that budgets memory charges for the block (bytes up to 2 MiB - 1
+ * more than asked inside the huge-page range, else bytes). */
+size_t kdr_block_size(size_t bytes);
 
 void kdr_buf_init(kdr_buf *b);
 void kdr_buf_free(kdr_buf *b); /* frees data, leaves an empty buffer */

@@ -153,6 +153,7 @@ enum MHD_Result kdr_http_on_request(void *cls, struct MHD_Connection *c, const c
     } else {
         req.body = rs->body;
         req.len = rs->len;
+        req.held = rs->cap;
         req.start = rs->start;
         req.claim = &rs->claim;
         if (kdr_route_is_query(rs->ep)) return kdr_http_start_query(h, c, rs, &req);

@@ -104,10 +104,13 @@ int kdr_http_answer_now(struct MHD_Connection *c, long long clen, size_t max_bod
     return clen <= 0 || (unsigned long long)clen > max_body + DRAIN_MAX;
 }
 
-/* A query body's admission: a slot and the bytes of its announced length,
- * before anything is allocated for it. 0, or 1 with rs->refusal set. */
+/* A query body's admission: a slot and the bytes of its announced length
+ * (as the block it will be read into holds them: up to 2 MiB of whole huge
+ * pages more, kdr_block_size), before anything is allocated for it. 0, or
+ * 1 with rs->refusal set. */
 int kdr_http_admit(kdr_http *h, req_state *rs, long long clen, const char *path) {
-    size_t need = clen > 0 ? kdr_exec_body_charge((size_t)clen) : 0;
+    const size_t len = clen > 0 ? (size_t)clen : 0;
+    size_t need = len ? kdr_exec_body_charge(len) + (kdr_block_size(len) - len) : 0;
     kdr_admit a = kdr_exec_admit(h->srv->exec, &rs->claim, need);
     if (a != KDR_ADMIT_OK) {
         kdr_route_refusal(h->srv, a, need, &rs->refusal);
@@ -120,8 +123,9 @@ int kdr_http_admit(kdr_http *h, req_state *rs, long long clen, const char *path)
     }
     if (clen > 0) {
         /* a large body's block faults in 2 MiB pages (kdr_block_alloc) */
-        rs->body = kdr_block_alloc((size_t)clen, NULL);
-        rs->cap = rs->body ? (size_t)clen : 0;
+        size_t usable = 0;
+        rs->body = kdr_block_alloc(len, &usable);
+        rs->cap = rs->body ? usable : 0; /* the query's body_held */
         if (!rs->body) {
             kdr_exec_release(h->srv->exec, &rs->claim);
             kdr_route_problem(&rs->refusal, 503, "out of memory for the request body");

@@ -123,6 +123,7 @@ static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoi
                                .nmeshes = call->scene->nranges,
                                .body = req->body,
                                .len = req->len,
+                               .body_held = req->held,
                                .media = media,
                                .answer_media = kdr_proto_answer_media(req->accept, media),
                                .max_rays = srv->max_rays,

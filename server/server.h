@@ -41,6 +41,7 @@ typedef struct kdr_request {
     const char *accept;       /* NULL if absent */
     const char *body;
     size_t len;
+    size_t held;           /* bytes body's buffer holds (>= len; 0: len) */
     double start;          /* kdr_now() when its headers arrived */
     kdr_exec_claim *claim; /* query endpoints: the admitted claim */
     const kdr_render_params *render; /* render.png: its parsed parameters */

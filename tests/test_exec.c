@@ -342,6 +342,60 @@ static void test_answer_charge(const kdr_scene *s) {
     kdr_exec_destroy(ex);
 }
 
+/* Admission charges what is allocated, not the lengths (issue 16, svc9): a
+ * body read into a kdr_block_alloc block is held at its whole 2 MiB pages
+ * (kdr_exec_query.body_held), and an answer at the block the encoder
+ * reserves for its bound (kdr_block_size of it). A budget one byte short of
+ * that refuses the answer (the exact lengths fit it: the old charge ran
+ * it); the exact budget runs it, and the claim settles to the held body
+ * plus the answer's capacity. */
+static void test_block_charge(const kdr_scene *s) {
+    const size_t n = 200000; /* 2.4 MB of directions, a 3.2 MB answer */
+    body b = cbor_bundle_body(n, "closest");
+    size_t held = 0;
+    char *blk = kdr_block_alloc(b.len, &held);
+    CHECK(blk && held > b.len && held == kdr_block_size(b.len),
+          "a body of %zu bytes in a block of %zu", b.len, held);
+    memcpy(blk, b.s, b.len);
+    const size_t bound =
+        kdr_proto_hits_answer_max(n, KDR_CLOSEST, KDR_FIELDS_CLOSEST, KDR_ENCODING_CBOR);
+    CHECK(kdr_block_size(bound) > bound, "the answer's bound %zu is a block", bound);
+    /* after the parse (typed arrays read in place, a few floats of
+     * defaults allocated: within SLACK): body, hit arrays, answer block */
+    const size_t need = held + n * 16 + kdr_block_size(bound), SLACK = 64;
+    for (int fits = 0; fits < 2; fits++) {
+        kdr_exec_config cfg = {1, 4, fits ? need + SLACK : need - 1, NULL, NULL};
+        kdr_exec *ex = kdr_exec_create(&cfg);
+        kdr_exec_claim cl = {0};
+        CHECK(kdr_exec_admit(ex, &cl, kdr_exec_body_charge(b.len) + (held - b.len)) ==
+                  KDR_ADMIT_OK,
+              "admit");
+        kdr_exec_query q = query_of(s, KDR_EXEC_BUNDLE, KDR_EXEC_FAST, &b);
+        q.body = blk;
+        q.body_held = held;
+        q.claim = &cl;
+        run_query(ex, &q);
+        if (fits)
+            CHECK(q.result.status == 200 && cl.bytes == held + q.result.body.cap &&
+                      q.result.body.cap >= q.result.body.len,
+                  "budget that fits: %d %s, settled to %zu (held %zu + answer %zu)",
+                  q.result.status, q.result.detail, cl.bytes, held, q.result.body.cap);
+        else
+            CHECK(q.result.status == 413 && strstr(q.result.detail, "answer:") &&
+                      cl.bytes == held,
+                  "a byte short: %d %s, settled to %zu", q.result.status,
+                  q.result.detail, cl.bytes);
+        kdr_exec_stats st;
+        kdr_exec_get_stats(ex, &st);
+        CHECK(st.bytes_used == cl.bytes, "books %zu", st.bytes_used);
+        kdr_exec_query_done(&q);
+        kdr_exec_release(ex, &cl);
+        kdr_exec_destroy(ex);
+    }
+    free(blk);
+    free(b.s);
+}
+
 /* A body that goes to cJSON (an unknown member of single digits: ~40
  * bytes of nodes per body byte) is charged as its parse allocates: 413 past
  * the whole budget, 503 when others hold the room, 200 when it fits; its
@@ -498,6 +552,7 @@ int main(void) {
     test_admission();
     test_answer_charge(s);
     test_parse_charge(s);
+    test_block_charge(s);
     test_stops(s);
     free_cases(&c);
     kdr_scene_free(s);

@@ -47,6 +47,11 @@ static void test_block(void) {
     check_huge("3 MiB block", p, three);
     CHECK(usable == (size_t)4 << 20,
           "3 MiB block: usable %zu, want whole 2 MiB pages (4 MiB)", usable);
+    /* what the executor charges for a block (svc9) is what it holds */
+    CHECK(kdr_block_size(three) == usable && kdr_block_size(100) == 100 &&
+              kdr_block_size(KDR_BLOCK_HUGE_MIN) == KDR_BLOCK_HUGE_MIN &&
+              kdr_block_size(KDR_BLOCK_HUGE_MAX + 1) == KDR_BLOCK_HUGE_MAX + 1,
+          "kdr_block_size(3 MiB) %zu, usable %zu", kdr_block_size(three), usable);
     if (p) {
         memset(p, 0xab, usable);             /* all of it is the caller's */
         unsigned char *q = realloc(p, 1000); /* the executor shrinks answers */

@@ -17,6 +17,7 @@ and that query answers carry Server-Timing (body, queue, parse, trace,
 encode).
 """
 
+import array
 import json
 import os
 import re
@@ -297,6 +298,58 @@ def test_server_timing(t, c, b):
             "no Server-Timing on an error answer")
 
 
+def test_cbor_body_layout(t, c, b):
+    """cbor_body writes what cbor2 reads back: every float array a tag-85
+    typed array of its little-endian bytes starting at a multiple of 4
+    (whatever came before it), other members as given, members counted
+    with the padding ones (heads of 1, 2, 3 and 5 bytes for the lengths)."""
+    for n in (0, 1, 5, 6, 64, 16384, 70000):
+        for key_len in range(1, 5):
+            payload = {"q" * key_len: "closest", "origins": _f32_array([1, 2, 3]),
+                       "d" * key_len: _f32_array(1000.25 + i for i in range(n)),
+                       "tmax": 2.5}
+            body = cbor_body(payload)
+            got = cbor2.loads(body)
+            what = "n=%d key_len=%d" % (n, key_len)
+            for key, value in payload.items():
+                if isinstance(value, array.array):
+                    raw = struct.pack("<%df" % len(value), *value)
+                    item = got.get(key)
+                    t.check(isinstance(item, cbor2.CBORTag) and item.tag == 85 and
+                            item.value == raw, "%s: %s round trip" % (what, key))
+                    at = body.find(raw) if raw else 0  # values found nowhere else
+                    t.check(at % 4 == 0, "%s: %s at offset %d" % (what, key, at))
+                else:
+                    t.eq(got.get(key), value, "%s: %s" % (what, key))
+            t.check(set(got) - set(payload) <= {"_pad%d" % i for i in range(8)},
+                    what + ": only padding members added")
+
+
+def test_arrays_not_lists(t, c, b):
+    """A binary client with lists=False answers with array.array objects of
+    the typed arrays' element types (float32 "f", int32 "i", uint8 "B"),
+    holding what the list-decoding client gets; one-piece and streamed."""
+    bounds = c.scene(SCENE)["bounds"]
+    o, d = lib.rays_into_box(bounds, RAYS, seed=5)
+    want_type = {"t": "f", "u": "f", "v": "f", "prim": "i", "hit": "B"}
+    for stream in (False, True):
+        a = Client(b.url, binary=True, stream=stream, lists=False)
+        for query in ("closest", "any"):
+            what = "bundle %s stream=%s" % (query, stream)
+            ls = b.bundle(SCENE, o, d, query=query)
+            ar = a.bundle(SCENE, o, d, query=query)
+            t.eq(sorted(ar), sorted(ls), what + ": members")
+            for key, value in ls.items():
+                if isinstance(value, list):
+                    got = ar[key]
+                    t.check(isinstance(got, array.array) and
+                            got.typecode == want_type[key],
+                            "%s: %s is %r" % (what, key, type(got)))
+                    t.eq(got.tolist(), value, "%s: %s" % (what, key))
+                else:
+                    t.eq(ar[key], value, "%s: %s" % (what, key))
+
+
 def main():
     t = lib.Runner()
     d = lib.Daemon(KDRAYD, ["--threads", "2"])
@@ -304,7 +357,8 @@ def main():
     try:
         for fn in (test_every_kind_both_ways, test_negotiation, test_fields,
                    test_bad_bodies, test_misaligned_typed_array, test_trace_reads_cbor,
-                   test_server_timing):
+                   test_server_timing, test_arrays_not_lists,
+                   test_cbor_body_layout):
             t.run(fn, c, b)
     finally:
         rc = d.stop()
