@@ -188,9 +188,8 @@ KD_FN VF KD_WN(kb_ties)(const KD_WN(kb_state) *st, VF eq, int32_t prim) {
     return V(bitmask)(win);
 }
 
-/* Tests the leaf's triangles against the active lanes. Returns 1 when
- * the bundle is done (any hit: every lane has hit), told only on a hit. */
-KD_FN int KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) *st,
+/* Tests the leaf's triangles against the active lanes. */
+KD_FN void KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) *st,
                     VF act) {
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
@@ -209,11 +208,8 @@ KD_FN int KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) *
         if (st->any) {
             st->live = V(andnot)(hit, st->live);
             act = V(andnot)(hit, act);
-            if (!V(bits)(act)) {
-                if (!V(bits)(st->live))
-                    return 1;
+            if (!V(bits)(act))
                 break;
-            }
             continue;
         }
         VF better = V(lt)(t, st->best_t);
@@ -227,7 +223,6 @@ KD_FN int KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) *
         st->best_prim = V(sel)(better, V(seti)(prim), st->best_prim);
     }
     KD_WN(kb_update_limit)(st);
-    return 0;
 }
 
 /* Where a bundle is: a node, the lanes' interval there, the active lanes. */
@@ -424,12 +419,8 @@ KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF
             if (st->shared && a != 0.0f ? KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp)
                                         : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
                 continue;
-        } else if (KD_WN(kb_leaf)(s, n, st, c.act)) {
-            /* any hit, every lane has hit: no stack entry holds an active
-             * lane (limit is -inf on dead lanes), so popping them all
-             * would only empty the stack; stop with the same steps */
-            b->steps = steps;
-            return;
+        } else {
+            KD_WN(kb_leaf)(s, n, st, c.act);
         }
         /* pop the nearest entry that still has an active lane */
         for (;;) {
