@@ -115,6 +115,14 @@ size_t kd_batch_live(const kdr_ray_batch *b, size_t first, size_t count, kdr_que
  * equal origins (kd_batch.c); else unchanged. */
 void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids);
 
+/* 1 when no run of equal origins (bitwise) among rays ids[0..count)
+ * crosses a multiple of w: every bundle of w consecutive rays then holds
+ * whole runs (16 shadow rays of one point, 16 AO rays of one point, rays
+ * with their own origins), so kd_batch_order, which moves rays only within
+ * their run, would permute lanes inside bundles and change nothing else
+ * (kd_batch.c). 0 for a batch with one shared origin (org_stride 0). */
+int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, size_t w);
+
 /* Driver flags (the `flags` argument of kd_bundle*_trace). */
 #define KB_FALLBACK 1 /* incoherent stretches go through kd_stream_trace */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */

@@ -163,7 +163,12 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
         else
             for (size_t i = 0; i < c; i++)
                 ids[i] = base + i;
-        kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
+        /* the order only regroups rays within runs of one origin: where
+         * every bundle already holds whole runs it would only permute
+         * lanes (the walk is the same for any lane order), so its
+         * direction spread (a division per ray) is skipped */
+        if (!(flags & KB_SORT) || !kd_batch_runs_fit(rb, ids, (size_t)m, KD_W))
+            kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
         base += c;
         if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats)) {
             const size_t skip = end - base < KB_FALLBACK_CHUNKS * KB_CHUNK
