@@ -299,6 +299,21 @@ void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids)
     memcpy(ids, pos, count * sizeof *ids);
 }
 
+/* kd_batch_order's run field holds 255 runs: a chunk of at most 256 rays
+ * never merges two origins there, so it never moves a ray out of its run
+ * (what kd_batch_runs_fit relies on) */
+_Static_assert(KB_CHUNK <= 256, "kd_batch_order's run key would merge origins");
+
+int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, size_t w) {
+    /* one origin for the whole batch is one run across every bundle */
+    if (b->org_stride == 0)
+        return 0;
+    for (size_t p = w; p < count; p += w)
+        if (memcmp(b->org + 3 * ids[p], b->org + 3 * ids[p - 1], 3 * sizeof(float)) == 0)
+            return 0;
+    return 1;
+}
+
 int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                        size_t count) {
     if (b->org_stride == 0 || count <= 8)

@@ -115,6 +115,14 @@ size_t kd_batch_live(const kdr_ray_batch *b, size_t first, size_t count, kdr_que
  * equal origins (kd_batch.c); else unchanged. */
 void kd_batch_order(const kdr_ray_batch *b, size_t count, int sort, size_t *ids);
 
+/* 1 when no run of equal origins (bitwise) among rays ids[0..count)
+ * crosses a multiple of w: every bundle of w consecutive rays then holds
+ * whole runs (16 shadow rays of one point, 16 AO rays of one point, rays
+ * with their own origins), so kd_batch_order, which moves rays only within
+ * their run, would permute lanes inside bundles and change nothing else
+ * (kd_batch.c). 0 for a batch with one shared origin (org_stride 0). */
+int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, size_t w);
+
 /* Driver flags (the `flags` argument of kd_bundle*_trace). */
 #define KB_FALLBACK 1 /* incoherent stretches go through kd_stream_trace */
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
@@ -300,6 +308,44 @@ KD_FN int KD_WN(kb_step_shared)(const KD_WN(kb_state) *st, const kd_node *n, flo
 }
 
 /*
+ * kb_step_shared for any-hit bundles, with the lanes' choice made by
+ * selects instead of branches: the back entry is written always and kept
+ * (the stack pointer moved) only when both children are needed, and the
+ * cursor takes the front child's fields when some lane needs it, else the
+ * back child's. The same values as kb_step_shared's branches pick, so the
+ * same walk. Shadow and AO lanes turn at random where camera tiles do not:
+ * their branches mispredict (camera tiles lost with this form: see
+ * docs/TRAVERSAL.md, so closest-hit bundles keep the branches).
+ */
+KD_FN int KD_WN(kb_step_shared_nb)(const KD_WN(kb_state) *st, const kd_node *n, float a,
+                                   KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack,
+                                   int *sp) {
+    const int axis = kd_axis(n);
+    const VF av = V(set1)(a), inv = st->inv_dir[axis];
+    const VF t_lo = V(mul)(V(sub)(av, st->ss[axis]), inv);
+    const VF t_hi = V(mul)(V(add)(av, st->ss[axis]), inv);
+    const VF away = a < 0.0f ? V(andnot)(st->sgn[axis], V(seti)(-1)) : st->sgn[axis];
+    KD_WN(kb_span) f, b;
+    KD_WN(kb_spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
+    const VF f_act = V(and)(c->act, V(le)(f.t_near, f.t_far));
+    const VF b_act = V(and)(c->act, KD_WN(kb_active)(st, b.t_near, b.t_far));
+    const uint32_t front = a < 0.0f ? kd_above(n) : c->node + 1;
+    const uint32_t back = a < 0.0f ? c->node + 1 : kd_above(n);
+    const int f_empty = a < 0.0f ? kd_above_empty(n) : kd_below_empty(n);
+    const int b_empty = a < 0.0f ? kd_below_empty(n) : kd_above_empty(n);
+    const int fb = f_empty ? 0 : V(bits)(f_act), bb = b_empty ? 0 : V(bits)(b_act);
+    KD_WN(kb_entry) *e = &stack[*sp];
+    e->node = back, e->t_near = b.t_near, e->t_far = b.t_far;
+    *sp += (fb != 0) & (bb != 0);
+    const VF go_front = V(bitmask)(fb ? -1 : 0);
+    c->node = fb ? front : back;
+    c->t_near = V(sel)(go_front, c->t_near, b.t_near);
+    c->t_far = V(sel)(go_front, f.t_far, b.t_far);
+    c->act = V(sel)(go_front, f_act, b_act);
+    return (fb | bb) != 0;
+}
+
+/*
  * Interior node, general case: per-lane origins, or a shared origin on the
  * plane. Each lane's below/above intervals come from its own front/back; an
  * origin ON the plane takes as front the child its direction leaves (the
@@ -416,8 +462,10 @@ KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF
         st->lane_steps = V(count)(st->lane_steps, c.act);
         if (!kd_is_leaf(n)) {
             const float a = n->u.split - st->sorg[kd_axis(n)];
-            if (st->shared && a != 0.0f ? KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp)
-                                        : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
+            if (st->shared && a != 0.0f
+                    ? (st->any ? KD_WN(kb_step_shared_nb)(st, n, a, &c, stack, &sp)
+                               : KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp))
+                    : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
                 continue;
         } else {
             KD_WN(kb_leaf)(s, n, st, c.act);

@@ -16,11 +16,53 @@
 #error "include kd_traverse_bundle.h's template (define KD_W) before kd_traverse_bundle_run.h"
 #endif
 
+#if KD_W == 16
+/* 1 when ids[0..16) are 16 consecutive rays (the usual bundle: a chunk
+ * that the order left alone, with every ray live) */
+static inline int KD_WN(kb_consecutive)(const size_t *ids) {
+    for (int j = 1; j < KD_W; j++)
+        if (ids[j] != ids[0] + (size_t)j)
+            return 0;
+    return 1;
+}
+
+/* kb_gather's copy for 16 consecutive rays, a vector at a time (the same
+ * floats: only where they are moved differs) */
+KD_FN void KD_WN(kb_gather_run)(const kdr_ray_batch *rb, size_t i0, KD_WN(kb_bundle) *b) {
+    VF v[3];
+    f16_load3x16(rb->dir + 3 * i0, v);
+    for (int k = 0; k < 3; k++)
+        V(store)(b->dir[k], v[k]);
+    if (rb->org_stride) {
+        f16_load3x16(rb->org + 3 * i0, v);
+        for (int k = 0; k < 3; k++)
+            V(store)(b->org[k], v[k]);
+    } else {
+        for (int k = 0; k < 3; k++)
+            V(store)(b->org[k], V(set1)(rb->org[k]));
+    }
+    const VF lo = !rb->tmin ? V(set1)(0.0f)
+                  : rb->tmin_stride ? f16_loadu(rb->tmin + i0) : V(set1)(rb->tmin[0]);
+    const VF hi = !rb->tmax ? V(set1)(INFINITY)
+                  : rb->tmax_stride ? f16_loadu(rb->tmax + i0) : V(set1)(rb->tmax[0]);
+    V(store)(b->tmin, lo);
+    V(store)(b->best_t, hi);
+}
+#endif
+
 /* Copies the rays ids[0..n) into the bundle's lanes (SoA). Lanes that
  * must be traced alone are returned in *alone; they and unused lanes hold
  * a harmless ray. */
 KD_FN void KD_WN(kb_gather)(const kdr_ray_batch *rb, const size_t *ids, int n,
                       KD_WN(kb_bundle) *b, int *alone) {
+#if KD_W == 16
+    if (n == KD_W && KD_WN(kb_consecutive)(ids)) {
+        KD_WN(kb_gather_run)(rb, ids[0], b);
+        V(store)(b->best_u, V(set1)(0.0f));
+        V(store)(b->best_v, V(set1)(0.0f));
+        V(store)((float *)b->best_prim, V(seti)(-1));
+    } else
+#endif
     for (int j = 0; j < KD_W; j++) {
         const size_t i = ids[j < n ? j : 0];
         const float *o = rb->org + rb->org_stride * i, *d = rb->dir + 3 * i;
@@ -163,7 +205,12 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
         else
             for (size_t i = 0; i < c; i++)
                 ids[i] = base + i;
-        kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
+        /* the order only regroups rays within runs of one origin: where
+         * every bundle already holds whole runs it would only permute
+         * lanes (the walk is the same for any lane order), so its
+         * direction spread (a division per ray) is skipped */
+        if (!(flags & KB_SORT) || !kd_batch_runs_fit(rb, ids, (size_t)m, KD_W))
+            kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
         base += c;
         if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats)) {
             const size_t skip = end - base < KB_FALLBACK_CHUNKS * KB_CHUNK

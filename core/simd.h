@@ -461,5 +461,25 @@ KD_AVX512 static inline f16 f16_permute(f16 v, f16 idx) {
 KD_AVX512 static inline f16 f16_load8u(const float *p) {
     return _mm512_castps256_ps512(_mm256_loadu_ps(p));
 }
+/* Sixteen 3-float records from p (48 floats, AoS) into their x, y and z
+ * lanes (SoA): three loads and six two-source permutes, where a lane-by-
+ * lane copy stores 48 floats and reloads them as vectors (the bundle
+ * driver's gather of 16 consecutive rays). */
+KD_AVX512 static inline void f16_load3x16(const float *p, f16 out[3]) {
+    const f16 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16),
+              c = _mm512_loadu_ps(p + 32);
+    /* record j's component k is float 3j + k: lanes whose float lies in
+     * a|b (index < 32) take it from there, the others then from c (16 +
+     * index - 32 in the second permute, which keeps lane j otherwise) */
+    const __m512i lo0 = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
+    const __m512i hi0 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
+    const __m512i lo1 = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
+    const __m512i hi1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
+    const __m512i lo2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
+    const __m512i hi2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+    out[0] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, lo0, b), hi0, c);
+    out[1] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, lo1, b), hi1, c);
+    out[2] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, lo2, b), hi2, c);
+}
 
 #endif /* KD_SIMD_H */

@@ -13,6 +13,8 @@
  * KD_STREAM_RUNS_MIN_BYTES and more; a chunk with ONE origin (stride 0, or
  * stride 3 with every origin equal: a cone's samples of one point) stays
  * with bundles even on such a scene, because there the walk lost.
+ * Also kd_batch_runs_fit, which lets the bundle driver skip ordering a
+ * chunk whose bundles already hold whole runs of one origin.
  */
 #include <math.h>
 #include <stdio.h>
@@ -114,6 +116,38 @@ static void check_route(const char *scene, const kdr_scene *s, const char *what,
     free(c);
 }
 
+/* kd_batch_runs_fit (the bundle driver skips kd_batch_order where it says
+ * 1): its answer for a chunk of runs of `run` rays seen from ray `skip` on
+ * at bundle width w, and, where it says 1, the property the skip relies
+ * on: kd_batch_order keeps every group of w consecutive rays (a bundle)
+ * the same set of rays, only permuted. */
+static void check_runs_fit(int run, int shared, size_t skip, size_t w, int want) {
+    chunk *c = malloc(sizeof *c);
+    make_chunk(c, run);
+    if (shared) c->b.org_stride = 0;
+    const size_t n = KB_CHUNK - skip;
+    size_t ids[KB_CHUNK], sorted[KB_CHUNK];
+    for (size_t i = 0; i < n; i++)
+        ids[i] = sorted[i] = skip + i;
+    const int fit = kd_batch_runs_fit(&c->b, ids, n, w);
+    kd_batch_order(&c->b, n, 1, sorted);
+    int moved = 0, permuted = 0; /* rays that left their group / changed place */
+    for (size_t i = 0; i < n; i++) {
+        moved += (sorted[i] - skip) / w != i / w;
+        permuted += sorted[i] != ids[i];
+    }
+    const int ok = fit == want && (!fit || moved == 0);
+    printf("runs of %3d%s from ray %zu, width %2zu: fit %d (want %d), order moves %d rays"
+           " across bundles, %d in all: %s\n",
+           run, shared ? " (stride 0)" : "", skip, w, fit, want, moved, permuted,
+           ok ? "ok" : "FAIL");
+    if (!ok) {
+        fprintf(stderr, "FAIL runs_fit: runs of %d from %zu, width %zu\n", run, skip, w);
+        failures++;
+    }
+    free(c);
+}
+
 static kdr_scene *build(size_t ntris) {
     float *tris = make_soup(ntris);
     kdr_scene *s = NULL;
@@ -144,6 +178,15 @@ int main(void) {
     check_route("small", small, "one origin, stride 3", KB_CHUNK, 0, 0);
     check_route("small", small, "runs of 16 (AO of 16 points)", 16, 0, 0);
     check_route("small", small, "an origin per ray", 1, 0, 1);
+    /* the order must really permute these chunks (spread directions), or
+     * the "no ray leaves its bundle" half would hold trivially */
+    check_runs_fit(16, 0, 0, 16, 1);  /* 16 rays per point, 16 lanes */
+    check_runs_fit(16, 0, 0, 8, 0);   /* a run across every second boundary */
+    check_runs_fit(8, 0, 0, 16, 1);   /* two whole runs per bundle */
+    check_runs_fit(1, 0, 0, 16, 1);   /* an origin per ray: the order is the identity */
+    check_runs_fit(64, 0, 0, 16, 0);  /* 64 AO rays per point: 4 bundles a run */
+    check_runs_fit(16, 0, 3, 16, 0);  /* runs off the bundles' grid */
+    check_runs_fit(KB_CHUNK, 1, 0, 16, 0); /* one origin, stride 0 */
     kdr_scene_free(big);
     kdr_scene_free(small);
     printf("%s: %d failures\n", failures ? "FAILED" : "passed", failures);
