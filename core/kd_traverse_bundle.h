@@ -272,36 +272,55 @@ KD_FN void KD_WN(kb_spans)(VF t_lo, VF t_hi, VF away, VF t_near, VF t_far,
 }
 
 /*
- * Interior node, shared origin strictly off the plane: one front child for
- * every lane, the paper's listing. Returns 0 when no lane enters either
- * child. A lane moves away from the plane when its direction points from
- * the plane to the origin's side.
+ * What both shared-origin steps below decide at an interior node whose
+ * split the shared origin lies strictly off: the front (origin's side) and
+ * back children, their per-lane spans, which lanes need each, and each
+ * child's lane bits (0 for an empty child: kd_layout's flags say it needs
+ * no visit). A lane moves away from the plane when its direction points
+ * from the plane to the origin's side.
  */
-KD_FN int KD_WN(kb_step_shared)(const KD_WN(kb_state) *st, const kd_node *n, float a,
-                          KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp) {
+typedef struct KD_WN(kb_choice) {
+    KD_WN(kb_span) f, b;
+    VF f_act, b_act;
+    uint32_t front, back;
+    int fb, bb;
+} KD_WN(kb_choice);
+
+KD_FN void KD_WN(kb_shared_choice)(const KD_WN(kb_state) *st, const kd_node *n, float a,
+                                   const KD_WN(kb_cursor) *c, KD_WN(kb_choice) *ch) {
     const int axis = kd_axis(n);
     const VF av = V(set1)(a), inv = st->inv_dir[axis];
     const VF t_lo = V(mul)(V(sub)(av, st->ss[axis]), inv);
     const VF t_hi = V(mul)(V(add)(av, st->ss[axis]), inv);
     const VF away = a < 0.0f ? V(andnot)(st->sgn[axis], V(seti)(-1)) : st->sgn[axis];
-    KD_WN(kb_span) f, b;
-    KD_WN(kb_spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
-    const VF f_act = V(and)(c->act, V(le)(f.t_near, f.t_far));
-    const VF b_act = V(and)(c->act, KD_WN(kb_active)(st, b.t_near, b.t_far));
-    const uint32_t front = a < 0.0f ? kd_above(n) : c->node + 1;
-    const uint32_t back = a < 0.0f ? c->node + 1 : kd_above(n);
-    /* an empty child (kd_layout's flags) needs no visit */
+    KD_WN(kb_spans)(t_lo, t_hi, away, c->t_near, c->t_far, &ch->f, &ch->b);
+    ch->f_act = V(and)(c->act, V(le)(ch->f.t_near, ch->f.t_far));
+    ch->b_act = V(and)(c->act, KD_WN(kb_active)(st, ch->b.t_near, ch->b.t_far));
+    ch->front = a < 0.0f ? kd_above(n) : c->node + 1;
+    ch->back = a < 0.0f ? c->node + 1 : kd_above(n);
     const int f_empty = a < 0.0f ? kd_above_empty(n) : kd_below_empty(n);
     const int b_empty = a < 0.0f ? kd_below_empty(n) : kd_above_empty(n);
-    const int fb = f_empty ? 0 : V(bits)(f_act), bb = b_empty ? 0 : V(bits)(b_act);
-    if (fb && bb)
-        KD_WN(kb_push)(stack, sp, back, b.t_near, b.t_far);
-    if (fb) {
-        c->node = front, c->t_far = f.t_far, c->act = f_act;
+    ch->fb = f_empty ? 0 : V(bits)(ch->f_act);
+    ch->bb = b_empty ? 0 : V(bits)(ch->b_act);
+}
+
+/*
+ * Interior node, shared origin strictly off the plane: one front child for
+ * every lane, the paper's listing. Returns 0 when no lane enters either
+ * child.
+ */
+KD_FN int KD_WN(kb_step_shared)(const KD_WN(kb_state) *st, const kd_node *n, float a,
+                          KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp) {
+    KD_WN(kb_choice) ch;
+    KD_WN(kb_shared_choice)(st, n, a, c, &ch);
+    if (ch.fb && ch.bb)
+        KD_WN(kb_push)(stack, sp, ch.back, ch.b.t_near, ch.b.t_far);
+    if (ch.fb) {
+        c->node = ch.front, c->t_far = ch.f.t_far, c->act = ch.f_act;
         return 1;
     }
-    if (bb) {
-        c->node = back, c->t_near = b.t_near, c->t_far = b.t_far, c->act = b_act;
+    if (ch.bb) {
+        c->node = ch.back, c->t_near = ch.b.t_near, c->t_far = ch.b.t_far, c->act = ch.b_act;
         return 1;
     }
     return 0;
@@ -320,29 +339,17 @@ KD_FN int KD_WN(kb_step_shared)(const KD_WN(kb_state) *st, const kd_node *n, flo
 KD_FN int KD_WN(kb_step_shared_nb)(const KD_WN(kb_state) *st, const kd_node *n, float a,
                                    KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack,
                                    int *sp) {
-    const int axis = kd_axis(n);
-    const VF av = V(set1)(a), inv = st->inv_dir[axis];
-    const VF t_lo = V(mul)(V(sub)(av, st->ss[axis]), inv);
-    const VF t_hi = V(mul)(V(add)(av, st->ss[axis]), inv);
-    const VF away = a < 0.0f ? V(andnot)(st->sgn[axis], V(seti)(-1)) : st->sgn[axis];
-    KD_WN(kb_span) f, b;
-    KD_WN(kb_spans)(t_lo, t_hi, away, c->t_near, c->t_far, &f, &b);
-    const VF f_act = V(and)(c->act, V(le)(f.t_near, f.t_far));
-    const VF b_act = V(and)(c->act, KD_WN(kb_active)(st, b.t_near, b.t_far));
-    const uint32_t front = a < 0.0f ? kd_above(n) : c->node + 1;
-    const uint32_t back = a < 0.0f ? c->node + 1 : kd_above(n);
-    const int f_empty = a < 0.0f ? kd_above_empty(n) : kd_below_empty(n);
-    const int b_empty = a < 0.0f ? kd_below_empty(n) : kd_above_empty(n);
-    const int fb = f_empty ? 0 : V(bits)(f_act), bb = b_empty ? 0 : V(bits)(b_act);
+    KD_WN(kb_choice) ch;
+    KD_WN(kb_shared_choice)(st, n, a, c, &ch);
     KD_WN(kb_entry) *e = &stack[*sp];
-    e->node = back, e->t_near = b.t_near, e->t_far = b.t_far;
-    *sp += (fb != 0) & (bb != 0);
-    const VF go_front = V(bitmask)(fb ? -1 : 0);
-    c->node = fb ? front : back;
-    c->t_near = V(sel)(go_front, c->t_near, b.t_near);
-    c->t_far = V(sel)(go_front, f.t_far, b.t_far);
-    c->act = V(sel)(go_front, f_act, b_act);
-    return (fb | bb) != 0;
+    e->node = ch.back, e->t_near = ch.b.t_near, e->t_far = ch.b.t_far;
+    *sp += (ch.fb != 0) & (ch.bb != 0);
+    const VF go_front = V(bitmask)(ch.fb ? -1 : 0);
+    c->node = ch.fb ? ch.front : ch.back;
+    c->t_near = V(sel)(go_front, c->t_near, ch.b.t_near);
+    c->t_far = V(sel)(go_front, ch.f.t_far, ch.b.t_far);
+    c->act = V(sel)(go_front, ch.f_act, ch.b_act);
+    return (ch.fb | ch.bb) != 0;
 }
 
 /*
