@@ -324,14 +324,20 @@ class _TLSConnection(http.client.HTTPSConnection):
 def _stale(conn):
     """True when an idle kept-alive connection cannot carry a request: the
     server closed it (EOF readable) or sent something unasked. A readable
-    idle socket is never good news, so the check costs no round trip."""
-    if conn.sock is None:
+    idle socket is never good news, so the check costs no round trip. Not
+    done over TLS, where a session ticket can arrive unasked (a request on
+    a closed TLS connection is retried as below)."""
+    sock = conn.sock
+    if sock is None or isinstance(conn, _TLSConnection):
         return False  # http.client opens a new socket at the next request
     try:
-        readable, _, _ = select.select([conn.sock], [], [], 0)
+        if hasattr(select, "poll"):
+            poller = select.poll()
+            poller.register(sock, select.POLLIN)
+            return bool(poller.poll(0))
+        return bool(select.select([sock], [], [], 0)[0])
     except (OSError, ValueError):
         return True
-    return bool(readable)
 
 
 class Client:
