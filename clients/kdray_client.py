@@ -423,23 +423,28 @@ class Client:
         """Sends a request; returns (conn, response) with the response's head
         read. Retries once on a new connection when a kept connection turns
         out to be closed (see the class's docstring)."""
+        # a body given as an iterable or a file is sent as it is read: it
+        # cannot be sent twice, so its request is never retried; one with a
+        # Transfer-Encoding header is sent chunked (as urllib did)
+        resendable = body is None or isinstance(body, (bytes, bytearray, str))
+        chunked = any(k.lower() == "transfer-encoding" for k in headers)
         while True:
             conn = self._take()
-            reused = conn.sock is not None
+            # retried only on a kept connection (a new one failing is real)
+            may_retry = conn.sock is not None and resendable
             try:
                 try:
                     conn.request(method, self._prefix + path, body=body,
-                                 headers=headers)
+                                 headers=headers, encode_chunked=chunked)
                 except ConnectionError:
                     # The server may have answered before it stopped reading
                     # (413: body too large): read that answer if there is one.
                     if conn.sock is None:
                         raise  # never connected: nothing to read
-
                 return conn, conn.getresponse()
             except _NoAnswer as err:
                 conn.close()
-                if not reused:
+                if not may_retry:
                     raise ConnectionError("%s: no answer: %s" % (self.url, err)) from None
             except BaseException:
                 conn.close()

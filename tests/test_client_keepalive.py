@@ -13,7 +13,9 @@ connection, one per thread when threads share it, and close() closes
 them; a kept connection the server closed while idle (the relay dropping
 it, kdrayd's own --connection-timeout-s, a kdrayd restarted on the same
 port) is replaced once, transparently; a failure after part of an answer
-arrived, or on a new connection, is raised and not retried; a streamed
+arrived, on a new connection, or of a request whose body was read from an
+iterable (sent chunked, cannot be sent twice) is raised and not retried;
+a streamed
 answer abandoned mid-way closes its connection and the next request gets
 a right answer on a new one, while one read to its end leaves its
 connection for the next request.
@@ -229,6 +231,22 @@ def test_idle_closed(t, d):
         t.eq(len(r["t"]), n, "1M-ray CBOR bundle after its connection closed")
         t.check(r["t"][0] > 0 and r["t"][n - 1] == r["t"][0], "its answers")
         t.eq(relay.accepted, 5, "b's connection, then its retry's")
+        # a body read from an iterable (sent chunked) cannot be sent twice:
+        # its request is not retried
+        def parts():
+            return iter([b'{"origins": [0, 3, 0], ', b'"directions": [0, -1, 0]}'])
+        bundle = "/v1/scenes/%s/bundle" % SCENE
+        chunked = {"Transfer-Encoding": "chunked"}
+        status, _, body = c.request("POST", bundle, parts(), headers=chunked)
+        t.eq(status, 200, "chunked body: %r" % body[:200])
+        before = relay.accepted
+        relay.kill = True
+        try:
+            c.request("POST", bundle, parts(), headers=chunked)
+            t.check(False, "an iterable body's request was retried")
+        except OSError:
+            pass
+        t.eq(relay.accepted, before, "iterable body: no new connection")
         # a failure after part of an answer arrived: raised, not retried
         c.health()
         before = relay.accepted
