@@ -357,7 +357,9 @@ class Client:
     the first byte of an answer is never retried, and neither is a failure
     on a new connection. A request whose body was cut half sent is retried
     too: every kdray request is idempotent (GETs, and queries that only
-    read the scene). A streamed answer leaves its connection for the next
+    read the scene); only a body given as an iterable or a file (sent as
+    it is read, chunked with a Transfer-Encoding header) is never sent
+    twice. A streamed answer leaves its connection for the next
     request only when read to its end; one left half read (a generator
     closed or dropped early) closes its connection. close(), or leaving a
     with block, closes the kept connections; a later request opens a new
