@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """kdray_client.py - a client for the kdray HTTP API.
 
-In its default JSON mode only the standard library (urllib, struct, base64,
-json) is used, so the file can be copied anywhere next to a running kdrayd.
+In its default JSON mode only the standard library (http.client, struct,
+base64, json) is used, so the file can be copied anywhere next to a running kdrayd.
 Its binary mode (Client(url, binary=True), --binary) sends and receives
 application/cbor with float arrays as RFC 8746 typed arrays (raw
 little-endian float32, no text conversion at all); it needs Debian's
@@ -36,19 +36,25 @@ As a command (see --help):
     kdray_client.py --binary bundle --random 100000 --fields t
     kdray_client.py --stream frustum --eye 0,0,5 --target 0,0,0 --width 1024 \\
         --height 1024   # the answer streamed while later chunks trace
+
+A Client keeps its HTTP/1.1 connection open between requests (one per
+thread that uses it) and closes it on close() or at the end of a with
+block; see Client for when it reconnects.
 """
 
 import argparse
 import array
 import base64
+import http.client
 import json
 import math
 import random
 import struct
+import select
 import sys
-import urllib.error
+import threading
 import urllib.parse
-import urllib.request
+import weakref
 
 DEFAULT_URL = "http://127.0.0.1:8080"
 DEFAULT_TIMEOUT_S = 120.0
@@ -288,13 +294,76 @@ def assemble_stream(items):
     return answer
 
 
+class _NoAnswer(Exception):
+    """The connection failed before the first byte of an answer arrived (the
+    server had closed it, or reset it): the request may be sent again."""
+
+
+class _Response(http.client.HTTPResponse):
+    """An answer that tells "nothing arrived" (_NoAnswer) apart from a failure
+    after its first byte, which is never retried."""
+
+    def begin(self):
+        try:
+            first = self.fp.peek(1)
+        except ConnectionError as err:
+            raise _NoAnswer(err) from err
+        if not first:
+            raise _NoAnswer("connection closed before an answer")
+        super().begin()
+
+
+class _Connection(http.client.HTTPConnection):
+    response_class = _Response
+
+
+class _TLSConnection(http.client.HTTPSConnection):
+    response_class = _Response
+
+
+def _stale(conn):
+    """True when an idle kept-alive connection cannot carry a request: the
+    server closed it (EOF readable) or sent something unasked. A readable
+    idle socket is never good news, so the check costs no round trip. Not
+    done over TLS, where a session ticket can arrive unasked (a request on
+    a closed TLS connection is retried as below)."""
+    sock = conn.sock
+    if sock is None or isinstance(conn, _TLSConnection):
+        return False  # http.client opens a new socket at the next request
+    try:
+        if hasattr(select, "poll"):
+            poller = select.poll()
+            poller.register(sock, select.POLLIN)
+            return bool(poller.poll(0))
+        return bool(select.select([sock], [], [], 0)[0])
+    except (OSError, ValueError):
+        return True
+
+
 class Client:
-    """One kdrayd; every method is one HTTP request (thread-safe). binary:
-    query bodies and answers in CBOR instead of JSON. stream: bundle,
-    cone-shadow and frustum answers streamed (application/cbor-seq, chunk by
-    chunk while later chunks trace) and put together (implies binary).
-    lists=False (binary or stream): answer arrays as array.array objects
-    instead of lists (see the module's docstring for why)."""
+    """One kdrayd; every method is one HTTP request. binary: query bodies and
+    answers in CBOR instead of JSON. stream: bundle, cone-shadow and frustum
+    answers streamed (application/cbor-seq, chunk by chunk while later chunks
+    trace) and put together (implies binary). lists=False (binary or
+    stream): answer arrays as array.array objects instead of lists (see the
+    module's docstring for why).
+
+    Connections: the Client keeps one HTTP/1.1 keep-alive connection per
+    thread that uses it (a Client may be shared by threads: each gets its
+    own connection, no request waits for another's). A request on a kept
+    connection that the server had closed while it was idle (its
+    --connection-timeout-s, a restart) is sent once more on a new
+    connection, provided no byte of the answer had arrived; a failure after
+    the first byte of an answer is never retried, and neither is a failure
+    on a new connection. A request whose body was cut half sent is retried
+    too: every kdray request is idempotent (GETs, and queries that only
+    read the scene); only a body given as an iterable or a file (sent as
+    it is read, chunked with a Transfer-Encoding header) is never sent
+    twice. A streamed answer leaves its connection for the next
+    request only when read to its end; one left half read (a generator
+    closed or dropped early) closes its connection. close(), or leaving a
+    with block, closes the kept connections; a later request opens a new
+    one."""
 
     def __init__(self, url=DEFAULT_URL, timeout=DEFAULT_TIMEOUT_S, binary=False,
                  stream=False, lists=True):
@@ -303,8 +372,85 @@ class Client:
         self.binary = binary or stream
         self.stream = stream
         self.lists = lists
+        parts = urllib.parse.urlsplit(self.url)
+        if parts.scheme not in ("http", "https") or not parts.hostname:
+            raise ValueError("url: expected http://HOST[:PORT], got %r" % url)
+        self._conn_class = _Connection if parts.scheme == "http" else _TLSConnection
+        self._netloc = parts.netloc
+        self._prefix = parts.path  # a path prefix (behind a proxy), may be ""
+        self._local = threading.local()   # .conn: this thread's idle connection
+        self._idle = weakref.WeakSet()    # every thread's, for close()
+        self._lock = threading.Lock()
         if self.binary:
             _cbor2()  # fail now, not at the first query
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        """Closes the idle kept connections of every thread (one carrying a
+        request closes when that request ends)."""
+        with self._lock:
+            conns = list(self._idle)
+            self._idle.clear()
+        for conn in conns:
+            conn.close()
+
+    def _take(self):
+        """This thread's kept connection, or a new one (not yet connected)."""
+        with self._lock:
+            conn = getattr(self._local, "conn", None)
+            self._local.conn = None
+            if conn is not None:
+                self._idle.discard(conn)
+        if conn is not None and _stale(conn):
+            conn.close()  # the next request on it opens a new socket
+        return conn or self._conn_class(self._netloc, timeout=self.timeout)
+
+    def _keep(self, conn, resp):
+        """Puts conn back for the next request if resp was read to its end
+        and the server keeps the connection open; closes it otherwise."""
+        if resp.isclosed() and not resp.will_close and conn.sock is not None:
+            with self._lock:
+                if getattr(self._local, "conn", None) is None:
+                    self._local.conn = conn
+                    self._idle.add(conn)
+                    return
+        conn.close()
+
+    def _open(self, method, path, body, headers):
+        """Sends a request; returns (conn, response) with the response's head
+        read. Retries once on a new connection when a kept connection turns
+        out to be closed (see the class's docstring)."""
+        # a body given as an iterable or a file is sent as it is read: it
+        # cannot be sent twice, so its request is never retried; one with a
+        # Transfer-Encoding header is sent chunked (as urllib did)
+        resendable = body is None or isinstance(body, (bytes, bytearray, str))
+        chunked = any(k.lower() == "transfer-encoding" for k in headers)
+        while True:
+            conn = self._take()
+            # retried only on a kept connection (a new one failing is real)
+            may_retry = conn.sock is not None and resendable
+            try:
+                try:
+                    conn.request(method, self._prefix + path, body=body,
+                                 headers=headers, encode_chunked=chunked)
+                except ConnectionError:
+                    # The server may have answered before it stopped reading
+                    # (413: body too large): read that answer if there is one.
+                    if conn.sock is None:
+                        raise  # never connected: nothing to read
+                return conn, conn.getresponse()
+            except _NoAnswer as err:
+                conn.close()
+                if not may_retry:
+                    raise ConnectionError("%s: no answer: %s" % (self.url, err)) from None
+            except BaseException:
+                conn.close()
+                raise
 
     def request(self, method, path, body=None, content_type="application/json",
                 headers=None):
@@ -313,14 +459,14 @@ class Client:
         hdrs = dict(headers or {})
         if body is not None and content_type is not None:
             hdrs["Content-Type"] = content_type
-        req = urllib.request.Request(self.url + path, data=body, method=method,
-                                     headers=hdrs)
+        conn, resp = self._open(method, path, body, hdrs)
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as resp:
-                return resp.status, dict(resp.headers.items()), resp.read()
-        except urllib.error.HTTPError as err:
-            with err:
-                return err.code, dict(err.headers.items()), err.read()
+            data = resp.read()
+        except BaseException:
+            conn.close()
+            raise
+        self._keep(conn, resp)
+        return resp.status, dict(resp.headers.items()), data
 
     def call(self, method, path, payload=None):
         """JSON in, JSON out (CBOR both ways for queries in binary mode);
@@ -351,32 +497,52 @@ class Client:
         """POSTs a query (CBOR) asking for a streamed answer and yields its
         items as they arrive (see stream_items: head, chunk items, final
         item). An error answer before streaming began raises KdrayError with
-        its problem, as call() does; so does a final problem item."""
-        req = urllib.request.Request(
-            self.url + path, data=cbor_body(payload), method="POST",
-            headers={"Content-Type": CBOR, "Accept": CBOR_SEQ})
+        its problem, as call() does; so does a final problem item. The
+        connection is kept for the next request only when the answer was
+        read to its end."""
+        conn, resp = self._open("POST", path, cbor_body(payload),
+                                {"Content-Type": CBOR, "Accept": CBOR_SEQ})
+        settled = False  # conn kept or closed
         try:
-            resp = urllib.request.urlopen(req, timeout=self.timeout)
-        except urllib.error.HTTPError as err:
-            with err:
-                data = err.read()
+            if resp.status >= 400:
+                data = resp.read()
+                self._keep(conn, resp)
+                settled = True
                 try:
                     problem = json.loads(data)
                 except ValueError:
                     problem = data.decode("utf-8", "replace")
-                retry = err.headers.get("Retry-After", "")
-                raise KdrayError(err.code, problem,
-                                 int(retry) if retry.isdigit() else None) from None
-        with resp:
+                retry = resp.headers.get("Retry-After", "")
+                raise KdrayError(resp.status, problem,
+                                 int(retry) if retry.isdigit() else None)
             ctype = resp.headers.get("Content-Type", "")
             if not ctype.startswith(CBOR_SEQ):
                 raise KdrayError(resp.status, "not a streamed answer: " + ctype)
             try:
-                yield from stream_items(read_cbor_seq(resp, self.lists))
-            except (EOFError, OSError, ValueError) as err:
+                for item in stream_items(read_cbor_seq(resp, self.lists)):
+                    if "status" in item and "kind" not in item:
+                        # The final item: its last byte ended the sequence.
+                        # Reading the chunked body's terminator makes the
+                        # connection reusable; it is settled before the
+                        # caller sees the item, as a caller may stop asking
+                        # for items once it has the final one.
+                        if resp.read() == b"":
+                            self._keep(conn, resp)
+                        else:
+                            conn.close()
+                        settled = True
+                    yield item
+            except (EOFError, OSError, ValueError,
+                    http.client.HTTPException) as err:
                 if isinstance(err, KdrayError):
                     raise
                 raise KdrayError(0, "streamed answer cut: %s" % err) from None
+        finally:
+            # A generator closed or dropped early (GeneratorExit at a yield)
+            # or an error lands here unsettled: the rest of the answer is
+            # unread, so the connection cannot carry another request.
+            if not settled:
+                conn.close()
 
     def _query(self, path, payload):
         if self.stream:
@@ -672,7 +838,7 @@ def main(argv=None):
         if err.retry_after is not None:
             print("kdray_client: retry after %d s" % err.retry_after, file=sys.stderr)
         return 1
-    except (urllib.error.URLError, OSError) as err:
+    except (OSError, http.client.HTTPException) as err:
         print("kdray_client: %s: %s" % (args.url, err), file=sys.stderr)
         return 1
     if not args.full and isinstance(answer, dict):

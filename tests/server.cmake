@@ -108,6 +108,14 @@ add_test(NAME server_queries
                  ${PROJECT_SOURCE_DIR}/clients)
 set_tests_properties(server_queries PROPERTIES TIMEOUT 600)
 
+# clients/kdray_client.py keeps one connection per Client (and thread),
+# reconnects once when a kept one was closed, closes a half-read stream's
+# (issue 16): counted through a relay. Debian's python3 (python3-cbor2).
+add_test(NAME client_keepalive
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_client_keepalive.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(client_keepalive PROPERTIES TIMEOUT 300)
+
 # clients/kdray_raycast.py (issue 15): installed offline the documented way
 # into a throwaway venv, then every Open3D-named method against kdrayd.
 add_test(NAME client_raycast

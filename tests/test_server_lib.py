@@ -71,15 +71,15 @@ class Daemon:
 
     def wait_healthy(self):
         from kdray_client import Client
-        client = Client(self.url, timeout=10)
-        deadline = time.time() + HEALTH_TIMEOUT_S
-        while time.time() < deadline:
-            if self.proc.poll() is not None:
-                raise RuntimeError("kdrayd exited:\n" + self.log_text())
-            status, _, _ = client.request("GET", "/v1/health")
-            if status == 200:
-                return
-            time.sleep(0.05)
+        with Client(self.url, timeout=10) as client:  # closes its connection
+            deadline = time.time() + HEALTH_TIMEOUT_S
+            while time.time() < deadline:
+                if self.proc.poll() is not None:
+                    raise RuntimeError("kdrayd exited:\n" + self.log_text())
+                status, _, _ = client.request("GET", "/v1/health")
+                if status == 200:
+                    return
+                time.sleep(0.05)
         raise RuntimeError("kdrayd never became healthy:\n" + self.log_text())
 
     def signal(self, sig=signal.SIGTERM):
