@@ -51,8 +51,7 @@ typedef struct KD_WN(ks_lane) {
     size_t id;
     float tmin;
     kd_walk_out o;
-    kd_ray_pre pre;
-    kd_ntri_pre4 pre4;
+    kd_ntri_pre8 pre8; /* the leaf test's shear, eight lanes (kd_walk_leaf_w8) */
 } KD_WN(ks_lane);
 
 /* The lanes' state: in registers (the vectors) and in memory (stacks of
@@ -131,8 +130,9 @@ KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
             w->stk_tf[d][j] = st[d].tf;
         }
         l->tmin = ray.tmin;
-        kd_ray_precompute(ray.org, ray.dir, &l->pre);
-        kd_ntri_pre_init4(&l->pre, &l->pre4);
+        kd_ray_pre pre;
+        kd_ray_precompute(ray.org, ray.dir, &pre);
+        kd_ntri_pre_init8(&pre, &l->pre8);
         w->node = IV(put)(w->node, bit, (int32_t)(n0 - c->s->nodes));
         w->sp = IV(put)(w->sp, bit, sp);
         w->visits = IV(put)(w->visits, bit, level);
@@ -173,8 +173,8 @@ KD_FN void KD_WN(ks_settle)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, unsigned lea
     for (unsigned mm = leaf; mm; mm &= mm - 1) {
         const int j = __builtin_ctz(mm);
         KD_WN(ks_lane) *l = &w->lane[j];
-        if (kd_walk_leaf(s, s->nodes + nv[j], &l->pre, &l->pre4, l->tmin, c->q == KDR_ANY,
-                         1, &l->o)) {
+        if (kd_walk_leaf_w8(s, s->nodes + nv[j], &l->pre8, l->tmin, c->q == KDR_ANY,
+                            &l->o)) {
             done |= (unsigned)(1u << j);
             found |= (unsigned)(1u << j);
         } else {
