@@ -12,14 +12,16 @@
  *            step as mask operations (near/far, the empty-child flags, the
  *            far entry scattered to the lane's stack when both are taken;
  *            AVX2 has no scatter: the pushing lanes store one by one);
- *   leaves   the lanes at leaves test their leaf one by one, with the
- *            single walk's leaf test (kd_walk_leaf: one ray against 1, 4
- *            or 8 triangles at a time);
+ *   leaves   the lanes at leaves test their leaf one by one, one ray
+ *            against 8 triangles at a time whatever the leaf's size
+ *            (kd_walk_leaf_w8: the single walk's triangle test and tie
+ *            rule without its branch on the count);
  *   pops     lanes after a leaf or with no child to enter pop their stack
  *            (walk()'s pop: entries starting after kd_term_bound(best t)
  *            are dropped);
  *   refill   a finished lane writes its answer and takes the batch's next
- *            ray, so the lanes stay full until the batch runs dry; a ray
+ *            ray, so the lanes stay full until the batch runs dry (the
+ *            rays are set up KD_W at a time, one per lane: ks_prepare); a ray
  *            that shares its origin with the ray before it starts at its
  *            entry on the origin's path, with the single walk's interval
  *            and pending entries there (kd_entry.h: the replayed levels
