@@ -12,10 +12,13 @@
  *            step as mask operations (near/far, the empty-child flags, the
  *            far entry scattered to the lane's stack when both are taken;
  *            AVX2 has no scatter: the pushing lanes store one by one);
- *   leaves   the lanes at leaves test their leaf one by one, one ray
- *            against 8 triangles at a time whatever the leaf's size
+ *   leaves   the lanes at leaves test their leaf one by one: closest-hit
+ *            rays 8 triangles at a time whatever the leaf's size
  *            (kd_walk_leaf_w8: the single walk's triangle test and tie
- *            rule without its branch on the count);
+ *            rule without its branch on the count), any-hit rays with the
+ *            single walk's kd_walk_leaf (1, 4 or 8 at a time by the
+ *            count: for them the 8-wide test of a short list cost more
+ *            than the count's mispredicts, docs/TRAVERSAL.md);
  *   pops     lanes after a leaf or with no child to enter pop their stack
  *            (walk()'s pop: entries starting after kd_term_bound(best t)
  *            are dropped);
@@ -41,7 +44,17 @@
  */
 /* The includer includes kd_stream.h, kd_traverse_bundle.h and kd_walk.h
  * BEFORE defining KD_W: kd_walk.h instantiates the triangle tests at its own
- * widths, and kd_traverse_bundle.h would instantiate the bundle walk. */
+ * widths, and kd_traverse_bundle.h would instantiate the bundle walk.
+ *
+ * The query kind is a compile-time constant as the width is: the includer
+ * defines KS_ANY (1: any hit, kd_stream_any8 / 16; 0: closest hit,
+ * kd_stream_hit8 / 16), and kd_stream_trace8 / 16 (kd_traverse_stream.c)
+ * pick one per batch. Each instantiation has a translation unit of its
+ * own (kd_traverse_stream{8,16}{,_any}.c): with both leaf tests in one
+ * unit GCC stopped inlining kd_ntri_test8 into the closest-hit walk. */
+#if !defined(KS_ANY) || (KS_ANY != 0 && KS_ANY != 1)
+#error "define KS_ANY as 0 (closest hit) or 1 (any hit) before including kd_traverse_stream_lanes.h"
+#endif
 
 #undef KS_ALL
 #undef KS_LOG2W
@@ -53,7 +66,12 @@ typedef struct KD_WN(ks_lane) {
     size_t id;
     float tmin;
     kd_walk_out o;
+#if KS_ANY
+    kd_ray_pre pre;    /* kd_walk_leaf's shear, one and four lanes */
+    kd_ntri_pre4 pre4;
+#else
     kd_ntri_pre8 pre8; /* the leaf test's shear, eight lanes (kd_walk_leaf_w8) */
+#endif
 } KD_WN(ks_lane);
 
 /* The lanes' state: in registers (the vectors) and in memory (stacks of
@@ -90,7 +108,6 @@ typedef struct KD_WN(ks_src) {
     const kdr_ray_batch *b;
     const size_t *ids; /* NULL: rays first, first + 1, ... */
     size_t first, m, next;
-    kdr_query q;
     kdr_hits *out;
     kdr_trav_stats *stats;
     unsigned stage; /* all lanes when leaves are staged (large scenes) */
@@ -108,7 +125,7 @@ static void KD_WN(ks_finish)(const KD_WN(ks_lane) * l, int found,
         c->stats->nodes_visited += l->o.nodes;
         c->stats->tri_tests += l->o.tests;
     }
-    if (c->q == KDR_ANY) {
+    if (KS_ANY) {
         c->out->hit[i] = (uint8_t)found;
         return;
     }
@@ -251,10 +268,23 @@ KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
             w->stk_tf[d][j] = st[d].tf;
         }
         l->tmin = p->tmin[i];
-        /* kd_ntri_pre_init8 of the ray's kd_ray_precompute */
         static const int8_t after[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
         const int kz = (int)((p->kz[1] >> i) & 1) + 2 * (int)((p->kz[2] >> i) & 1);
         const int swp = (int)((p->sw >> i) & 1);
+#if KS_ANY
+        /* the ray's kd_ray_precompute (ks_prepare's shear) and its
+         * kd_ntri_pre_init4 */
+        for (int k = 0; k < 3; k++)
+            l->pre.org[k] = org[k];
+        l->pre.kx = after[kz][swp][0];
+        l->pre.ky = after[kz][swp][1];
+        l->pre.kz = kz;
+        l->pre.sx = p->sh[3][i];
+        l->pre.sy = p->sh[4][i];
+        l->pre.sz = p->sh[5][i];
+        kd_ntri_pre_init4(&l->pre, &l->pre4);
+#else
+        /* kd_ntri_pre_init8 of the ray's kd_ray_precompute */
         l->pre8.kx = after[kz][swp][0];
         l->pre8.ky = after[kz][swp][1];
         l->pre8.kz = kz;
@@ -264,6 +294,7 @@ KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
         l->pre8.sx = f8_set1(p->sh[3][i]);
         l->pre8.sy = f8_set1(p->sh[4][i]);
         l->pre8.sz = f8_set1(p->sh[5][i]);
+#endif
         w->node = IV(put)(w->node, bit, (int32_t)(n0 - c->s->nodes));
         w->sp = IV(put)(w->sp, bit, sp);
         w->visits = IV(put)(w->visits, bit, level);
@@ -303,8 +334,13 @@ KD_FN void KD_WN(ks_settle)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, unsigned lea
     for (unsigned mm = leaf; mm; mm &= mm - 1) {
         const int j = __builtin_ctz(mm);
         KD_WN(ks_lane) *l = &w->lane[j];
-        if (kd_walk_leaf_w8(s, s->nodes + nv[j], &l->pre8, l->tmin, c->q == KDR_ANY,
-                            &l->o)) {
+#if KS_ANY
+        const int hit = kd_walk_leaf(s, s->nodes + nv[j], &l->pre, &l->pre4, l->tmin, 1, 1,
+                                     &l->o);
+#else
+        const int hit = kd_walk_leaf_w8(s, s->nodes + nv[j], &l->pre8, l->tmin, 0, &l->o);
+#endif
+        if (hit) {
             done |= (unsigned)(1u << j);
             found |= (unsigned)(1u << j);
         } else {
@@ -400,17 +436,23 @@ KD_FN void KD_WN(ks_turn)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w) {
     if (leaf | pop) KD_WN(ks_settle)(c, w, leaf, pop);
 }
 
-KD_TARGET void KD_WN(kd_stream_trace)(const kdr_scene *s, const kdr_ray_batch *b,
-                                      const size_t *ids, size_t first, size_t m,
-                                      kdr_query q, int flags, kdr_hits *out,
-                                      kdr_trav_stats *stats) {
+#undef KS_ENTRY
+#if KS_ANY
+#define KS_ENTRY KD_WN(kd_stream_any)
+#else
+#define KS_ENTRY KD_WN(kd_stream_hit)
+#endif
+
+KD_TARGET void KS_ENTRY(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                        size_t first, size_t m, int flags, kdr_hits *out,
+                        kdr_trav_stats *stats) {
     const int stage =
         (flags & KD_STREAM_STAGE) || s->stats.bytes >= KD_STREAM_STAGE_MIN_BYTES;
     kd_entry_cache ec;
     ec.have_path = ec.have_prev = 0;
     KD_WN(ks_src) c; /* field by field: prep is written before it is read */
     c.s = s, c.b = b, c.ids = ids, c.first = first, c.m = m, c.next = 0;
-    c.q = q, c.out = out, c.stats = stats, c.stage = stage ? KS_ALL : 0, c.entry = &ec;
+    c.out = out, c.stats = stats, c.stage = stage ? KS_ALL : 0, c.entry = &ec;
     c.prep.n = c.prep.at = 0;
     KD_WN(ks_lanes) w;
     w.node = w.sp = w.visits = IV(set1)(0);
