@@ -161,10 +161,12 @@ static inline int kd_walk_leaf(const kdr_scene *s, const kd_node *n,
 }
 
 /* kd_walk_leaf for callers compiled for AVX2 (the interleaved walk's
- * lanes): every leaf eight references at a time, however few it holds, so
- * the test takes one path whatever the count (kd_walk_leaf's choice
- * between one, four and eight at a time is a branch on the count, which
- * mispredicts for incoherent rays); a leaf of fewer than eight repeats its
+ * closest-hit lanes; its any-hit lanes keep kd_walk_leaf, for which the
+ * padded short lists cost more than the count's mispredicts, see
+ * docs/TRAVERSAL.md): every leaf eight references at a time, however few
+ * it holds, so the test takes one path whatever the count (kd_walk_leaf's
+ * choice between one, four and eight at a time is a branch on the count,
+ * which mispredicts for incoherent rays); a leaf of fewer than eight repeats its
  * last reference (kd_walk_groups8). Same answer as kd_walk_leaf. */
 KD_AVX2 static inline __attribute__((always_inline)) int
 kd_walk_leaf_w8(const kdr_scene *s, const kd_node *n, const kd_ntri_pre8 *pre8,
