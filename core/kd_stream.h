@@ -38,6 +38,18 @@ void kd_stream_trace16(const kdr_scene *s, const kdr_ray_batch *b, const size_t 
                        size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
                        kdr_trav_stats *stats);
 
+/* The lane forms' instantiations, one per query kind (the leaf test is
+ * chosen at compile time, kd_traverse_stream_lanes.h): kd_stream_trace8 /
+ * 16 call kd_stream_any* for KDR_ANY, kd_stream_hit* otherwise. */
+void kd_stream_hit8(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                    size_t first, size_t m, int flags, kdr_hits *out, kdr_trav_stats *stats);
+void kd_stream_any8(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                    size_t first, size_t m, int flags, kdr_hits *out, kdr_trav_stats *stats);
+void kd_stream_hit16(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                     size_t first, size_t m, int flags, kdr_hits *out, kdr_trav_stats *stats);
+void kd_stream_any16(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                     size_t first, size_t m, int flags, kdr_hits *out, kdr_trav_stats *stats);
+
 /* Leaves staged (a leaf's triangles requested one turn before their test)
  * and next nodes requested on every scene, not only on scenes of
  * KD_STREAM_STAGE_MIN_BYTES and more (tests put small scenes through that

@@ -1,8 +1,9 @@
 /*
  * kd_traverse_stream.c — the interleaved walk of a batch's incoherent rays
  * without SIMD lanes (kd_traverse_stream16.c and kd_traverse_stream8.c are
- * the AVX-512 and AVX2 forms; this file also dispatches between the three:
- * 16 lanes, else 8, else this one): KD_STREAM_RAYS rays are in flight in one
+ * the AVX-512 and AVX2 forms, with an _any.c each for any-hit rays; this
+ * file also dispatches between the three: 16 lanes, else 8, else this one,
+ * and between the lanes' two query kinds): KD_STREAM_RAYS rays are in flight in one
  * thread, each with its own stack, interval and best hit; in turn each
  * ray takes ONE node step or tests one leaf, requests (prefetches) the
  * node it visits next and yields to the next ray. When its turn comes
@@ -169,6 +170,24 @@ void kd_stream_scalar_trace(const kdr_scene *s, const kdr_ray_batch *b, const si
 int kd_cpu_has_avx512(void) {
     return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
            __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512vl");
+}
+
+void kd_stream_trace8(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                      size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
+                      kdr_trav_stats *stats) {
+    if (q == KDR_ANY)
+        kd_stream_any8(s, b, ids, first, m, flags, out, stats);
+    else
+        kd_stream_hit8(s, b, ids, first, m, flags, out, stats);
+}
+
+void kd_stream_trace16(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                       size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
+                       kdr_trav_stats *stats) {
+    if (q == KDR_ANY)
+        kd_stream_any16(s, b, ids, first, m, flags, out, stats);
+    else
+        kd_stream_hit16(s, b, ids, first, m, flags, out, stats);
 }
 
 void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,

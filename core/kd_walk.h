@@ -94,6 +94,44 @@ kd_walk_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
     return 0;
 }
 
+/* References ref[0..count) eight at a time with pre8, for callers compiled
+ * for AVX2 (kd_walk_leaf_w8). As in kd_walk_leaf8 the last group is the
+ * last eight references; a list of fewer than eight fills its one group
+ * by repeating its last reference (re-testing a reference cannot change
+ * the best hit: an equal (t, prim) is not better). Only the hit lanes are
+ * visited, in lane order. Returns 1 at a hit when any != 0. */
+KD_AVX2 static inline __attribute__((always_inline)) int
+kd_walk_groups8(const kdr_scene *s, const uint32_t *ref, uint32_t count,
+                const kd_ntri_pre8 *pre8, float tmin, const int any, kd_walk_out *o) {
+    const f8 tmin8 = f8_set1(tmin);
+    for (uint32_t i = 0; i < count; i += 8) {
+        const uint32_t base = i + 8 <= count ? i : count >= 8 ? count - 8 : 0;
+        const uint32_t last = count - 1 - base;
+        int32_t prims[8];
+        const float *rows[8];
+        for (uint32_t j = 0; j < 8; j++) {
+            prims[j] = (int32_t)ref[base + (j < last ? j : last)];
+            rows[j] = s->tris + 9 * (size_t)prims[j];
+        }
+        f8 t, V, W, det;
+        const int hits =
+            kd_ntri_test8(pre8, rows, tmin8, f8_set1(o->t), &t, &V, &W, &det);
+        if (!hits) continue;
+        if (any) return 1;
+        _Alignas(32) float tv[8], vv[8], wv[8], dv[8];
+        f8_store(tv, t);
+        f8_store(vv, V);
+        f8_store(wv, W);
+        f8_store(dv, det);
+        for (unsigned m = (unsigned)hits; m; m &= m - 1) { /* the hit lanes, in order */
+            const int j = __builtin_ctz(m);
+            if (kd_hit_better(tv[j], prims[j], o->t, o->prim))
+                kd_walk_keep(o, tv[j], prims[j], vv[j] / dv[j], wv[j] / dv[j]);
+        }
+    }
+    return 0;
+}
+
 /* Tests every triangle of leaf n over [tmin, best t] and keeps the best by
  * the tie rule; returns 1 at the first hit when any != 0. Leaves of at least
  * KD_LEAF_SIMD_MIN references go four at a time. */
@@ -120,6 +158,22 @@ static inline int kd_walk_leaf(const kdr_scene *s, const kd_node *n,
         kd_walk_keep(o, t, prim, u, v);
     }
     return 0;
+}
+
+/* kd_walk_leaf for callers compiled for AVX2 (the interleaved walk's
+ * closest-hit lanes; its any-hit lanes keep kd_walk_leaf, for which the
+ * padded short lists cost more than the count's mispredicts, see
+ * docs/TRAVERSAL.md): every leaf eight references at a time, however few
+ * it holds, so the test takes one path whatever the count (kd_walk_leaf's
+ * choice between one, four and eight at a time is a branch on the count,
+ * which mispredicts for incoherent rays); a leaf of fewer than eight repeats its
+ * last reference (kd_walk_groups8). Same answer as kd_walk_leaf. */
+KD_AVX2 static inline __attribute__((always_inline)) int
+kd_walk_leaf_w8(const kdr_scene *s, const kd_node *n, const kd_ntri_pre8 *pre8,
+                float tmin, const int any, kd_walk_out *o) {
+    const uint32_t count = kd_count(n);
+    o->tests += count;
+    return kd_walk_groups8(s, s->refs + n->u.first, count, pre8, tmin, any, o);
 }
 
 /* The ray's set-up, three axes per SSE operation: validity (kd_ray_valid),
