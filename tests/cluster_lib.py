@@ -103,6 +103,7 @@ class Replica:
         self.addr = "127.0.0.1:%d" % self.port
         self.url = "http://" + self.addr
         self.proc = None
+        self.was_ready = False
         self.log = tempfile.TemporaryFile(mode="w+")
         self.start()
 
@@ -115,10 +116,26 @@ class Replica:
 
     def wait_ready(self, timeout=300):
         deadline = time.time() + timeout
+        moves = 0
         while time.time() < deadline:
             if self.proc.poll() is not None:
+                # free_port() closes its probe socket before kdrayd binds, so
+                # a test running beside this one (ctest -j) can take the port
+                # in between. Before the replica was first ready nothing else
+                # knows its address: take another port and start again.
+                if (not self.was_ready and moves < 5 and
+                        "Address already in use" in self.log_text()):
+                    moves += 1
+                    self.port = free_port()
+                    self.addr = "127.0.0.1:%d" % self.port
+                    self.url = "http://" + self.addr
+                    self.log.seek(0)
+                    self.log.truncate()
+                    self.start()
+                    continue
                 raise RuntimeError("kdrayd exited: " + self.log_text())
             if get(self.url + "/v1/ready", 2)[0] == 200:
+                self.was_ready = True
                 return
             time.sleep(0.02)
         raise RuntimeError("kdrayd never ready: " + self.log_text())
