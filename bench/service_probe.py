@@ -4,7 +4,7 @@ and new daemon alternated in one time window (issue 16, svc8 round). Not a
 test.
 
     service_probe.py KDRAYD [KDRAYD_B ...] [--scene PATH] [--reps N]
-                     [--rounds R] [--only NAME]... [--faults]
+                     [--rounds R] [--only NAME]... [--faults] [--floor BIN]
 
 For each round, each daemon in turn is started on the scene (default
 2CylinderEngine of the scene ladder, --threads 2, workers at nice 0) and
@@ -25,6 +25,11 @@ the summary gives the medians per daemon and request kind, and the
 largest encode (cold memory shows there). With --faults each daemon's
 minor page faults over its requests are counted with `perf stat -e
 page-faults` (perf must be installed; a missing perf fails the run).
+With --floor BIN (build/bench/kdray-loopback-floor) the run ends with the
+loopback floor on this machine for the bundle's body size: the same bytes
+between two threads of one process, read as libmicrohttpd reads a body in
+kdrayd and in larger pieces (bench/loopback_floor.c), so that the "body"
+column above has its floor beside it, measured in the same minutes.
 """
 
 import argparse
@@ -166,6 +171,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--only", action="append", choices=KINDS)
     ap.add_argument("--faults", action="store_true")
+    ap.add_argument("--floor", metavar="BIN",
+                    help="kdray-loopback-floor: print the loopback floor for the body size")
     a = ap.parse_args()
     if a.faults and not shutil.which("perf"):
         raise SystemExit("--faults needs perf (linux-perf)")
@@ -188,6 +195,14 @@ def main():
                 med(lambda r: r[4]["body"]), med(lambda r: r[4]["parse"]),
                 med(lambda r: r[4]["trace"]), med(lambda r: r[4]["encode"]),
                 max(r[4]["encode"] for r in got)))
+    if a.floor:
+        size = len(bodies[0]["bundle24"][1])
+        print("\nthe loopback floor for the %d-byte bundle body (%s):" % (size, a.floor),
+              flush=True)
+        out = subprocess.run([a.floor, "--bytes", str(size)], capture_output=True, text=True)
+        if out.returncode != 0:
+            raise SystemExit("%s failed:\n%s" % (a.floor, out.stderr))
+        print(out.stdout, end="")
 
 
 if __name__ == "__main__":
