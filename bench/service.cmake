@@ -25,3 +25,10 @@ if(TARGET kdrayd AND TARGET kdray_trace)
     USES_TERMINAL
     COMMENT "kdrayd 60 s soak: errors, memory, metrics")
 endif()
+
+# The loopback floor under the service's transport (bench/loopback_floor.c):
+# N bytes between two threads over TCP loopback, read the way
+# libmicrohttpd reads a body in kdrayd and in larger pieces. Prints only.
+add_executable(kdray_loopback_floor ${CMAKE_CURRENT_SOURCE_DIR}/loopback_floor.c)
+set_target_properties(kdray_loopback_floor PROPERTIES OUTPUT_NAME kdray-loopback-floor)
+target_link_libraries(kdray_loopback_floor PRIVATE Threads::Threads)

@@ -4,7 +4,8 @@ and new daemon alternated in one time window (issue 16, svc8 round). Not a
 test.
 
     service_probe.py KDRAYD [KDRAYD_B ...] [--scene PATH] [--reps N]
-                     [--rounds R] [--only NAME]... [--faults]
+                     [--rounds R] [--only NAME]... [--faults] [--floor BIN]
+                     [--syscalls]
 
 For each round, each daemon in turn is started on the scene (default
 2CylinderEngine of the scene ladder, --threads 2, workers at nice 0) and
@@ -25,6 +26,16 @@ the summary gives the medians per daemon and request kind, and the
 largest encode (cold memory shows there). With --faults each daemon's
 minor page faults over its requests are counted with `perf stat -e
 page-faults` (perf must be installed; a missing perf fails the run).
+With --syscalls each daemon's reads, polls and sends over its requests are
+counted with `strace -f -c -p PID` (strace must be installed; a missing
+strace fails the run), and the bytes of request bodies per read call
+printed: libmicrohttpd's read size. strace slows every system call, so
+the times of such a run are not comparable with others.
+With --floor BIN (build/bench/kdray-loopback-floor) the run ends with the
+loopback floor on this machine for the bundle's body size: the same bytes
+between two threads of one process, read as libmicrohttpd reads a body in
+kdrayd and in larger pieces (bench/loopback_floor.c), so that the "body"
+column above has its floor beside it, measured in the same minutes.
 """
 
 import argparse
@@ -113,7 +124,20 @@ def requests(url):
             "transport24": ("/v1/scenes/default/bundle", empty, "application/cbor")}
 
 
-def run_daemon(kdrayd, scene, kinds, reps, bodies, faults, rows):
+SYSCALLS = ("recvfrom", "read", "poll", "sendto", "sendmsg", "writev")
+
+
+def strace_counts(err):
+    """{syscall: calls} from strace -c's summary table."""
+    calls = {}
+    for line in err.splitlines():
+        f = line.split()
+        if len(f) >= 5 and f[-1] in SYSCALLS and f[3].isdigit():
+            calls[f[-1]] = int(f[3])
+    return calls
+
+
+def run_daemon(kdrayd, scene, kinds, reps, bodies, faults, rows, syscalls=False):
     proc, url = start_daemon(kdrayd, scene, 2)
     try:
         if bodies[0] is None:
@@ -128,6 +152,12 @@ def run_daemon(kdrayd, scene, kinds, reps, bodies, faults, rows):
                                      "-p", str(proc.pid)], stderr=subprocess.PIPE,
                                     text=True)
             time.sleep(0.5)
+        tracer = None
+        if syscalls:
+            tracer = subprocess.Popen(["strace", "-f", "-c", "-e", "trace=" + ",".join(SYSCALLS),
+                                       "-p", str(proc.pid)], stderr=subprocess.PIPE, text=True)
+            time.sleep(0.5)
+        body_bytes = 0
         for kind in kinds:
             path, body, ctype = bodies[0][kind]
             for _ in range(reps):
@@ -138,6 +168,7 @@ def run_daemon(kdrayd, scene, kinds, reps, bodies, faults, rows):
                 if status != 200:
                     raise SystemExit("%s: HTTP %d" % (kind, status))
                 rows.append((kdrayd, kind, wall, cpu, timing))
+                body_bytes += len(body)
                 print("%-22s %-12s wall %7.1f ms cpu %6.1f ms (sys %5.0f) minflt %5d "
                       "answer %5.1f MB  %s" % (
                           os.path.basename(kdrayd)[-22:], kind, wall, cpu, s1 - s0,
@@ -145,6 +176,16 @@ def run_daemon(kdrayd, scene, kinds, reps, bodies, faults, rows):
                           " ".join("%s %.1f" % (k, timing.get(k, float("nan")))
                                    for k in STEPS)), flush=True)
         sock.close()
+        if tracer:
+            time.sleep(0.2)
+            tracer.send_signal(2)
+            calls = strace_counts(tracer.communicate()[1])
+            reads = calls.get("recvfrom", 0) + calls.get("read", 0)
+            if not reads:
+                raise SystemExit("strace counted no reads")
+            print("%s: %s; %.1f KiB of request bodies per read call" % (
+                kdrayd, ", ".join("%s %d" % kv for kv in sorted(calls.items())),
+                body_bytes / reads / 1024))
         if perf:
             time.sleep(0.2)
             perf.send_signal(2)
@@ -166,14 +207,19 @@ def main():
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--only", action="append", choices=KINDS)
     ap.add_argument("--faults", action="store_true")
+    ap.add_argument("--syscalls", action="store_true")
+    ap.add_argument("--floor", metavar="BIN",
+                    help="kdray-loopback-floor: print the loopback floor for the body size")
     a = ap.parse_args()
     if a.faults and not shutil.which("perf"):
         raise SystemExit("--faults needs perf (linux-perf)")
+    if a.syscalls and not shutil.which("strace"):
+        raise SystemExit("--syscalls needs strace")
     kinds = a.only or list(KINDS)
     bodies, rows = [None], []
     for r in range(a.rounds):
         for d in a.kdrayd:
-            run_daemon(d, a.scene, kinds, a.reps, bodies, a.faults, rows)
+            run_daemon(d, a.scene, kinds, a.reps, bodies, a.faults, rows, a.syscalls)
     print("\nmedians (ms) over %d round(s) x %d request(s); load average %s" % (
         a.rounds, a.reps, open("/proc/loadavg").read().split()[0]))
     print("%-12s %-22s %7s %7s %7s %7s %7s %7s %10s" % (
@@ -188,6 +234,14 @@ def main():
                 med(lambda r: r[4]["body"]), med(lambda r: r[4]["parse"]),
                 med(lambda r: r[4]["trace"]), med(lambda r: r[4]["encode"]),
                 max(r[4]["encode"] for r in got)))
+    if a.floor:
+        size = len(bodies[0]["bundle24"][1])
+        print("\nthe loopback floor for the %d-byte bundle body (%s):" % (size, a.floor),
+              flush=True)
+        out = subprocess.run([a.floor, "--bytes", str(size)], capture_output=True, text=True)
+        if out.returncode != 0:
+            raise SystemExit("%s failed:\n%s" % (a.floor, out.stderr))
+        print(out.stdout, end="")
 
 
 if __name__ == "__main__":

@@ -37,6 +37,15 @@ add_test(NAME server_stream
                  $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
 set_tests_properties(server_stream PROPERTIES TIMEOUT 600)
 
+# How a large body arrives: odd-sized paced pieces (announced and chunked)
+# answer byte for byte as one send; bodies cut short, Content-Length lies
+# and bodies over --max-body-mb never give a 200 and release their
+# admission. Debian's Python (cbor2).
+add_test(NAME server_arrival
+         COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/test_server_arrival.py
+                 $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
+set_tests_properties(server_arrival PROPERTIES TIMEOUT 600)
+
 add_test(NAME server_ops
          COMMAND ${KDRAY_PYTHON3} ${CMAKE_CURRENT_SOURCE_DIR}/test_server_ops.py
                  $<TARGET_FILE:kdrayd> ${PROJECT_SOURCE_DIR}/clients)
