@@ -10,7 +10,9 @@
  * (kb_trace), stores the lanes' answers, and sends incoherent stretches
  * through the interleaved walk (kd_stream_trace): chunks kd_batch_scattered
  * calls scattered, and the rest of a chunk, plus KB_FALLBACK_CHUNKS more,
- * whose first bundles' lane occupancy fell under KB_OCC_MIN.
+ * whose first bundles' lane occupancy fell under KB_OCC_MIN. Any-hit
+ * chunks whose rays' ends cluster (kd_batch_far_first: shadow rays toward a
+ * light) walk far end first, in bundles and in the interleaved walk.
  */
 #ifndef KD_W
 #error "include kd_traverse_bundle.h's template (define KD_W) before kd_traverse_bundle_run.h"
@@ -132,20 +134,24 @@ KD_FN void KD_WN(kb_stats_add)(kdr_trav_stats *stats, const KD_WN(kb_bundle) *b,
 }
 
 /* Traces rays ids[0..m) (ids NULL: [first, first + m)) through the
- * interleaved walk: one fallback per bundle-sized group. */
+ * interleaved walk (far: far end first): one fallback per bundle-sized
+ * group. */
 KD_FN void KD_WN(kb_alone)(const kdr_scene *s, const kdr_ray_batch *rb,
                            const size_t *ids, size_t first, size_t m, kdr_query q,
-                           kdr_hits *out, kdr_trav_stats *stats) {
-    kd_stream_trace(s, rb, ids, first, m, q, out, stats);
+                           int far, kdr_hits *out, kdr_trav_stats *stats) {
+    if (far)
+        kd_stream_trace_far(s, rb, ids, first, m, q, out, stats);
+    else
+        kd_stream_trace(s, rb, ids, first, m, q, out, stats);
     if (stats)
         stats->fallbacks += (uint64_t)((m + KD_W - 1) / KD_W);
 }
 
-/* Traces one chunk of rays (ids) in bundles of KD_W. Returns 1 when the
- * bundles so far (at least KB_PROBE of them) turned out incoherent; the
- * rest of the chunk then went alone. */
+/* Traces one chunk of rays (ids) in bundles of KD_W (far: any-hit lanes
+ * far end first). Returns 1 when the bundles so far (at least KB_PROBE of
+ * them) turned out incoherent; the rest of the chunk then went alone. */
 KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
-                    const size_t *ids, int m, kdr_query q, int flags,
+                    const size_t *ids, int m, kdr_query q, int flags, int far,
                     kdr_hits *out, kdr_trav_stats *stats) {
     KD_WN(kb_bundle) b;
     kd_entry_cache ec;
@@ -156,7 +162,7 @@ KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
         const int n = m - g < KD_W ? m - g : KD_W;
         int alone;
         KD_WN(kb_gather)(rb, ids + g, n, &b, &alone);
-        KD_WN(kb_trace)(s, &b, q == KDR_ANY, (flags & KB_ROOT) ? NULL : &ec);
+        KD_WN(kb_trace)(s, &b, q == KDR_ANY, far, (flags & KB_ROOT) ? NULL : &ec);
         KD_WN(kb_store)(&b, ids + g, n, alone, q, out);
         KD_WN(kb_stats_add)(stats, &b, n, alone);
         for (int j = 0; j < n; j++)
@@ -167,7 +173,8 @@ KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
         used += (double)b.lane_steps;
         offered += (double)b.steps * kd_lane_count(b.lanes);
         if ((flags & KB_FALLBACK) && k >= KB_PROBE && used < KB_OCC_MIN * offered) {
-            KD_WN(kb_alone)(s, rb, ids + g + n, 0, (size_t)(m - g - n), q, out, stats);
+            KD_WN(kb_alone)(s, rb, ids + g + n, 0, (size_t)(m - g - n), q, far, out,
+                            stats);
             return 1;
         }
     }
@@ -182,6 +189,9 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
                          kdr_trav_stats *stats) {
     size_t ids[KB_CHUNK];
     const size_t end = first + count;
+    /* any hit: the order of a chunk's walks (kd_batch_far_first) */
+    const int far_all = q == KDR_ANY && (flags & KB_FAR);
+    const int far_auto = q == KDR_ANY && (flags & KB_FAR_AUTO) && !far_all;
     for (size_t base = first; base < end;) {
         /* a stretch of scattered chunks, or the chunks after a failed
          * probe, in one call: the walk's lanes stay full longer */
@@ -192,7 +202,9 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
                                       end - alone < KB_CHUNK ? end - alone : KB_CHUNK))
                 alone += end - alone < KB_CHUNK ? end - alone : KB_CHUNK;
         if (alone > base) {
-            KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, out, stats);
+            const size_t probe = alone - base < KB_CHUNK ? alone - base : KB_CHUNK;
+            const int far = far_all || (far_auto && kd_batch_far_first(rb, NULL, base, probe));
+            KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, far, out, stats);
             base = alone;
             continue;
         }
@@ -212,12 +224,14 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
         if (!(flags & KB_SORT) || !kd_batch_runs_fit(rb, ids, (size_t)m, KD_W))
             kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
         base += c;
-        if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats)) {
+        const int far =
+            far_all || (far_auto && m > 0 && kd_batch_far_first(rb, ids, 0, (size_t)m));
+        if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, far, out, stats)) {
             const size_t skip = end - base < KB_FALLBACK_CHUNKS * KB_CHUNK
                                     ? end - base
                                     : KB_FALLBACK_CHUNKS * KB_CHUNK;
             if (skip)
-                KD_WN(kb_alone)(s, rb, NULL, base, skip, q, out, stats);
+                KD_WN(kb_alone)(s, rb, NULL, base, skip, q, far, out, stats);
             base += skip;
         }
     }

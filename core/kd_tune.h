@@ -137,6 +137,11 @@
 #define KB_OCC_MIN 0.3
 #define KB_PROBE 4
 #define KB_FALLBACK_CHUNKS 4
+/* Any-hit chunks of rays with their own origins whose ends (o + tmax d)
+ * lie in a box narrower than KD_FAR_END_SPREAD times their origins' box
+ * (widest axis of each) walk far end first (kd_batch_far_first): shadow
+ * rays toward one light. docs/TRAVERSAL.md, "Round: far end first". */
+#define KD_FAR_END_SPREAD 0.25f
 
 /* ---- cone shadows (kd_cone.c, kd_cone_cells.c) ------------------------------
  * Measured with kdray_bench_cone (default scene and 2CylinderEngine, a small

@@ -14,7 +14,9 @@
  * stride 3 with every origin equal: a cone's samples of one point) stays
  * with bundles even on such a scene, because there the walk lost.
  * Also kd_batch_runs_fit, which lets the bundle driver skip ordering a
- * chunk whose bundles already hold whole runs of one origin.
+ * chunk whose bundles already hold whole runs of one origin, and
+ * kd_batch_far_first, which sends any-hit chunks whose ends cluster (shadow
+ * rays of many points toward one light) far end first.
  */
 #include <math.h>
 #include <stdio.h>
@@ -148,6 +150,47 @@ static void check_runs_fit(int run, int shared, size_t skip, size_t w, int want)
     free(c);
 }
 
+/* kd_batch_far_first's verdict (any-hit chunks walked far end first) for
+ * a chunk of make_chunk's origins whose rays run either toward a small
+ * ball (a light at y = 3, radius 0.05: ends that cluster) or along
+ * make_chunk's directions for `reach` (AO-like: ends spread as the
+ * origins do); then one ray's tmax made +inf (no finite end), or the
+ * tmax array dropped (every tmax +inf). */
+enum { END_LIGHT, END_REACH };
+static void check_far_first(const char *what, int run, int shared, int ends, float reach,
+                            int inf_at, int no_tmax, int want) {
+    chunk *c = malloc(sizeof *c);
+    make_chunk(c, run);
+    if (shared) c->b.org_stride = 0;
+    for (int i = 0; i < KB_CHUNK; i++) {
+        const float *o = c->org + (shared ? 0 : 3 * i);
+        float *d = c->dir + 3 * i;
+        if (ends == END_LIGHT) {
+            const float light[3] = {0.0f, 3.0f, 0.0f};
+            for (int k = 0; k < 3; k++)
+                d[k] = light[k] + 0.05f * d[k] - o[k];
+            c->tmin[i] = 1e-4f, c->tmax[i] = 1.0f;
+        } else {
+            c->tmin[i] = 0.0f, c->tmax[i] = reach;
+        }
+    }
+    if (inf_at >= 0) c->tmax[inf_at] = INFINITY;
+    if (no_tmax) c->b.tmax = NULL;
+    const int got = kd_batch_far_first(&c->b, NULL, 0, KB_CHUNK);
+    size_t ids[KB_CHUNK];
+    for (int i = 0; i < KB_CHUNK; i++)
+        ids[i] = (size_t)(KB_CHUNK - 1 - i);
+    const int got_ids = kd_batch_far_first(&c->b, ids, 0, KB_CHUNK);
+    const int ok = got == want && got_ids == want;
+    printf("far end first: %-44s %d (want %d): %s\n", what, got, want, ok ? "ok" : "FAIL");
+    if (!ok) {
+        fprintf(stderr, "FAIL far_first %s: %d / %d with ids, want %d\n", what, got, got_ids,
+                want);
+        failures++;
+    }
+    free(c);
+}
+
 static kdr_scene *build(size_t ntris) {
     float *tris = make_soup(ntris);
     kdr_scene *s = NULL;
@@ -187,6 +230,17 @@ int main(void) {
     check_runs_fit(64, 0, 0, 16, 0);  /* 64 AO rays per point: 4 bundles a run */
     check_runs_fit(16, 0, 3, 16, 0);  /* runs off the bundles' grid */
     check_runs_fit(KB_CHUNK, 1, 0, 16, 0); /* one origin, stride 0 */
+    check_far_first("shadow rays, an origin per ray", 1, 0, END_LIGHT, 0, -1, 0, 1);
+    check_far_first("shadow rays, runs of 16 (16 points)", 16, 0, END_LIGHT, 0, -1, 0, 1);
+    check_far_first("shadow rays, one ray with tmax +inf", 16, 0, END_LIGHT, 0, 77, 0, 0);
+    check_far_first("shadow rays, no tmax array (all +inf)", 16, 0, END_LIGHT, 0, -1, 1, 0);
+    check_far_first("shadow rays of one origin, stride 3", KB_CHUNK, 0, END_LIGHT, 0, -1, 0,
+                    0);
+    check_far_first("shadow rays of one origin, stride 0", KB_CHUNK, 1, END_LIGHT, 0, -1, 0,
+                    0);
+    check_far_first("AO rays, runs of 16, reach 0.2", 16, 0, END_REACH, 0.2f, -1, 0, 0);
+    check_far_first("AO rays, an origin per ray, reach 0.05", 1, 0, END_REACH, 0.05f, -1, 0,
+                    0);
     kdr_scene_free(big);
     kdr_scene_free(small);
     printf("%s: %d failures\n", failures ? "FAILED" : "passed", failures);
