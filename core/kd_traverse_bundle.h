@@ -398,7 +398,8 @@ KD_FN int KD_WN(kb_step_shared_far)(const KD_WN(kb_state) *st, const kd_node *n,
  * is entered first.
  */
 KD_FN int KD_WN(kb_step_general)(const KD_WN(kb_state) *st, const kd_node *n,
-                           KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp) {
+                           KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp,
+                           const int far) {
     const int axis = kd_axis(n);
     const VF zero = V(set1)(0.0f), inv = st->inv_dir[axis];
     const VF a = V(sub)(V(set1)(n->u.split), st->org[axis]);
@@ -423,7 +424,7 @@ KD_FN int KD_WN(kb_step_general)(const KD_WN(kb_state) *st, const kd_node *n,
     int go_above = !lb;
     if (lb && hb) {
         /* far end first: the child most lanes' directions lead into */
-        const VF first_above = st->far ? V(andnot)(st->sgn[axis], V(seti)(-1)) : above_front;
+        const VF first_above = far ? V(andnot)(st->sgn[axis], V(seti)(-1)) : above_front;
         const int votes = kd_lane_count(V(bits)(V(and)(c->act, first_above)));
         go_above = 2 * votes > kd_lane_count(V(bits)(c->act));
         if (go_above)
@@ -494,9 +495,12 @@ KD_FN void KD_WN(kb_replay)(const kdr_scene *s, const kd_entry_path *p,
 
 /* The node loop: from the root interval (or, given the path of the
  * bundle's shared origin, from where kb_replay leaves it) to an empty
- * stack. */
-KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF t_far,
-                    const kd_entry_path *path, KD_WN(kb_bundle) *b) {
+ * stack. far (a constant: kb_trace instantiates the loop once for each
+ * order, so the front-to-back loop is compiled as it was before the far
+ * order existed) takes the far end first steps. */
+KD_FN __attribute__((always_inline)) void
+KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF t_far,
+               const kd_entry_path *path, KD_WN(kb_bundle) *b, const int far) {
     KD_WN(kb_entry) stack[KD_MAX_DEPTH + 1];
     int sp = 0;
     KD_WN(kb_cursor) c = {t_near, t_far, KD_WN(kb_active)(st, t_near, t_far), 0};
@@ -510,10 +514,10 @@ KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF
         if (!kd_is_leaf(n)) {
             const float a = n->u.split - st->sorg[kd_axis(n)];
             if (st->shared && a != 0.0f
-                    ? (st->far   ? KD_WN(kb_step_shared_far)(st, n, a, &c, stack, &sp)
+                    ? (far       ? KD_WN(kb_step_shared_far)(st, n, a, &c, stack, &sp)
                        : st->any ? KD_WN(kb_step_shared_nb)(st, n, a, &c, stack, &sp)
                                  : KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp))
-                    : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
+                    : KD_WN(kb_step_general)(st, n, &c, stack, &sp, far))
                 continue;
         } else {
             KD_WN(kb_leaf)(s, n, st, c.act);
@@ -609,7 +613,7 @@ KD_FN void KD_WN(kb_setup)(const kdr_scene *s, KD_WN(kb_bundle) *b, KD_WN(kb_sta
  * 25-level walk to save about as much), reused while bundles keep it. */
 KD_FN const kd_entry_path *KD_WN(kb_path)(const kdr_scene *s, const KD_WN(kb_state) *st,
                                           kd_entry_cache *ec) {
-    if (!ec || !st->shared || st->far) /* the path leads to the near end */
+    if (!ec || !st->shared)
         return NULL;
     const size_t sz = 3 * sizeof(float);
     if (ec->have_path && memcmp(st->sorg, ec->path_org, sz) == 0)
@@ -647,7 +651,10 @@ KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any, int
     st.any = any;
     st.far = any && far;
     KD_WN(kb_update_limit)(&st);
-    KD_WN(kb_walk)(s, &st, t_near, t_far, KD_WN(kb_path)(s, &st, ec), b);
+    if (st.far) /* from the root: the origin's path leads to the near end */
+        KD_WN(kb_walk)(s, &st, t_near, t_far, NULL, b, 1);
+    else
+        KD_WN(kb_walk)(s, &st, t_near, t_far, KD_WN(kb_path)(s, &st, ec), b, 0);
     b->lane_steps = V(count_sum)(st.lane_steps);
     b->tri_tests = V(count_sum)(st.tri_tests);
     V(store)(b->best_t, st.best_t);
