@@ -131,16 +131,50 @@ int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, s
 #define KB_FAR_AUTO 16 /* any hit: chunks kd_batch_far_first picks walk far end first */
 #define KB_FAR 32     /* any hit: every chunk walks far end first (tests, A/B) */
 
-/* 1 when the rays ids[0..count) (ids NULL: [first, first + count)) should
- * walk far end first for any hit: they have their own origins, every end
- * o + tmax d is finite, and the ends' box is narrower than KD_FAR_END_SPREAD
- * times the origins' box on its widest axis (shadow rays of many points
+/* 1 when the rays ids[0..count) (ids NULL: [first, first + count)) may
+ * walk far end first for any hit: they have their own origins, and over
+ * 32 of them spread evenly over the list every end o + tmax d is finite
+ * and the ends' box is narrower than KD_FAR_END_SPREAD times the origins'
+ * box on its widest axis (shadow rays of many points
  * toward one light: the walk from each end meets the blockers near the
  * light and shares its top path with the chunk's other rays; AO ends
  * spread as their origins do, and one point's samples keep their origin's
  * path). kd_batch.c. */
 int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
                        size_t count);
+
+/* Which order a batch call's clustered-end chunks take (kd_batch_far_first
+ * says the ends cluster; whether the far end finds the blockers sooner
+ * depends on where they are: shadow rays from points inside an object's
+ * cavities meet its shell near the light, points a camera sees often have
+ * their blocker near them). The driver measures: the first bundles (or
+ * interleaved-walk runs) alternate the orders until each has traced
+ * KD_FAR_PROBE_RAYS rays; then the call takes the far order while its
+ * work per ray (node steps + triangle tests) is under KD_FAR_GAIN times
+ * the front-to-back order's. work and rays per order: [0] front to back,
+ * [1] far end first. */
+typedef struct kd_far_probe {
+    double work[2], rays[2];
+} kd_far_probe;
+
+/* 1: far end first for the next rays (the order still short of its probe,
+ * far first; then the cheaper one by the rule above). */
+static inline int kd_far_pick(const kd_far_probe *p) {
+    if (p->rays[0] < KD_FAR_PROBE_RAYS || p->rays[1] < KD_FAR_PROBE_RAYS)
+        return p->rays[1] <= p->rays[0];
+    return p->work[1] * p->rays[0] < KD_FAR_GAIN * p->work[0] * p->rays[1];
+}
+
+/* 1 while some order is short of its probe. */
+static inline int kd_far_probing(const kd_far_probe *p) {
+    return p->rays[0] < KD_FAR_PROBE_RAYS || p->rays[1] < KD_FAR_PROBE_RAYS;
+}
+
+/* The order argument of the drivers' helpers: front to back, far end
+ * first, or chosen by the call's kd_far_probe. */
+#define KB_ORDER_NEAR 0
+#define KB_ORDER_FAR 1
+#define KB_ORDER_PROBE 2
 /* The incoherence probe's knobs (KB_OCC_MIN, KB_PROBE, KB_FALLBACK_CHUNKS)
  * are in kd_tune.h with KB_CHUNK. */
 
