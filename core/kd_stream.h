@@ -22,12 +22,17 @@
 void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
                      size_t first, size_t m, kdr_query q, kdr_hits *out,
                      kdr_trav_stats *stats);
+/* The same with any-hit rays walked far end first (KD_STREAM_FAR in the
+ * lane forms; the scalar form walks them front to back: same answers). */
+void kd_stream_trace_far(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                         size_t first, size_t m, kdr_query q, kdr_hits *out,
+                         kdr_trav_stats *stats);
 
 /* The forms, same contract (tests call each): KD_STREAM_RAYS rays
  * interleaved in scalar code (kd_traverse_stream.c), and 8 or 16 rays in
  * the lanes of AVX2 or AVX-512 registers (kd_traverse_stream_lanes.h; only
  * after kdr_cpu_has_avx2() / kd_cpu_has_avx512() said yes). flags:
- * KD_STREAM_STAGE or 0. */
+ * KD_STREAM_STAGE, KD_STREAM_FAR (lane forms only), or 0. */
 void kd_stream_scalar_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
                             size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
                             kdr_trav_stats *stats);
@@ -55,6 +60,11 @@ void kd_stream_any16(const kdr_scene *s, const kdr_ray_batch *b, const size_t *i
  * KD_STREAM_STAGE_MIN_BYTES and more (tests put small scenes through that
  * path with it). */
 #define KD_STREAM_STAGE 1
+/* Any-hit rays visit their cells back to front (kd_occluded1_far's order:
+ * the far child first, the same intervals, from the root), for rays whose
+ * blockers lie nearer their end (kd_batch_far_first); closest-hit walks
+ * ignore it. */
+#define KD_STREAM_FAR 2
 
 /* The interleaved walks' pop for lane j (walk()'s pop): the depth below
  * sp of the deepest stacked entry whose start stk_tn[depth * width + j] is

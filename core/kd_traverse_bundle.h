@@ -63,7 +63,7 @@
 #include "kd_traverse.h"
 
 /* Batch drivers: same contract as kdr_trace_batch (arguments checked by the
- * caller); flags are KB_FALLBACK | KB_SORT | KB_LIVE below. With flags == 0
+ * caller); flags are KB_FALLBACK | KB_SORT | KB_LIVE | KB_FAR_AUTO below. With flags == 0
  * every bundle is traced as a bundle in the caller's ray order (tests use this to
  * put every adversarial ray through the SIMD path). kd_bundle8_trace needs
  * AVX2. */
@@ -128,6 +128,53 @@ int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, s
 #define KB_SORT 2     /* regroup each chunk of rays by direction */
 #define KB_LIVE 4     /* answer rays that cannot hit first (kd_batch_live) */
 #define KB_ROOT 8     /* every bundle walks from the root: no kb_replay (tests, A/B) */
+#define KB_FAR_AUTO 16 /* any hit: chunks kd_batch_far_first picks walk far end first */
+#define KB_FAR 32     /* any hit: every chunk walks far end first (tests, A/B) */
+
+/* 1 when the rays ids[0..count) (ids NULL: [first, first + count)) may
+ * walk far end first for any hit: they have their own origins, and over
+ * 32 of them spread evenly over the list every end o + tmax d is finite
+ * and the ends' box is narrower than KD_FAR_END_SPREAD times the origins'
+ * box on its widest axis (shadow rays of many points
+ * toward one light: the walk from each end meets the blockers near the
+ * light and shares its top path with the chunk's other rays; AO ends
+ * spread as their origins do, and one point's samples keep their origin's
+ * path). kd_batch.c. */
+int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
+                       size_t count);
+
+/* Which order a batch call's clustered-end chunks take (kd_batch_far_first
+ * says the ends cluster; whether the far end finds the blockers sooner
+ * depends on where they are: shadow rays from points inside an object's
+ * cavities meet its shell near the light, points a camera sees often have
+ * their blocker near them). The driver measures: the first bundles (or
+ * interleaved-walk runs) alternate the orders until each has traced
+ * KD_FAR_PROBE_RAYS rays; then the call takes the far order while its
+ * work per ray (node steps + triangle tests) is under KD_FAR_GAIN times
+ * the front-to-back order's. work and rays per order: [0] front to back,
+ * [1] far end first. */
+typedef struct kd_far_probe {
+    double work[2], rays[2];
+} kd_far_probe;
+
+/* 1: far end first for the next rays (the order still short of its probe,
+ * far first; then the cheaper one by the rule above). */
+static inline int kd_far_pick(const kd_far_probe *p) {
+    if (p->rays[0] < KD_FAR_PROBE_RAYS || p->rays[1] < KD_FAR_PROBE_RAYS)
+        return p->rays[1] <= p->rays[0];
+    return p->work[1] * p->rays[0] < KD_FAR_GAIN * p->work[0] * p->rays[1];
+}
+
+/* 1 while some order is short of its probe. */
+static inline int kd_far_probing(const kd_far_probe *p) {
+    return p->rays[0] < KD_FAR_PROBE_RAYS || p->rays[1] < KD_FAR_PROBE_RAYS;
+}
+
+/* The order argument of the drivers' helpers: front to back, far end
+ * first, or chosen by the call's kd_far_probe. */
+#define KB_ORDER_NEAR 0
+#define KB_ORDER_FAR 1
+#define KB_ORDER_PROBE 2
 /* The incoherence probe's knobs (KB_OCC_MIN, KB_PROBE, KB_FALLBACK_CHUNKS)
  * are in kd_tune.h with KB_CHUNK. */
 
@@ -170,6 +217,8 @@ typedef struct KD_WN(kb_state) {
     VF lane_steps, tri_tests; /* per-lane counters (V(count)) */
     VF limit;  /* kd_term_bound(best_t) on live lanes, -inf elsewhere */
     int any;
+    int far;   /* any hit, far end first: at a split the child the lanes'
+                  directions lead into (where their ends lie) is entered first */
 } KD_WN(kb_state);
 
 /* kd_term_bound, per lane, exactly as the scalar inline computes it. */
@@ -353,6 +402,29 @@ KD_FN int KD_WN(kb_step_shared_nb)(const KD_WN(kb_state) *st, const kd_node *n, 
 }
 
 /*
+ * kb_step_shared_nb's far end first form (any hit): the back child (beyond
+ * the plane from the shared origin, where the lanes moving toward the
+ * plane end) is entered first when some lane needs it, the front child
+ * stacked when both are needed; the same spans and lane sets, so the same
+ * leaves are tested over the same intervals, only in the other order.
+ */
+KD_FN int KD_WN(kb_step_shared_far)(const KD_WN(kb_state) *st, const kd_node *n, float a,
+                                    KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack,
+                                    int *sp) {
+    KD_WN(kb_choice) ch;
+    KD_WN(kb_shared_choice)(st, n, a, c, &ch);
+    KD_WN(kb_entry) *e = &stack[*sp];
+    e->node = ch.front, e->t_near = ch.f.t_near, e->t_far = ch.f.t_far;
+    *sp += (ch.fb != 0) & (ch.bb != 0);
+    const VF go_back = V(bitmask)(ch.bb ? -1 : 0);
+    c->node = ch.bb ? ch.back : ch.front;
+    c->t_near = V(sel)(go_back, ch.b.t_near, c->t_near);
+    c->t_far = V(sel)(go_back, ch.b.t_far, ch.f.t_far);
+    c->act = V(sel)(go_back, ch.b_act, ch.f_act);
+    return (ch.fb | ch.bb) != 0;
+}
+
+/*
  * Interior node, general case: per-lane origins, or a shared origin on the
  * plane. Each lane's below/above intervals come from its own front/back; an
  * origin ON the plane takes as front the child its direction leaves (the
@@ -360,7 +432,8 @@ KD_FN int KD_WN(kb_step_shared_nb)(const KD_WN(kb_state) *st, const kd_node *n, 
  * is entered first.
  */
 KD_FN int KD_WN(kb_step_general)(const KD_WN(kb_state) *st, const kd_node *n,
-                           KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp) {
+                           KD_WN(kb_cursor) *c, KD_WN(kb_entry) *stack, int *sp,
+                           const int far) {
     const int axis = kd_axis(n);
     const VF zero = V(set1)(0.0f), inv = st->inv_dir[axis];
     const VF a = V(sub)(V(set1)(n->u.split), st->org[axis]);
@@ -384,7 +457,9 @@ KD_FN int KD_WN(kb_step_general)(const KD_WN(kb_state) *st, const kd_node *n,
         return 0;
     int go_above = !lb;
     if (lb && hb) {
-        const int votes = kd_lane_count(V(bits)(V(and)(c->act, above_front)));
+        /* far end first: the child most lanes' directions lead into */
+        const VF first_above = far ? V(andnot)(st->sgn[axis], V(seti)(-1)) : above_front;
+        const int votes = kd_lane_count(V(bits)(V(and)(c->act, first_above)));
         go_above = 2 * votes > kd_lane_count(V(bits)(c->act));
         if (go_above)
             KD_WN(kb_push)(stack, sp, c->node + 1, lo.t_near, lo.t_far);
@@ -454,9 +529,12 @@ KD_FN void KD_WN(kb_replay)(const kdr_scene *s, const kd_entry_path *p,
 
 /* The node loop: from the root interval (or, given the path of the
  * bundle's shared origin, from where kb_replay leaves it) to an empty
- * stack. */
-KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF t_far,
-                    const kd_entry_path *path, KD_WN(kb_bundle) *b) {
+ * stack. far (a constant: kb_trace instantiates the loop once for each
+ * order, so the front-to-back loop is compiled as it was before the far
+ * order existed) takes the far end first steps. */
+KD_FN __attribute__((always_inline)) void
+KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF t_far,
+               const kd_entry_path *path, KD_WN(kb_bundle) *b, const int far) {
     KD_WN(kb_entry) stack[KD_MAX_DEPTH + 1];
     int sp = 0;
     KD_WN(kb_cursor) c = {t_near, t_far, KD_WN(kb_active)(st, t_near, t_far), 0};
@@ -470,9 +548,10 @@ KD_FN void KD_WN(kb_walk)(const kdr_scene *s, KD_WN(kb_state) *st, VF t_near, VF
         if (!kd_is_leaf(n)) {
             const float a = n->u.split - st->sorg[kd_axis(n)];
             if (st->shared && a != 0.0f
-                    ? (st->any ? KD_WN(kb_step_shared_nb)(st, n, a, &c, stack, &sp)
-                               : KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp))
-                    : KD_WN(kb_step_general)(st, n, &c, stack, &sp))
+                    ? (far       ? KD_WN(kb_step_shared_far)(st, n, a, &c, stack, &sp)
+                       : st->any ? KD_WN(kb_step_shared_nb)(st, n, a, &c, stack, &sp)
+                                 : KD_WN(kb_step_shared)(st, n, a, &c, stack, &sp))
+                    : KD_WN(kb_step_general)(st, n, &c, stack, &sp, far))
                 continue;
         } else {
             KD_WN(kb_leaf)(s, n, st, c.act);
@@ -585,8 +664,9 @@ KD_FN const kd_entry_path *KD_WN(kb_path)(const kdr_scene *s, const KD_WN(kb_sta
 }
 
 /* Traces the gathered lanes of a bundle; ec (NULL: every walk starts at
- * the root) caches the path of a shared origin (kb_path). */
-KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any,
+ * the root) caches the path of a shared origin (kb_path); far (any hit
+ * only) walks the lanes far end first. */
+KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any, int far,
                            kd_entry_cache *ec) {
     KD_WN(kb_state) st;
     VF t_near, t_far;
@@ -603,8 +683,12 @@ KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any,
     st.live = V(bitmask)(b->lanes);
     st.lane_steps = st.tri_tests = V(seti)(0);
     st.any = any;
+    st.far = any && far;
     KD_WN(kb_update_limit)(&st);
-    KD_WN(kb_walk)(s, &st, t_near, t_far, KD_WN(kb_path)(s, &st, ec), b);
+    if (st.far) /* from the root: the origin's path leads to the near end */
+        KD_WN(kb_walk)(s, &st, t_near, t_far, NULL, b, 1);
+    else
+        KD_WN(kb_walk)(s, &st, t_near, t_far, KD_WN(kb_path)(s, &st, ec), b, 0);
     b->lane_steps = V(count_sum)(st.lane_steps);
     b->tri_tests = V(count_sum)(st.tri_tests);
     V(store)(b->best_t, st.best_t);

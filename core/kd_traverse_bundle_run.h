@@ -10,7 +10,10 @@
  * (kb_trace), stores the lanes' answers, and sends incoherent stretches
  * through the interleaved walk (kd_stream_trace): chunks kd_batch_scattered
  * calls scattered, and the rest of a chunk, plus KB_FALLBACK_CHUNKS more,
- * whose first bundles' lane occupancy fell under KB_OCC_MIN.
+ * whose first bundles' lane occupancy fell under KB_OCC_MIN. Any-hit
+ * chunks whose rays' ends cluster (kd_batch_far_first: shadow rays toward a
+ * light) walk far end first, in bundles and in the interleaved walk, where
+ * the call's first such rays measured that order cheaper (kd_far_probe).
  */
 #ifndef KD_W
 #error "include kd_traverse_bundle.h's template (define KD_W) before kd_traverse_bundle_run.h"
@@ -131,22 +134,56 @@ KD_FN void KD_WN(kb_stats_add)(kdr_trav_stats *stats, const KD_WN(kb_bundle) *b,
     stats->tri_tests += b->tri_tests;
 }
 
+/* The interleaved walk over ids[0..m) (ids NULL: [first, first + m)),
+ * far end first or not. */
+KD_FN void KD_WN(kb_stream)(const kdr_scene *s, const kdr_ray_batch *rb,
+                            const size_t *ids, size_t first, size_t m, kdr_query q,
+                            int far, kdr_hits *out, kdr_trav_stats *stats) {
+    if (far)
+        kd_stream_trace_far(s, rb, ids, first, m, q, out, stats);
+    else
+        kd_stream_trace(s, rb, ids, first, m, q, out, stats);
+}
+
 /* Traces rays ids[0..m) (ids NULL: [first, first + m)) through the
- * interleaved walk: one fallback per bundle-sized group. */
+ * interleaved walk in the order `order` (KB_ORDER_*; probing: runs of
+ * KD_FAR_PROBE_RAYS alternate the orders into fp until both are measured,
+ * the rest takes kd_far_pick's): one fallback per bundle-sized group. */
 KD_FN void KD_WN(kb_alone)(const kdr_scene *s, const kdr_ray_batch *rb,
                            const size_t *ids, size_t first, size_t m, kdr_query q,
-                           kdr_hits *out, kdr_trav_stats *stats) {
-    kd_stream_trace(s, rb, ids, first, m, q, out, stats);
+                           int order, kd_far_probe *fp, kdr_hits *out,
+                           kdr_trav_stats *stats) {
+    size_t done = 0;
+    if (order == KB_ORDER_PROBE)
+        for (; done < m && kd_far_probing(fp); done += KD_FAR_PROBE_RAYS) {
+            const size_t k = m - done < KD_FAR_PROBE_RAYS ? m - done : KD_FAR_PROBE_RAYS;
+            const int far = kd_far_pick(fp);
+            kdr_trav_stats st = {0, 0, 0, 0};
+            KD_WN(kb_stream)(s, rb, ids ? ids + done : NULL, ids ? 0 : first + done, k, q,
+                             far, out, &st);
+            fp->work[far] += (double)(st.nodes_visited + st.tri_tests);
+            fp->rays[far] += (double)st.rays;
+            if (stats) {
+                stats->rays += st.rays;
+                stats->nodes_visited += st.nodes_visited;
+                stats->tri_tests += st.tri_tests;
+            }
+        }
+    if (done < m)
+        KD_WN(kb_stream)(s, rb, ids ? ids + done : NULL, ids ? 0 : first + done, m - done,
+                         q, order == KB_ORDER_PROBE ? kd_far_pick(fp) : order, out, stats);
     if (stats)
         stats->fallbacks += (uint64_t)((m + KD_W - 1) / KD_W);
 }
 
-/* Traces one chunk of rays (ids) in bundles of KD_W. Returns 1 when the
- * bundles so far (at least KB_PROBE of them) turned out incoherent; the
- * rest of the chunk then went alone. */
+/* Traces one chunk of rays (ids) in bundles of KD_W, any-hit lanes in the
+ * order `order` (KB_ORDER_*; probing: each bundle takes kd_far_pick's order
+ * and adds its work to fp). Returns 1 when the bundles so far (at least
+ * KB_PROBE of them) turned out incoherent; the rest of the chunk then went
+ * alone. */
 KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
-                    const size_t *ids, int m, kdr_query q, int flags,
-                    kdr_hits *out, kdr_trav_stats *stats) {
+                    const size_t *ids, int m, kdr_query q, int flags, int order,
+                    kd_far_probe *fp, kdr_hits *out, kdr_trav_stats *stats) {
     KD_WN(kb_bundle) b;
     kd_entry_cache ec;
     ec.have_path = ec.have_prev = 0;
@@ -156,7 +193,12 @@ KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
         const int n = m - g < KD_W ? m - g : KD_W;
         int alone;
         KD_WN(kb_gather)(rb, ids + g, n, &b, &alone);
-        KD_WN(kb_trace)(s, &b, q == KDR_ANY, (flags & KB_ROOT) ? NULL : &ec);
+        const int far = order == KB_ORDER_PROBE ? kd_far_pick(fp) : order;
+        KD_WN(kb_trace)(s, &b, q == KDR_ANY, far, (flags & KB_ROOT) ? NULL : &ec);
+        if (order == KB_ORDER_PROBE) {
+            fp->work[far] += (double)(b.lane_steps + b.tri_tests);
+            fp->rays[far] += (double)kd_lane_count(b.lanes);
+        }
         KD_WN(kb_store)(&b, ids + g, n, alone, q, out);
         KD_WN(kb_stats_add)(stats, &b, n, alone);
         for (int j = 0; j < n; j++)
@@ -167,7 +209,8 @@ KD_FN int KD_WN(kb_chunk)(const kdr_scene *s, const kdr_ray_batch *rb,
         used += (double)b.lane_steps;
         offered += (double)b.steps * kd_lane_count(b.lanes);
         if ((flags & KB_FALLBACK) && k >= KB_PROBE && used < KB_OCC_MIN * offered) {
-            KD_WN(kb_alone)(s, rb, ids + g + n, 0, (size_t)(m - g - n), q, out, stats);
+            KD_WN(kb_alone)(s, rb, ids + g + n, 0, (size_t)(m - g - n), q, order, fp, out,
+                            stats);
             return 1;
         }
     }
@@ -182,6 +225,12 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
                          kdr_trav_stats *stats) {
     size_t ids[KB_CHUNK];
     const size_t end = first + count;
+    /* any hit: the order of a chunk's walks: far end first everywhere
+     * (KB_FAR), or measured (kd_far_probe) where kd_batch_far_first says
+     * the ends cluster (KB_FAR_AUTO) */
+    const int far_all = q == KDR_ANY && (flags & KB_FAR);
+    const int far_auto = q == KDR_ANY && (flags & KB_FAR_AUTO) && !far_all;
+    kd_far_probe fp = {{0.0, 0.0}, {0.0, 0.0}};
     for (size_t base = first; base < end;) {
         /* a stretch of scattered chunks, or the chunks after a failed
          * probe, in one call: the walk's lanes stay full longer */
@@ -192,7 +241,12 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
                                       end - alone < KB_CHUNK ? end - alone : KB_CHUNK))
                 alone += end - alone < KB_CHUNK ? end - alone : KB_CHUNK;
         if (alone > base) {
-            KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, out, stats);
+            const size_t probe = alone - base < KB_CHUNK ? alone - base : KB_CHUNK;
+            const int order = far_all ? KB_ORDER_FAR
+                              : far_auto && kd_batch_far_first(rb, NULL, base, probe)
+                                  ? KB_ORDER_PROBE
+                                  : KB_ORDER_NEAR;
+            KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, order, &fp, out, stats);
             base = alone;
             continue;
         }
@@ -212,12 +266,16 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
         if (!(flags & KB_SORT) || !kd_batch_runs_fit(rb, ids, (size_t)m, KD_W))
             kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
         base += c;
-        if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, out, stats)) {
+        const int order = far_all ? KB_ORDER_FAR
+                          : far_auto && m > 0 && kd_batch_far_first(rb, ids, 0, (size_t)m)
+                              ? KB_ORDER_PROBE
+                              : KB_ORDER_NEAR;
+        if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, order, &fp, out, stats)) {
             const size_t skip = end - base < KB_FALLBACK_CHUNKS * KB_CHUNK
                                     ? end - base
                                     : KB_FALLBACK_CHUNKS * KB_CHUNK;
             if (skip)
-                KD_WN(kb_alone)(s, rb, NULL, base, skip, q, out, stats);
+                KD_WN(kb_alone)(s, rb, NULL, base, skip, q, order, &fp, out, stats);
             base += skip;
         }
     }

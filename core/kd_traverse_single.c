@@ -19,15 +19,15 @@
 #include "kd_entry.h"
 #include "kd_walk.h"
 
-/* Descends from n to a non-empty leaf, pushing far children; returns the
- * leaf, or NULL when the rest of this subtree is empty for the ray (a child
- * flagged empty is never entered). */
+/* Descends from n to a non-empty leaf, pushing far children (rev: near
+ * children, entering the far one: the far end first, same intervals);
+ * returns the leaf, or NULL when the rest of this subtree is empty for the
+ * ray (a child flagged empty is never entered). */
 static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
                                      const float org[3], const float inv[3],
                                      const float ss[3], const unsigned neg[3],
-                                     kd_todo *stack,
-                                     int *sp, float *tn, float *tf,
-                                     uint64_t *visited) {
+                                     kd_todo *stack, int *sp, float *tn, float *tf,
+                                     uint64_t *visited, const int rev) {
     while (!kd_is_leaf(n)) {
         ++*visited;
         const int axis = kd_axis(n);
@@ -54,6 +54,13 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
         } else if (near_empty) {
             n = farc;
             *tn = t_lo > *tn ? t_lo : *tn;
+        } else if (rev) { /* the same two intervals, far child first */
+            stack[*sp].node = nearc;
+            stack[*sp].tn = *tn;
+            stack[*sp].tf = t_hi < *tf ? t_hi : *tf;
+            ++*sp;
+            n = farc;
+            *tn = t_lo > *tn ? t_lo : *tn;
         } else {
             stack[*sp].node = farc;
             stack[*sp].tn = t_lo > *tn ? t_lo : *tn;
@@ -69,8 +76,10 @@ static inline const kd_node *descend(const kd_node *nodes, const kd_node *n,
 
 /* The walk from node n over [tn, tf] with stack[0..sp) pending (the root,
  * the root-clipped interval and nothing, or an entry point of kd_entry.h
- * and the entries pushed above it); any != 0 stops at the first hit. */
+ * and the entries pushed above it); any != 0 stops at the first hit; rev
+ * != 0 (any hit only) visits the cells back to front. */
 static inline int walk_from(const kdr_scene *s, const kdr_ray *r, const int any,
+                            const int rev,
                             const kd_node *n, float tn, float tf, const float inv[3],
                             const float ss[3], const unsigned neg[3], kd_todo *stack,
                             int sp, kd_walk_out *o) {
@@ -81,7 +90,8 @@ static inline int walk_from(const kdr_scene *s, const kdr_ray *r, const int any,
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     const kd_node *nodes = s->nodes;
     for (;;) {
-        n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes);
+        n = descend(nodes, n, r->org, inv, ss, neg, stack, &sp, &tn, &tf, &o->nodes,
+                    rev);
         if (n && kd_walk_leaf(s, n, &pre, &pre4, r->tmin, any, avx2, o))
             return 1;
         const float bound = kd_term_bound(o->t);
@@ -96,15 +106,16 @@ static inline int walk_from(const kdr_scene *s, const kdr_ray *r, const int any,
     }
 }
 
-/* The walk shared by both queries; any != 0 stops at the first hit. */
+/* The walk shared by both queries; any != 0 stops at the first hit, rev
+ * != 0 walks back to front (any hit only). */
 static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
-                       kd_walk_out *o) {
+                       const int rev, kd_walk_out *o) {
     float inv[3], ss[3], tn, tf;
     unsigned neg[3];
     if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
         return 0;
     kd_todo stack[KD_MAX_DEPTH];
-    return walk_from(s, r, any, s->nodes, tn, tf, inv, ss, neg, stack, 0, o);
+    return walk_from(s, r, any, rev, s->nodes, tn, tf, inv, ss, neg, stack, 0, o);
 }
 
 /* The same from the ray's entry on the path of its origin (kd_entry.h). */
@@ -119,7 +130,7 @@ static inline int walk_entry(const kdr_scene *s, const kd_entry_path *p,
     const kd_node *n =
         kd_entry_descend(p, r->org, inv, ss, neg, &tn, &tf, &level, stack, &sp);
     o->nodes += (uint64_t)level; /* the single walk steps through them */
-    return walk_from(s, r, any, n, tn, tf, inv, ss, neg, stack, sp, o);
+    return walk_from(s, r, any, 0, n, tn, tf, inv, ss, neg, stack, sp, o);
 }
 
 static void add_stats(kdr_trav_stats *st, const kd_walk_out *o) {
@@ -133,7 +144,7 @@ static void add_stats(kdr_trav_stats *st, const kd_walk_out *o) {
 int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
                    kdr_trav_stats *stats) {
     kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
-    const int found = ray ? walk(scene, ray, 0, &o) : 0;
+    const int found = ray ? walk(scene, ray, 0, 0, &o) : 0;
     add_stats(stats, &o);
     if (hit) {
         hit->t = found ? o.t : -1.0f;
@@ -147,7 +158,15 @@ int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
 int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
                   kdr_trav_stats *stats) {
     kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
-    const int found = ray ? walk(scene, ray, 1, &o) : 0;
+    const int found = ray ? walk(scene, ray, 1, 0, &o) : 0;
+    add_stats(stats, &o);
+    return found;
+}
+
+int kd_occluded1_far(const kdr_scene *scene, const kdr_ray *ray,
+                     kdr_trav_stats *stats) {
+    kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
+    const int found = ray ? walk(scene, ray, 1, 1, &o) : 0;
     add_stats(stats, &o);
     return found;
 }

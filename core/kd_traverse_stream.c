@@ -190,13 +190,25 @@ void kd_stream_trace16(const kdr_scene *s, const kdr_ray_batch *b, const size_t 
         kd_stream_hit16(s, b, ids, first, m, flags, out, stats);
 }
 
+static void stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                         size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
+                         kdr_trav_stats *stats) {
+    if (kd_cpu_has_avx512())
+        kd_stream_trace16(s, b, ids, first, m, q, flags, out, stats);
+    else if (kdr_cpu_has_avx2())
+        kd_stream_trace8(s, b, ids, first, m, q, flags, out, stats);
+    else
+        kd_stream_scalar_trace(s, b, ids, first, m, q, 0, out, stats);
+}
+
 void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
                      size_t first, size_t m, kdr_query q, kdr_hits *out,
                      kdr_trav_stats *stats) {
-    if (kd_cpu_has_avx512())
-        kd_stream_trace16(s, b, ids, first, m, q, 0, out, stats);
-    else if (kdr_cpu_has_avx2())
-        kd_stream_trace8(s, b, ids, first, m, q, 0, out, stats);
-    else
-        kd_stream_scalar_trace(s, b, ids, first, m, q, 0, out, stats);
+    stream_trace(s, b, ids, first, m, q, 0, out, stats);
+}
+
+void kd_stream_trace_far(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                         size_t first, size_t m, kdr_query q, kdr_hits *out,
+                         kdr_trav_stats *stats) {
+    stream_trace(s, b, ids, first, m, q, KD_STREAM_FAR, out, stats);
 }

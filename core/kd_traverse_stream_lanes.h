@@ -113,6 +113,8 @@ typedef struct KD_WN(ks_src) {
     unsigned stage; /* all lanes when leaves are staged (large scenes) */
     kd_entry_cache *entry; /* rays of a shared origin start at their entry
                               (kd_entry.h) */
+    int far;        /* any hit, KD_STREAM_FAR: each ray's cells back to front,
+                       from the root (the origin's path leads to the near end) */
     KD_WN(ks_prep) prep;
 } KD_WN(ks_src);
 
@@ -259,9 +261,10 @@ KD_WN(ks_fill)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w, int j) {
                                  (p->neg[2] >> i) & 1};
         float tn = p->tn[i], tf = p->tf[i];
         kd_todo st[KD_MAX_DEPTH];
-        int level, sp;
+        int level = 0, sp = 0;
         const kd_node *n0 =
-            kd_entry_for(c->s, c->entry, org, inv, ss, neg, &tn, &tf, &level, st, &sp);
+            c->far ? c->s->nodes
+                   : kd_entry_for(c->s, c->entry, org, inv, ss, neg, &tn, &tf, &level, st, &sp);
         for (int d = 0; d < sp; d++) { /* the entries pushed above the entry */
             w->stk_node[d][j] = (int32_t)(st[d].node - c->s->nodes);
             w->stk_tn[d][j] = st[d].tn;
@@ -407,17 +410,30 @@ KD_FN void KD_WN(ks_turn)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w) {
     const unsigned go_far = V(ngt)(inner & ~far_empty, t_lo, tf);
     const unsigned push = go_near & go_far;
     const VF far_tn = V(max)(t_lo, tn), near_tf = V(min)(t_hi, tf);
-    if (push) {
-        const VI slot = IV(add)(IV(sll)(w->sp, KS_LOG2W), IV(iota)());
-        IV(scatter)(&w->stk_node[0][0], push, slot, farc);
-        V(scatter)(&w->stk_tn[0][0], push, slot, far_tn);
-        V(scatter)(&w->stk_tf[0][0], push, slot, tf);
-        w->sp = IV(add_in)(push, w->sp, one);
-    }
     const unsigned moved = go_near | go_far;
-    w->node = IV(selm)(moved, IV(selm)(go_near, nearc, farc), node);
-    w->tn = V(selm)(go_far & ~go_near, far_tn, tn);
-    w->tf = V(selm)(go_near, near_tf, tf);
+    if (KS_ANY && c->far) { /* the same intervals, the far child first */
+        if (push) {
+            const VI slot = IV(add)(IV(sll)(w->sp, KS_LOG2W), IV(iota)());
+            IV(scatter)(&w->stk_node[0][0], push, slot, nearc);
+            V(scatter)(&w->stk_tn[0][0], push, slot, tn);
+            V(scatter)(&w->stk_tf[0][0], push, slot, near_tf);
+            w->sp = IV(add_in)(push, w->sp, one);
+        }
+        w->node = IV(selm)(moved, IV(selm)(go_far, farc, nearc), node);
+        w->tn = V(selm)(go_far, far_tn, tn);
+        w->tf = V(selm)(go_near & ~go_far, near_tf, tf);
+    } else {
+        if (push) {
+            const VI slot = IV(add)(IV(sll)(w->sp, KS_LOG2W), IV(iota)());
+            IV(scatter)(&w->stk_node[0][0], push, slot, farc);
+            V(scatter)(&w->stk_tn[0][0], push, slot, far_tn);
+            V(scatter)(&w->stk_tf[0][0], push, slot, tf);
+            w->sp = IV(add_in)(push, w->sp, one);
+        }
+        w->node = IV(selm)(moved, IV(selm)(go_near, nearc, farc), node);
+        w->tn = V(selm)(go_far & ~go_near, far_tn, tn);
+        w->tf = V(selm)(go_near, near_tf, tf);
+    }
     if (c->stage) {
         _Alignas(sizeof(VF)) int32_t nv[KD_W];
         IV(store)(nv, w->node);
@@ -453,6 +469,7 @@ KD_TARGET void KS_ENTRY(const kdr_scene *s, const kdr_ray_batch *b, const size_t
     KD_WN(ks_src) c; /* field by field: prep is written before it is read */
     c.s = s, c.b = b, c.ids = ids, c.first = first, c.m = m, c.next = 0;
     c.out = out, c.stats = stats, c.stage = stage ? KS_ALL : 0, c.entry = &ec;
+    c.far = KS_ANY && (flags & KD_STREAM_FAR);
     c.prep.n = c.prep.at = 0;
     KD_WN(ks_lanes) w;
     w.node = w.sp = w.visits = IV(set1)(0);

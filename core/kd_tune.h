@@ -137,6 +137,16 @@
 #define KB_OCC_MIN 0.3
 #define KB_PROBE 4
 #define KB_FALLBACK_CHUNKS 4
+/* Any-hit chunks of rays with their own origins whose ends (o + tmax d)
+ * lie in a box narrower than KD_FAR_END_SPREAD times their origins' box
+ * (widest axis of each) walk far end first (kd_batch_far_first): shadow
+ * rays toward one light. docs/TRAVERSAL.md, "Round: far end first". */
+#define KD_FAR_END_SPREAD 0.25f
+/* Such chunks first trace KD_FAR_PROBE_RAYS rays each way, then walk far
+ * end first while that order's work per ray (node steps + triangle tests)
+ * stays under KD_FAR_GAIN times the other's (kd_far_pick). */
+#define KD_FAR_PROBE_RAYS 32
+#define KD_FAR_GAIN 0.85
 
 /* ---- cone shadows (kd_cone.c, kd_cone_cells.c) ------------------------------
  * Measured with kdray_bench_cone (default scene and 2CylinderEngine, a small

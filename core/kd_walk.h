@@ -222,4 +222,13 @@ static inline int kd_walk_setup(const kdr_scene *s, const kdr_ray *r, float inv[
     return *tn <= *tf;
 }
 
+/* kdr_occluded1's answer from a walk that visits the ray's cells back to
+ * front: the cell of the interval's far end (tmax, or the root box's exit)
+ * first, each interior node's far child before its near one, with the
+ * same intervals, leaf test and pruning (kd_traverse_single.c). An
+ * any-hit answer does not depend on the order in which cells are visited,
+ * so the bits are kdr_occluded1's; only the steps differ. */
+int kd_occluded1_far(const kdr_scene *scene, const kdr_ray *ray,
+                     kdr_trav_stats *stats);
+
 #endif /* KD_WALK_H */

@@ -14,7 +14,11 @@
  * stride 3 with every origin equal: a cone's samples of one point) stays
  * with bundles even on such a scene, because there the walk lost.
  * Also kd_batch_runs_fit, which lets the bundle driver skip ordering a
- * chunk whose bundles already hold whole runs of one origin.
+ * chunk whose bundles already hold whole runs of one origin, and
+ * kd_batch_far_first, which offers any-hit chunks whose ends cluster
+ * (shadow rays of many points toward one light) the far end first order,
+ * and kd_far_pick, which takes it where the call's probe measured it
+ * cheaper.
  */
 #include <math.h>
 #include <stdio.h>
@@ -148,6 +152,144 @@ static void check_runs_fit(int run, int shared, size_t skip, size_t w, int want)
     free(c);
 }
 
+/* kd_batch_far_first's verdict (any-hit chunks walked far end first) for
+ * a chunk of make_chunk's origins whose rays run either toward a small
+ * ball (a light at y = 3, radius 0.05: ends that cluster) or along
+ * make_chunk's directions for `reach` (AO-like: ends spread as the
+ * origins do); then one ray's tmax made +inf (no finite end), or the
+ * tmax array dropped (every tmax +inf). */
+enum { END_LIGHT, END_REACH };
+static void check_far_first(const char *what, int run, int shared, int ends, float reach,
+                            int inf_at, int no_tmax, int want) {
+    chunk *c = malloc(sizeof *c);
+    make_chunk(c, run);
+    if (shared) c->b.org_stride = 0;
+    for (int i = 0; i < KB_CHUNK; i++) {
+        const float *o = c->org + (shared ? 0 : 3 * i);
+        float *d = c->dir + 3 * i;
+        if (ends == END_LIGHT) {
+            const float light[3] = {0.0f, 3.0f, 0.0f};
+            for (int k = 0; k < 3; k++)
+                d[k] = light[k] + 0.05f * d[k] - o[k];
+            c->tmin[i] = 1e-4f, c->tmax[i] = 1.0f;
+        } else {
+            c->tmin[i] = 0.0f, c->tmax[i] = reach;
+        }
+    }
+    if (inf_at >= 0) c->tmax[inf_at] = INFINITY;
+    if (no_tmax) c->b.tmax = NULL;
+    const int got = kd_batch_far_first(&c->b, NULL, 0, KB_CHUNK);
+    size_t ids[KB_CHUNK];
+    for (int i = 0; i < KB_CHUNK; i++) /* rotated by 8: the same rays sampled */
+        ids[i] = (size_t)((i + 8) % KB_CHUNK);
+    const int got_ids = kd_batch_far_first(&c->b, ids, 0, KB_CHUNK);
+    const int ok = got == want && got_ids == want;
+    printf("far end first: %-44s %d (want %d): %s\n", what, got, want, ok ? "ok" : "FAIL");
+    if (!ok) {
+        fprintf(stderr, "FAIL far_first %s: %d / %d with ids, want %d\n", what, got, got_ids,
+                want);
+        failures++;
+    }
+    free(c);
+}
+
+/* kd_far_pick, the probe's choice: while an order is short of
+ * KD_FAR_PROBE_RAYS the one with fewer rays (far on a tie), then far end
+ * first only while its work per ray is under KD_FAR_GAIN of the other's. */
+static void check_far_pick(void) {
+    struct {
+        double work0, rays0, work1, rays1;
+        int want;
+        const char *what;
+    } c[] = {
+        {0, 0, 0, 0, 1, "nothing measured: far first"},
+        {0, 0, 900, KD_FAR_PROBE_RAYS, 0, "far measured, front to back not"},
+        {800, KD_FAR_PROBE_RAYS - 1, 100, KD_FAR_PROBE_RAYS, 0, "front to back one ray short"},
+        {3200, KD_FAR_PROBE_RAYS, 1600, KD_FAR_PROBE_RAYS, 1, "far half the work"},
+        {3200, KD_FAR_PROBE_RAYS, 3100, KD_FAR_PROBE_RAYS, 0, "far 3 % cheaper: not enough"},
+        {1000, 10 * KD_FAR_PROBE_RAYS, 5000, 100 * KD_FAR_PROBE_RAYS, 1,
+         "per ray, not in all: far 0.5 of front to back"},
+    };
+    for (size_t i = 0; i < sizeof c / sizeof c[0]; i++) {
+        const kd_far_probe p = {{c[i].work0, c[i].work1}, {c[i].rays0, c[i].rays1}};
+        const int got = kd_far_pick(&p);
+        printf("far pick: %-46s %d (want %d): %s\n", c[i].what, got, c[i].want,
+               got == c[i].want ? "ok" : "FAIL");
+        if (got != c[i].want) {
+            fprintf(stderr, "FAIL far_pick %s\n", c[i].what);
+            failures++;
+        }
+    }
+}
+
+/* The driver's wiring of the order: shadow rays from points among small
+ * triangles toward a light above a roof (two large triangles at y = 1.5
+ * over the soup): far end first meets the roof at once, front to back
+ * walks the soup first. kdr_trace_batch (KB_FAR_AUTO) must then do less
+ * work (node steps + triangle tests) than the same driver without it, with
+ * the same answers; AO-like rays (ends around their origins) must do
+ * exactly the same work either way (the rule does not offer them the far
+ * order). */
+static void check_far_work(void) {
+    const size_t nsoup = 20000, n = 4096;
+    float *tris = malloc((nsoup + 2) * 9 * sizeof(float));
+    float *soup = make_soup(nsoup);
+    memcpy(tris, soup, nsoup * 9 * sizeof(float));
+    free(soup);
+    const float roof[18] = {-2, 1.5f, -2, 2, 1.5f, -2, 2, 1.5f, 2,
+                            -2, 1.5f, -2, 2, 1.5f, 2, -2, 1.5f, 2};
+    memcpy(tris + 9 * nsoup, roof, sizeof roof);
+    kdr_scene *s = NULL;
+    if (kdr_scene_build(tris, nsoup + 2, NULL, NULL, NULL, &s) != KDR_OK) {
+        fprintf(stderr, "FAIL far_work: build\n");
+        failures++;
+        free(tris);
+        return;
+    }
+    float *org = malloc(3 * n * sizeof(float)), *dir = malloc(3 * n * sizeof(float));
+    float *tmin = malloc(n * sizeof(float)), *tmax = malloc(n * sizeof(float));
+    uint8_t *hit[2] = {malloc(n), malloc(n)};
+    typedef void (*bundle_fn)(const kdr_scene *, const kdr_ray_batch *, size_t, size_t,
+                              kdr_query, int, kdr_hits *, kdr_trav_stats *);
+    const bundle_fn fn = kd_cpu_has_avx512() ? kd_bundle16_trace
+                         : kdr_cpu_has_avx2() ? kd_bundle8_trace
+                                              : kd_bundle4_trace;
+    for (int ao = 0; ao < 2; ao++) {
+        for (size_t i = 0; i < n; i++) {
+            for (int k = 0; k < 3; k++)
+                org[3 * i + k] = 1.6f * rnd01() - 0.8f;
+            const float light[3] = {0.2f * rnd01(), 3.0f, 0.2f * rnd01()};
+            for (int k = 0; k < 3; k++)
+                dir[3 * i + k] = ao ? 2.0f * rnd01() - 1.0f : light[k] - org[3 * i + k];
+            tmin[i] = 1e-4f;
+            tmax[i] = ao ? 0.1f : 1.0f;
+        }
+        const kdr_ray_batch b = {n, org, 3, dir, tmin, 1, tmax, 1};
+        kdr_trav_stats st[2] = {{0, 0, 0, 0}, {0, 0, 0, 0}};
+        for (int w = 0; w < 2; w++) {
+            kdr_hits h = {NULL, NULL, NULL, NULL, hit[w]};
+            for (size_t f = 0; f < n; f += 1024) /* the daemon's calls, smaller */
+                fn(s, &b, f, 1024, KDR_ANY,
+                   KB_FALLBACK | KB_SORT | KB_LIVE | (w ? KB_FAR_AUTO : 0), &h, &st[w]);
+        }
+        const uint64_t w0 = st[0].nodes_visited + st[0].tri_tests;
+        const uint64_t w1 = st[1].nodes_visited + st[1].tri_tests;
+        const int same = memcmp(hit[0], hit[1], n) == 0;
+        const int ok = same && (ao ? w1 == w0 : w1 < w0);
+        printf("far work: %s rays, work per ray %.1f without the far order, %.1f with "
+               "KB_FAR_AUTO, answers %s: %s\n",
+               ao ? "AO-like" : "shadow", (double)w0 / n, (double)w1 / n,
+               same ? "equal" : "DIFFER", ok ? "ok" : "FAIL");
+        if (!ok) {
+            fprintf(stderr, "FAIL far_work %s\n", ao ? "ao" : "shadow");
+            failures++;
+        }
+    }
+    free(org), free(dir), free(tmin), free(tmax), free(hit[0]), free(hit[1]);
+    kdr_scene_free(s);
+    free(tris);
+}
+
 static kdr_scene *build(size_t ntris) {
     float *tris = make_soup(ntris);
     kdr_scene *s = NULL;
@@ -187,6 +329,22 @@ int main(void) {
     check_runs_fit(64, 0, 0, 16, 0);  /* 64 AO rays per point: 4 bundles a run */
     check_runs_fit(16, 0, 3, 16, 0);  /* runs off the bundles' grid */
     check_runs_fit(KB_CHUNK, 1, 0, 16, 0); /* one origin, stride 0 */
+    check_far_pick();
+    check_far_work();
+    check_far_first("shadow rays, an origin per ray", 1, 0, END_LIGHT, 0, -1, 0, 1);
+    check_far_first("shadow rays, runs of 16 (16 points)", 16, 0, END_LIGHT, 0, -1, 0, 1);
+    /* one of the rays the rule samples (every eighth of 256); an unsampled
+     * one is walked far end first from the root box's exit, which
+     * test_bundle's ends-on-splits set checks */
+    check_far_first("shadow rays, one ray with tmax +inf", 16, 0, END_LIGHT, 0, 64, 0, 0);
+    check_far_first("shadow rays, no tmax array (all +inf)", 16, 0, END_LIGHT, 0, -1, 1, 0);
+    check_far_first("shadow rays of one origin, stride 3", KB_CHUNK, 0, END_LIGHT, 0, -1, 0,
+                    0);
+    check_far_first("shadow rays of one origin, stride 0", KB_CHUNK, 1, END_LIGHT, 0, -1, 0,
+                    0);
+    check_far_first("AO rays, runs of 16, reach 0.2", 16, 0, END_REACH, 0.2f, -1, 0, 0);
+    check_far_first("AO rays, an origin per ray, reach 0.05", 1, 0, END_REACH, 0.05f, -1, 0,
+                    0);
     kdr_scene_free(big);
     kdr_scene_free(small);
     printf("%s: %d failures\n", failures ? "FAILED" : "passed", failures);

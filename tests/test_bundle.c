@@ -25,6 +25,13 @@
  * a wrong NaN rule in its node step (slack-planes): the far child a NaN
  * crossing pushes lies exactly the slack beyond the ray, holds nothing the
  * ray hits, so dropping it changes no answer, only the work.
+ * Any hit walked far end first (kd_occluded1_far's order): the bundle
+ * drivers and the interleaved walk's lane forms with KB_FAR /
+ * KD_STREAM_FAR on every set, answers against kdr_occluded1, and the lane
+ * forms' work against kd_occluded1_far's (a cell the far walk drops or
+ * adds changes the work even where it changes no answer); the sets
+ * include rays whose end lies on a split plane and shadow rays toward a
+ * small light (which kdr_trace_batch itself walks far end first).
  */
 #include <math.h>
 #include <stdio.h>
@@ -35,6 +42,7 @@
 #include "kd_stream.h"
 #include "kd_traverse.h"
 #include "kd_traverse_bundle.h"
+#include "kd_walk.h"
 #include "kdray.h"
 #include "ladder.h"
 #include "check.h"
@@ -47,11 +55,12 @@ typedef struct results {
     int32_t *prim;
     uint8_t *hit;
     kdr_trav_stats st[2]; /* per query (closest, any): the walk's work */
+    kdr_trav_stats far;   /* any hit walked far end first (kd_occluded1_far) */
 } results;
 
 static results res_alloc(size_t n) {
     results r = {malloc(n * 4), malloc(n * 4), malloc(n * 4), malloc(n * 4),
-                 malloc(n), {{0}}};
+                 malloc(n), {{0}}, {0}};
     memset(r.t, 0xA5, n * 4); /* sentinels: unwritten entries fail the test */
     memset(r.u, 0xA5, n * 4);
     memset(r.v, 0xA5, n * 4);
@@ -81,6 +90,10 @@ static results reference(const kdr_scene *s, const kdr_ray_batch *b) {
         kdr_intersect1(s, &r, &h, &ref.st[KDR_CLOSEST]);
         ref.t[i] = h.t, ref.u[i] = h.u, ref.v[i] = h.v, ref.prim[i] = h.prim;
         ref.hit[i] = (uint8_t)kdr_occluded1(s, &r, &ref.st[KDR_ANY]);
+        if (kd_occluded1_far(s, &r, &ref.far) != ref.hit[i]) {
+            fprintf(stderr, "FAIL ray %zu: kd_occluded1_far differs from kdr_occluded1\n", i);
+            failures++;
+        }
     }
     return ref;
 }
@@ -97,19 +110,28 @@ static int differ(const results *a, const results *b, size_t i, kdr_query q) {
  * scalar and AVX-512 forms, plain and with staged leaves, 10 = its
  * dispatch with an id list (the rays in reverse order), 11/12 = its AVX2
  * 8-lane form, plain and staged, 13/14 = the 16-wide (AVX-512) bundle
- * driver without the fallback and with kdr_trace_batch's flags. */
-#define NWAYS 15
+ * driver without the fallback and with kdr_trace_batch's flags; far end
+ * first for any hit (KB_FAR, KD_STREAM_FAR; closest hit ignores it):
+ * 15..17 = the 4/8/16-wide drivers without the fallback, 18..20 = the
+ * interleaved walk's 8 and 16-lane forms (16 also staged), 21 = the
+ * 16-wide driver with kdr_trace_batch's flags. */
+#define NWAYS 22
+#define WAY_FAR_STREAM_FIRST 18
+#define WAY_FAR_STREAM_LAST 20
 static const char *const way_names[NWAYS] = {
     "auto",   "single",        "bundle4",  "bundle8",          "raw4",      "raw8",
     "stream", "stream-staged", "stream16", "stream16-staged", "stream-ids",
-    "stream8", "stream8-staged", "raw16", "bundle16"};
+    "stream8", "stream8-staged", "raw16", "bundle16",
+    "raw4-far", "raw8-far", "raw16-far", "stream8-far", "stream16-far",
+    "stream16-far-staged", "bundle16-far"};
 
 /* 0 when the CPU cannot run that way (8 lanes without AVX2, 16 without
  * AVX-512). */
 static int way_runs(int way) {
-    if (way == 3 || way == 5 || way == 11 || way == 12)
+    if (way == 3 || way == 5 || way == 11 || way == 12 || way == 16 || way == 18)
         return kdr_cpu_has_avx2(); /* bundle8 would run 4-wide: raw8 must not run */
-    if (way == 8 || way == 9 || way == 13 || way == 14)
+    if (way == 8 || way == 9 || way == 13 || way == 14 || way == 17 || way == 19 ||
+        way == 20 || way == 21)
         return kd_cpu_has_avx512();
     return 1;
 }
@@ -118,7 +140,22 @@ static void run_way(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                     size_t count, kdr_query q, int way, results *out) {
     kdr_hits h = {out->t, out->prim, out->u, out->v, out->hit};
     kdr_trav_stats *st = &out->st[q];
-    if (way == 4) {
+    if (way == 15) {
+        kd_bundle4_trace(s, b, first, count, q, KB_FAR, &h, NULL);
+    } else if (way == 16) {
+        kd_bundle8_trace(s, b, first, count, q, KB_FAR, &h, NULL);
+    } else if (way == 17 || way == 21) {
+        kd_bundle16_trace(s, b, first, count, q,
+                          way == 21 ? KB_FALLBACK | KB_SORT | KB_LIVE | KB_FAR : KB_FAR,
+                          &h, NULL);
+    } else if (way == 18) {
+        if (s->nodes)
+            kd_stream_trace8(s, b, NULL, first, count, q, KD_STREAM_FAR, &h, st);
+    } else if (way == 19 || way == 20) {
+        if (s->nodes)
+            kd_stream_trace16(s, b, NULL, first, count, q,
+                              KD_STREAM_FAR | (way == 20 ? KD_STREAM_STAGE : 0), &h, st);
+    } else if (way == 4) {
         kd_bundle4_trace(s, b, first, count, q, 0, &h, NULL);
     } else if (way == 5) {
         kd_bundle8_trace(s, b, first, count, q, 0, &h, NULL);
@@ -201,8 +238,12 @@ static void check_cut(const char *scene, const rayset *rs, const kdr_scene *s,
      * catch a step that differs without changing an answer (a far child
      * dropped or entered that holds nothing the ray hits, e.g. a NaN
      * crossing's far entry, see rays_slack_planes). */
-    const kdr_trav_stats *gs = &got.st[q], *rs_ = &ref->st[q];
-    if (way >= 6 && way <= 12 && s->nodes &&
+    /* the far end first forms against kd_occluded1_far's work (closest
+     * hit ignores the flag: against the single walk's) */
+    const int far_stream = way >= WAY_FAR_STREAM_FIRST && way <= WAY_FAR_STREAM_LAST;
+    const kdr_trav_stats *gs = &got.st[q],
+                         *rs_ = far_stream && q == KDR_ANY ? &ref->far : &ref->st[q];
+    if (((way >= 6 && way <= 12) || far_stream) && s->nodes &&
         (gs->rays != rs_->rays || gs->nodes_visited != rs_->nodes_visited ||
          gs->tri_tests != rs_->tri_tests)) {
         fprintf(stderr,

@@ -333,6 +333,66 @@ rayset rays_intervals(const kdr_bounds *b, int shared) {
     return r;
 }
 
+/* Rays whose end o + tmax d lies on a split plane of a random interior
+ * node (tmax solved on the split axis, so the end is on the plane or
+ * within rounding of it, inside the walk's slack); a quarter have tmax
+ * +inf instead (no finite end) and an eighth start at tmin > 0. Origins
+ * anywhere around the box, some outside it. */
+rayset rays_ends_on_splits(const kdr_scene *s, const kdr_bounds *b) {
+    rayset r = rays_alloc("ends-on-splits", 0);
+    for (size_t i = 0; i < r.n; i++) {
+        float *o = r.org + 3 * i, *d = r.dir + 3 * i, e[3];
+        rnd_point(b, 0.3f, o);
+        rnd_point(b, 0.0f, e);
+        int axis = (int)(rnd_u32() % 3);
+        for (int tries = 0; tries < 64 && s->nnodes > 1; tries++) {
+            const kd_node *n = &s->nodes[rnd_u32() % s->nnodes];
+            if (!kd_is_leaf(n)) {
+                axis = kd_axis(n);
+                e[axis] = n->u.split;
+                break;
+            }
+        }
+        for (int k = 0; k < 3; k++)
+            d[k] = e[k] - o[k];
+        if (d[axis] == 0.0f)
+            d[axis] = 1.0f;
+        r.tmax[i] = (e[axis] - o[axis]) / d[axis];
+        if (!(r.tmax[i] >= 0.0f))
+            r.tmax[i] = 1.0f;
+        switch (rnd_u32() % 8) {
+        case 0: case 1: r.tmax[i] = INFINITY; break;
+        case 2: r.tmin[i] = rnd_in(0.0f, r.tmax[i]); break;
+        default: break;
+        }
+    }
+    return r;
+}
+
+/* Shadow rays: per-ray origins around the box toward random points of a
+ * small ball (a light) just above it, [1e-4, 1]: ends that cluster, which
+ * kdr_trace_batch walks far end first (kd_batch_far_first). */
+rayset rays_light(const kdr_bounds *b) {
+    rayset r = rays_alloc("light", 0);
+    float c[3], rad = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        c[k] = 0.5f * (b->min[k] + b->max[k]);
+        rad += (b->max[k] - b->min[k]) * (b->max[k] - b->min[k]);
+    }
+    rad = 0.03f * sqrtf(rad);
+    c[1] = b->max[1] + 4.0f * rad;
+    for (size_t i = 0; i < r.n; i++) {
+        float *o = r.org + 3 * i, *d = r.dir + 3 * i, u[3];
+        rnd_point(b, 0.0f, o);
+        rnd_dir(u);
+        for (int k = 0; k < 3; k++)
+            d[k] = c[k] + rad * u[k] - o[k];
+        r.tmin[i] = 1e-4f;
+        r.tmax[i] = 1.0f;
+    }
+    return r;
+}
+
 void rays_every_set(const scene_src *src, const kdr_scene *s, const kdr_bounds *b,
                     int integer_org, rayset out[RAYS_NSETS]) {
     int k = 0;
@@ -348,6 +408,8 @@ void rays_every_set(const scene_src *src, const kdr_scene *s, const kdr_bounds *
     out[k++] = rays_aimed(src, b, 0);
     out[k++] = rays_aimed(src, b, 1);
     out[k++] = rays_slack_planes(s, b);
+    out[k++] = rays_ends_on_splits(s, b);
+    out[k++] = rays_light(b);
 }
 
 int rays_check_every_set(const scene_src *src, int integer_org, rays_check_fn check) {

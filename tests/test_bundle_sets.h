@@ -4,7 +4,7 @@
  * of axis-aligned quads, a closed tessellated sphere) and NRAYS-ray sets
  * built to break bundles (shared and distinct origins, zero components,
  * origins on split planes, the walk's slack planes, aimed rays, odd
- * intervals). All draw from one deterministic generator, so the order of
+ * intervals, ends on split planes, shadow rays toward a small light). All draw from one deterministic generator, so the order of
  * the calls fixes the rays.
  */
 #ifndef TEST_BUNDLE_SETS_H
@@ -44,9 +44,11 @@ rayset rays_on_splits(const kdr_scene *s, const kdr_bounds *b, int shared);
 rayset rays_slack_planes(const kdr_scene *s, const kdr_bounds *b);
 rayset rays_aimed(const scene_src *src, const kdr_bounds *b, int shared);
 rayset rays_intervals(const kdr_bounds *b, int shared);
+rayset rays_ends_on_splits(const kdr_scene *s, const kdr_bounds *b);
+rayset rays_light(const kdr_bounds *b);
 /* Every set above for one scene, in a fixed order (the exactness tests
  * of test_bundle and test_all_stream run all of them): out[0..RAYS_NSETS). */
-#define RAYS_NSETS 12
+#define RAYS_NSETS 14
 void rays_every_set(const scene_src *src, const kdr_scene *s, const kdr_bounds *b,
                     int integer_org, rayset out[RAYS_NSETS]);
 /* Builds src's tree and hands every set of rays_every_set() to check, one

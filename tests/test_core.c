@@ -249,6 +249,29 @@ static void test_box_grid(void) {
             r.dir[(k + 1) % 3] = 0.5f;
         bad += !compare_ray(s, &r);
     }
+    /* rays whose end o + tmax d lies on a plane of the grid (exact in
+     * float: half-integer origin, direction components 0.5 or 0.25 in
+     * magnitude), where the far end first walk starts on a split plane,
+     * and their start at tmin > 0; from an RNG of their own, so the
+     * other cases keep their rays */
+    const uint64_t saved_rng = g_rng;
+    g_rng = 0x2545f4914f6cdd1dull;
+    for (int i = 0; i < 3000; i++) {
+        kdr_ray r;
+        const int k = rng_u32() % 3;
+        for (int j = 0; j < 3; j++) {
+            r.org[j] = (float)(rng_u32() % 9) - 1.5f;
+            r.dir[j] = (rng_u32() % 2 ? 0.5f : -0.25f) * (rng_u32() % 3 ? 1.0f : 0.0f);
+        }
+        r.dir[k] = rng_u32() % 2 ? 0.5f : -0.5f;
+        const float plane = (float)(rng_u32() % 8) - 1.0f;
+        r.tmax = (plane - r.org[k]) / r.dir[k];
+        if (r.tmax < 0.0f)
+            r.dir[k] = -r.dir[k], r.tmax = -r.tmax;
+        r.tmin = rng_u32() % 2 ? 0.0f : rng_f(0.0f, r.tmax);
+        bad += !compare_ray(s, &r);
+    }
+    g_rng = saved_rng;
     if (bad)
         fprintf(stderr, "box grid: %zu mismatches\n", bad);
     EXPECT(bad == 0);

@@ -15,6 +15,7 @@
 #include "kd_internal.h"
 #include "kd_traverse.h"
 #include "kd_tri.h"
+#include "kd_walk.h"
 #include "kdray.h"
 #define CHECK_PRINT_MAX 20
 #include "check.h"
@@ -71,20 +72,22 @@ static inline int same_hit(const kdr_hit *a, const kdr_hit *b) {
            memcmp(&a->v, &b->v, sizeof a->v) == 0;
 }
 
-/* Compares kd against brute force for one ray; returns 1 when equal. */
+/* Compares kd against brute force for one ray (closest hit, any hit, and
+ * any hit walked from the far end); returns 1 when equal. */
 static inline int compare_ray(const kdr_scene *s, const kdr_ray *r) {
     kdr_hit kh, bh;
     int kf = kdr_intersect1(s, r, &kh, NULL);
     int bf = brute_intersect(s->tris, s->ntris, r, &bh);
     int ka = kdr_occluded1(s, r, NULL);
-    int ok = kf == bf && ka == bf && same_hit(&kh, &bh);
+    int kr = kd_occluded1_far(s, r, NULL);
+    int ok = kf == bf && ka == bf && kr == bf && same_hit(&kh, &bh);
     if (!ok && failures < CHECK_PRINT_MAX)
         fprintf(stderr,
                 "mismatch: org %a %a %a dir %a %a %a [%a, %a]\n"
-                "  kd    %d prim %d t %a u %a v %a (any %d)\n"
+                "  kd    %d prim %d t %a u %a v %a (any %d, far end first %d)\n"
                 "  brute %d prim %d t %a u %a v %a\n",
                 r->org[0], r->org[1], r->org[2], r->dir[0], r->dir[1],
-                r->dir[2], r->tmin, r->tmax, kf, kh.prim, kh.t, kh.u, kh.v, ka,
+                r->dir[2], r->tmin, r->tmax, kf, kh.prim, kh.t, kh.u, kh.v, ka, kr,
                 bf, bh.prim, bh.t, bh.u, bh.v);
     return ok;
 }
