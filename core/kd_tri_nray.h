@@ -247,3 +247,83 @@ KD_FN VF KD_WN(kd_nray_test)(const KD_WN(kd_nray_pre) *p, const float *tri, VF a
     }
     return ok;
 }
+
+#if KD_W == 16
+/*
+ * The any-hit form of kd_nray_test_raw at 16 lanes, on AVX-512 mask
+ * registers: lanes in and out are a __mmask16, every compare is a masked
+ * compare that ANDs into the running mask, and nothing is turned into a
+ * vector mask and back (the vector form pays a vpmovm2d per compare and a
+ * vpmovd2m per test of its bits). An any-hit caller needs only which lanes
+ * hit in [tmin, tmax]: no t, u, v or det leave the test. The float
+ * operations, their order and the double-precision fallback are
+ * kd_nray_test_raw's, so the verdict of every lane is kd_tri_intersect's.
+ */
+KD_FN __mmask16 kd_nray_occ16(const kd_nray_pre16 *p, const float *tri, __mmask16 act,
+                              f16 tmin, f16 tmax, const f16 *org_rows) {
+    f16 Ax, Ay, Az0, Bx, By, Bz0, Cx, Cy, Cz0;
+    if (org_rows) {
+        /* one origin for every lane: subtract it from the triangle's rows
+         * before the permutes (2 subtractions, not 9); lane j's
+         * tri[kx] - org[kx] is the same operation on the same floats */
+        const f16 lo = f16_sub(f16_load8z(tri), org_rows[0]);
+        const f16 hi = f16_sub(f16_load8z(tri + 1), org_rows[1]);
+        Ax = f16_permute(lo, p->idx[0]);
+        Ay = f16_permute(lo, p->idx[1]);
+        Az0 = f16_permute(lo, p->idx[2]);
+        Bx = f16_permute(lo, p->idx[3]);
+        By = f16_permute(lo, p->idx[4]);
+        Bz0 = f16_permute(lo, p->idx[5]);
+        Cx = f16_permute(hi, p->idx[6]);
+        Cy = f16_permute(hi, p->idx[7]);
+        Cz0 = f16_permute(hi, p->idx[8]);
+    } else if (p->uniform) {
+        Ax = f16_sub(f16_set1(tri[0 + p->kx]), p->ox);
+        Ay = f16_sub(f16_set1(tri[0 + p->ky]), p->oy);
+        Az0 = f16_sub(f16_set1(tri[0 + p->kz]), p->oz);
+        Bx = f16_sub(f16_set1(tri[3 + p->kx]), p->ox);
+        By = f16_sub(f16_set1(tri[3 + p->ky]), p->oy);
+        Bz0 = f16_sub(f16_set1(tri[3 + p->kz]), p->oz);
+        Cx = f16_sub(f16_set1(tri[6 + p->kx]), p->ox);
+        Cy = f16_sub(f16_set1(tri[6 + p->ky]), p->oy);
+        Cz0 = f16_sub(f16_set1(tri[6 + p->kz]), p->oz);
+    } else {
+        const f16 lo = f16_load8u(tri), hi = f16_load8u(tri + 1);
+        Ax = f16_sub(f16_permute(lo, p->idx[0]), p->ox);
+        Ay = f16_sub(f16_permute(lo, p->idx[1]), p->oy);
+        Az0 = f16_sub(f16_permute(lo, p->idx[2]), p->oz);
+        Bx = f16_sub(f16_permute(lo, p->idx[3]), p->ox);
+        By = f16_sub(f16_permute(lo, p->idx[4]), p->oy);
+        Bz0 = f16_sub(f16_permute(lo, p->idx[5]), p->oz);
+        Cx = f16_sub(f16_permute(hi, p->idx[6]), p->ox);
+        Cy = f16_sub(f16_permute(hi, p->idx[7]), p->oy);
+        Cz0 = f16_sub(f16_permute(hi, p->idx[8]), p->oz);
+    }
+    const f16 ax = f16_sub(Ax, f16_mul(p->sx, Az0)), ay = f16_sub(Ay, f16_mul(p->sy, Az0));
+    const f16 bx = f16_sub(Bx, f16_mul(p->sx, Bz0)), by = f16_sub(By, f16_mul(p->sy, Bz0));
+    const f16 cx = f16_sub(Cx, f16_mul(p->sx, Cz0)), cy = f16_sub(Cy, f16_mul(p->sy, Cz0));
+    f16 U = f16_sub(f16_mul(cx, by), f16_mul(cy, bx));
+    f16 Vv = f16_sub(f16_mul(ax, cy), f16_mul(ay, cx));
+    f16 W = f16_sub(f16_mul(bx, ay), f16_mul(by, ax));
+    const f16 zero = f16_set1(0.0f);
+    const __mmask16 zl = f16_keq(act, U, zero) | f16_keq(act, Vv, zero) |
+                         f16_keq(act, W, zero);
+    if (zl)
+        kd_nray_exact16(zl, ax, ay, bx, by, cx, cy, &U, &Vv, &W);
+    /* a lane misses when its edge functions have both signs */
+    const __mmask16 neg = f16_klt(act, U, zero) | f16_klt(act, Vv, zero) |
+                          f16_klt(act, W, zero);
+    const __mmask16 pos = f16_klt(act, zero, U) | f16_klt(act, zero, Vv) |
+                          f16_klt(act, zero, W);
+    const f16 det = f16_add(f16_add(U, Vv), W);
+    /* det != 0 (a NaN det passes, as !(det == 0) does in the vector form) */
+    __mmask16 ok = f16_kne(act & ~(neg & pos), det, zero);
+    if (!ok)
+        return 0;
+    const f16 az = f16_mul(p->sz, Az0), bz = f16_mul(p->sz, Bz0), cz = f16_mul(p->sz, Cz0);
+    const f16 T = f16_add(f16_add(f16_mul(U, az), f16_mul(Vv, bz)), f16_mul(W, cz));
+    const f16 t = f16_div(T, det);
+    ok = f16_kle(ok, tmin, t);
+    return f16_kle(ok, t, tmax);
+}
+#endif
