@@ -196,74 +196,9 @@ KD_FN VF KD_WN(kb_ties)(const KD_WN(kb_state) *st, VF eq, int32_t prim) {
     return V(bitmask)(win);
 }
 
-#if KD_W == 16
-/* 1 when the lanes of k hold origin o bit for bit */
-KD_FN int kb_org_bits16(const kb_state16 *st, __mmask16 k, const float *o) {
-    __mmask16 same = k;
-    for (int a = 0; a < 3; a++) {
-        int32_t ob;
-        memcpy(&ob, &o[a], sizeof ob);
-        same = _mm512_mask_cmpeq_epi32_mask(same, _mm512_castps_si512(st->org[a]),
-                                            _mm512_set1_epi32(ob));
-    }
-    return same == k;
-}
-
-/* kb_leaf for an any-hit bundle at 16 lanes: the lanes still searching
- * stay in a mask register through the leaf (kd_nray_occ16), a lane that
- * hits leaves the rest of the leaf's triangles by one mask update, and
- * the leaf ends when none is left. The same triangles in the same order
- * against the same lanes as the vector form, so the same answers and
- * the same counts. */
-KD_FN void kb_leaf_any16(const kdr_scene *s, const kd_node *n, kb_state16 *st, f16 act) {
-    const uint32_t *refs = s->refs + n->u.first;
-    const uint32_t cnt = kd_count(n);
-    if (s->prefetch_leaves)
-        kd_prefetch_tris(s, refs, cnt);
-    __mmask16 k = f16_kbits(act), hit = 0;
-    __m512i tests = _mm512_castps_si512(st->tri_tests);
-    const __m512i one = _mm512_set1_epi32(1);
-    /* a shared origin whose lanes shear along different axes (AO, shadow
-     * samples): the origin in the layout of a triangle's two 8-float rows.
-     * Shared bit for bit in the lanes tested (st->shared compares floats,
-     * where -0 equals +0 but t - -0 and t - +0 differ in a zero's sign) */
-    f16 rows[2];
-    const f16 *org_rows = NULL;
-    const float *o = st->sorg;
-    if (st->shared && !st->tp.uniform && kb_org_bits16(st, k, o)) {
-        rows[0] = _mm512_setr_ps(o[0], o[1], o[2], o[0], o[1], o[2], o[0], o[1],
-                                 0, 0, 0, 0, 0, 0, 0, 0);
-        rows[1] = _mm512_setr_ps(o[1], o[2], o[0], o[1], o[2], o[0], o[1], o[2],
-                                 0, 0, 0, 0, 0, 0, 0, 0);
-        org_rows = rows;
-    }
-    for (uint32_t r = 0; r < cnt; r++) {
-        tests = _mm512_mask_add_epi32(tests, k, tests, one);
-        const __mmask16 h = kd_nray_occ16(&st->tp, s->tris + 9 * (size_t)refs[r], k,
-                                          st->tmin, st->best_t, org_rows);
-        if (!h)
-            continue;
-        hit |= h;
-        k &= (__mmask16)~h;
-        if (!k)
-            break;
-    }
-    st->tri_tests = _mm512_castsi512_ps(tests);
-    if (hit)
-        st->live = f16_andnot(f16_kmask(hit), st->live);
-    kb_update_limit16(st);
-}
-#endif
-
 /* Tests the leaf's triangles against the active lanes. */
 KD_FN void KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) *st,
                     VF act) {
-#if KD_W == 16
-    if (st->any) {
-        kb_leaf_any16(s, n, st, act);
-        return;
-    }
-#endif
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
     /* request every triangle of the leaf at once: the tests then find

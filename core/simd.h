@@ -452,22 +452,6 @@ KD_AVX512 static inline uint64_t f16_count_sum(f16 acc) {
         sum += (uint64_t)v[j];
     return sum;
 }
-/* Masked compares into AVX-512 mask bits: the lanes of m where the
- * compare holds (ordered: a NaN lane is clear, as with f16_lt / f16_le /
- * f16_eq; f16_kne is unordered, so a NaN lane is set, as !(a == b) is). The
- * any-hit triangle test (kd_nray_occ16) keeps its lanes in these. */
-KD_AVX512 static inline __mmask16 f16_klt(__mmask16 m, f16 a, f16 b) {
-    return _mm512_mask_cmp_ps_mask(m, a, b, _CMP_LT_OQ);
-}
-KD_AVX512 static inline __mmask16 f16_kle(__mmask16 m, f16 a, f16 b) {
-    return _mm512_mask_cmp_ps_mask(m, a, b, _CMP_LE_OQ);
-}
-KD_AVX512 static inline __mmask16 f16_keq(__mmask16 m, f16 a, f16 b) {
-    return _mm512_mask_cmp_ps_mask(m, a, b, _CMP_EQ_OQ);
-}
-KD_AVX512 static inline __mmask16 f16_kne(__mmask16 m, f16 a, f16 b) {
-    return _mm512_mask_cmp_ps_mask(m, a, b, _CMP_NEQ_UQ);
-}
 /* Lane j gets v[idx[j]] (idx: int32 lane indices 0..15 as bits). */
 KD_AVX512 static inline f16 f16_permute(f16 v, f16 idx) {
     return _mm512_permutexvar_ps(_mm512_castps_si512(idx), v);
@@ -476,10 +460,6 @@ KD_AVX512 static inline f16 f16_permute(f16 v, f16 idx) {
  * f16_permute with indices below 8: reads no more than the 8-wide load). */
 KD_AVX512 static inline f16 f16_load8u(const float *p) {
     return _mm512_castps256_ps512(_mm256_loadu_ps(p));
-}
-/* Floats p[0..7] in lanes 0..7 and zeros above (reads 8 floats). */
-KD_AVX512 static inline f16 f16_load8z(const float *p) {
-    return _mm512_maskz_loadu_ps((__mmask16)0xff, p);
 }
 /* Sixteen 3-float records from p (48 floats, AoS) into their x, y and z
  * lanes (SoA): three loads and six two-source permutes, where a lane-by-
