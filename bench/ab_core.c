@@ -480,7 +480,7 @@ static int run_scene(const opts *o, const ladder_entry *e) {
             light_of(&si, 0, &li);
             shadow_rays(&si, n, 16, &li, rays), j.q = KDR_ANY;
             break;
-        default: /* ao64, b8ao, b8ao8 */
+        default: /* ao64, b8ao, b8ao8, bao64 */
             ao_rays(&si, n, 64, rays), j.q = KDR_ANY, j.group = 64;
             break;
         }
@@ -558,7 +558,7 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &o) != 0) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
-                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam|b8ao8|all16|all|"
+                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam|b8ao8|bao64|all16|all|"
                         "count|closest|ball16|ball|bcount]...\n", argv[0]);
         return 2;
     }

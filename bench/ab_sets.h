@@ -35,6 +35,11 @@
  *            intervals, in the order the single sets trace them; Embree
  *            traces them with rtcIntersect1 / rtcOccluded1 as in the single
  *            sets
+ *   bao64    ao64 as bao: calls of 4096 rays with per-ray origins, runs
+ *            of 64 sharing one (kdray_bench --section core's ao_any
+ *            kd_batch row, the one issue 11's AO target is read from; on
+ *            large scenes kd_batch_scattered sends its chunks to the
+ *            interleaved walk, where b8ao's one-origin calls stay bundles)
  *   bshadow16
  *            any hit, 16 rays per surface point (ao_rays' points) toward
  *            the small light, as bshadow (kdray_bench's shadow workload:
@@ -66,6 +71,7 @@ enum {
     SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
     SET_BSHADOW, SET_BSHADOW16, SET_B16CAM, SET_CONECAM,
     SET_B8AO8, /* b8ao through the 8-wide driver (KDR_TRAV_BUNDLE8), issue 11 */
+    SET_BAO64, /* ao64 as bao: calls of AB_BATCH with per-ray origins */
     SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
     SET_BALL16, SET_BALL, SET_BCOUNT, NSETS
 };
