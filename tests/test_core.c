@@ -306,7 +306,8 @@ static void test_huge_offsets(void) {
  * other: past that (or with subnormal components) the shear and edge
  * products of kd_tri_intersect underflow and it reports hits at t = +-0 that
  * lie at t < 0 or far from the ray, which no traversal can reproduce short
- * of testing every triangle. */
+ * of testing every triangle. (Equal components are no shelter from a
+ * different underflow, of t's numerator: test_underflow_t.) */
 static float extreme_org(void) {
     static const float v[] = {0.0f, -0.0f, 1e-40f, -1e-40f, 1e-30f, -1e-30f,
                               1e30f, -1e30f, 1e5f, -1e5f, 3.0f, 0.5f};
