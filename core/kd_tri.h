@@ -16,6 +16,7 @@
 #ifndef KD_TRI_H
 #define KD_TRI_H
 
+#include <float.h>
 #include <stdint.h>
 
 /* Per-ray precomputation of the shear. */
@@ -61,6 +62,44 @@ static inline void kd_tri_edges_exact(float ax, float ay, float bx, float by,
 }
 
 /*
+ * Underflow of t (docs/ACCURACY.md). With az = sz * Az0 (z over the
+ * direction's length), a product U * az of T below FLT_MIN loses up to
+ * 2^-150 absolutely; divided by a small det (a ray nearly parallel to the
+ * triangle, or tiny sheared coordinates) that moves t far from where the
+ * triangle lies along the ray: a triangle the ray passes at t ~ 2^-119
+ * (direction 2^116 long, origin coordinates ~2^-100) came out at t = 0,
+ * before the walk's termination bound, so no walk could follow brute force.
+ * Such a t is recomputed. |T| >= KD_TRI_T_EXACT_BELOW bounds that loss by
+ * 2^-48 of T, far below T's own rounding, so only a smaller |T| is looked
+ * at (the cheap test every version makes per lane); rays starting on a
+ * triangle (T ~ 0 by cancellation, no product small) keep their float t.
+ */
+#define KD_TRI_T_EXACT_BELOW 0x1p-100f
+
+/* t for |T| < KD_TRI_T_EXACT_BELOW: the float t unless a product of T (or
+ * a scaled z) fell below FLT_MIN from non-zero factors; then T from the
+ * unscaled z differences in double (exact products of floats, no
+ * underflow), times sz, over det, rounded once. A zero result keeps the
+ * float t. Every SIMD version calls this per lane under the same test. */
+static inline float kd_tri_t_exact(float U, float V, float W, float Az0, float Bz0,
+                                   float Cz0, float sz, float det, float t) {
+    const float e[3] = {U, V, W}, z[3] = {Az0, Bz0, Cz0};
+    int lost = 0;
+    for (int i = 0; i < 3; i++) {
+        const float zs = sz * z[i], p = e[i] * zs;
+        lost |= (zs < FLT_MIN && zs > -FLT_MIN && z[i] != 0.0f) ||
+                (p < FLT_MIN && p > -FLT_MIN && e[i] != 0.0f && zs != 0.0f);
+    }
+    if (!lost)
+        return t;
+    const double T =
+        ((double)U * (double)Az0 + (double)V * (double)Bz0 + (double)W * (double)Cz0) *
+        (double)sz;
+    const float te = (float)(T / (double)det);
+    return te != 0.0f ? te : t;
+}
+
+/*
  * Tests triangle tri (9 floats) against the ray; on a hit with
  * tmin <= t <= tmax stores t, u, v and returns 1.
  */
@@ -92,7 +131,9 @@ static inline int kd_tri_intersect(const kd_ray_pre *p, const float *tri,
         return 0;
     const float az = p->sz * Az0, bz = p->sz * Bz0, cz = p->sz * Cz0;
     const float T = U * az + V * bz + W * cz;
-    const float t = T / det;
+    float t = T / det;
+    if (T < KD_TRI_T_EXACT_BELOW && T > -KD_TRI_T_EXACT_BELOW)
+        t = kd_tri_t_exact(U, V, W, Az0, Bz0, Cz0, p->sz, det, t);
     if (!(t >= tmin && t <= tmax)) /* also rejects NaN */
         return 0;
     *t_out = t;
