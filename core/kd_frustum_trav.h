@@ -152,13 +152,7 @@ KD_TARGET static VF kf_tri_test_eye(const KD_WN(kd_nray_pre) *p, const kf_tri_re
         return ok;
     const VF az = V(mul)(p->sz, Az0), bz = V(mul)(p->sz, Bz0), cz = V(mul)(p->sz, Cz0);
     const VF T = V(add)(V(add)(V(mul)(U, az), V(mul)(Vv, bz)), V(mul)(W, cz));
-    VF t = V(div)(T, det);
-    { /* kd_tri_intersect's recomputation of a t whose T may have underflowed */
-        const VF tiny = V(lt)(V(andnot)(V(set1)(-0.0f), T), V(set1)(KD_TRI_T_EXACT_BELOW));
-        const int tl = V(bits)(V(and)(ok, tiny));
-        if (tl)
-            t = KD_WN(kd_nray_t_exact)(tl, U, Vv, W, Az0, Bz0, Cz0, p->sz, det, t);
-    }
+    const VF t = KD_WN(kd_lanes_t)(ok, T, det, U, Vv, W, Az0, Bz0, Cz0, p->sz);
     ok = V(and)(ok, V(and)(V(le)(zero, t), V(le)(t, V(set1)(INFINITY))));
     *t_out = t;
     *u_out = V(div)(Vv, det);

@@ -19,6 +19,7 @@
  */
 #include "kd_tri.h"
 #include "simd.h"
+#include "kd_tri_t_lanes.h"
 
 /* Per-lane shear of a bundle (kd_ray_pre, transposed). */
 typedef struct KD_WN(kd_nray_pre) {
@@ -154,21 +155,6 @@ KD_FN void KD_WN(kd_nray_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF
     *W = V(load)(s[8]);
 }
 
-/* kd_tri_t_exact for the lanes in `lanes` (|T| < KD_TRI_T_EXACT_BELOW on a
- * lane that passed the edge tests): returns t with those lanes replaced. */
-KD_FN VF KD_WN(kd_nray_t_exact)(int lanes, VF U, VF Vv, VF W, VF Az0, VF Bz0, VF Cz0,
-                        VF sz, VF det, VF t) {
-    _Alignas(KD_VALIGN) float s[9][KD_W];
-    const VF in[9] = {U, Vv, W, Az0, Bz0, Cz0, sz, det, t};
-    for (int k = 0; k < 9; k++)
-        V(store)(s[k], in[k]);
-    for (int j = 0; j < KD_W; j++)
-        if ((lanes >> j) & 1)
-            s[8][j] = kd_tri_t_exact(s[0][j], s[1][j], s[2][j], s[3][j], s[4][j],
-                                     s[5][j], s[6][j], s[7][j], s[8][j]);
-    return V(load)(s[8]);
-}
-
 /*
  * Tests triangle tri against the lanes in mask act; returns the mask of
  * lanes that hit with tmin <= t <= tmax, their t, and the scaled V, W and
@@ -241,13 +227,7 @@ KD_FN VF KD_WN(kd_nray_test_raw)(const KD_WN(kd_nray_pre) *p, const float *tri, 
     }
     const VF az = V(mul)(p->sz, Az0), bz = V(mul)(p->sz, Bz0), cz = V(mul)(p->sz, Cz0);
     const VF T = V(add)(V(add)(V(mul)(U, az), V(mul)(Vv, bz)), V(mul)(W, cz));
-    VF t = V(div)(T, det);
-    { /* kd_tri_intersect's recomputation of a t whose T may have underflowed */
-        const VF tiny = V(lt)(V(andnot)(V(set1)(-0.0f), T), V(set1)(KD_TRI_T_EXACT_BELOW));
-        const int tl = V(bits)(V(and)(ok, tiny));
-        if (tl)
-            t = KD_WN(kd_nray_t_exact)(tl, U, Vv, W, Az0, Bz0, Cz0, p->sz, det, t);
-    }
+    const VF t = KD_WN(kd_lanes_t)(ok, T, det, U, Vv, W, Az0, Bz0, Cz0, p->sz);
     ok = V(and)(ok, V(and)(V(le)(tmin, t), V(le)(t, tmax)));
     *t_out = t;
     *V_out = Vv;

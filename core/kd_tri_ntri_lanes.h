@@ -8,6 +8,7 @@
  * Every lane performs exactly the float operations of kd_tri_intersect
  * (core/kd_tri.h) in the same order, so keep both in step.
  */
+#include "kd_tri_t_lanes.h"
 
 /* A ray's shear broadcast to KD_W lanes (built once per ray). */
 typedef struct KD_WN(kd_ntri_pre) {
@@ -43,21 +44,6 @@ KD_FN void KD_WN(kd_ntri_exact)(int lanes, VF ax, VF ay, VF bx, VF by, VF cx, VF
     *Ue = V(load)(s[6]);
     *Ve = V(load)(s[7]);
     *We = V(load)(s[8]);
-}
-
-/* kd_tri_t_exact for the lanes in `lanes` (|T| < KD_TRI_T_EXACT_BELOW on a
- * lane that passed the edge tests): returns t with those lanes replaced. */
-KD_FN VF KD_WN(kd_ntri_t_exact)(int lanes, VF U, VF Vv, VF W, VF Az0, VF Bz0, VF Cz0,
-                        VF sz, VF det, VF t) {
-    _Alignas(sizeof(VF)) float s[9][KD_W];
-    const VF in[9] = {U, Vv, W, Az0, Bz0, Cz0, sz, det, t};
-    for (int k = 0; k < 9; k++)
-        V(store)(s[k], in[k]);
-    for (int j = 0; j < KD_W; j++)
-        if ((lanes >> j) & 1)
-            s[8][j] = kd_tri_t_exact(s[0][j], s[1][j], s[2][j], s[3][j], s[4][j],
-                                     s[5][j], s[6][j], s[7][j], s[8][j]);
-    return V(load)(s[8]);
 }
 
 /*
@@ -111,13 +97,7 @@ KD_FN int KD_WN(kd_ntri_test)(const KD_WN(kd_ntri_pre) *p, const float *const r[
              cz = V(mul)(p->sz, Cz0);
     const VF T =
         V(add)(V(add)(V(mul)(Ue, az), V(mul)(Ve, bz)), V(mul)(We, cz));
-    VF t = V(div)(T, det);
-    { /* kd_tri_intersect's recomputation of a t whose T may have underflowed */
-        const VF tiny = V(lt)(V(andnot)(V(set1)(-0.0f), T), V(set1)(KD_TRI_T_EXACT_BELOW));
-        const int tl = V(bits)(V(and)(ok, tiny));
-        if (tl)
-            t = KD_WN(kd_ntri_t_exact)(tl, Ue, Ve, We, Az0, Bz0, Cz0, p->sz, det, t);
-    }
+    const VF t = KD_WN(kd_lanes_t)(ok, T, det, Ue, Ve, We, Az0, Bz0, Cz0, p->sz);
     *t_out = t;
     *V_out = Ve;
     *W_out = We;
