@@ -474,14 +474,28 @@ static void test_stops(const kdr_scene *s) {
      * this case is about */
     body shortdl = frustum_body(2000, 2000, "closest", ",\"deadline_ms\":100");
 
-    kdr_exec_query q = query_of(s, KDR_EXEC_FRUSTUM, KDR_EXEC_REFERENCE, &shortdl);
-    run_query(ex, &q);
-    CHECK(q.result.status == 503 && q.result.stopped == KDR_STOP_DEADLINE &&
-              strstr(q.result.detail, "deadline: 100 ms exceeded") &&
-              q.result.chunks > 0 && q.result.chunks_done < q.result.chunks &&
-              q.result.retry_after == 0,
-          "request deadline: %d %s", q.result.status, q.result.detail);
-    kdr_exec_query_done(&q);
+    /* Under a load spike (load 7 in one run) the worker may still not have
+     * cut the query into chunks when the 100 ms run out: that answer is a
+     * right one too (503, deadline, 0 of 0 chunks) but not the case this is
+     * about, so such a try is repeated, up to 5 times; every try must stop
+     * by its deadline, and one must have stopped between chunks. */
+    kdr_exec_query q;
+    int between = 0;
+    for (int attempt = 0; attempt < 5 && !between; attempt++) {
+        q = query_of(s, KDR_EXEC_FRUSTUM, KDR_EXEC_REFERENCE, &shortdl);
+        run_query(ex, &q);
+        CHECK(q.result.status == 503 && q.result.stopped == KDR_STOP_DEADLINE &&
+                  strstr(q.result.detail, "deadline: 100 ms exceeded") &&
+                  q.result.retry_after == 0,
+              "request deadline: %d %s", q.result.status, q.result.detail);
+        if (q.result.chunks > 0) {
+            CHECK(q.result.chunks_done < q.result.chunks,
+                  "request deadline stops between chunks: %s", q.result.detail);
+            between = 1;
+        }
+        kdr_exec_query_done(&q);
+    }
+    CHECK(between, "request deadline: no try got as far as its chunks in 5");
 
     q = query_of(s, KDR_EXEC_FRUSTUM, KDR_EXEC_REFERENCE, &longb);
     q.deadline_ms = 20; /* the operator's */
