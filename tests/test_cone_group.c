@@ -649,7 +649,8 @@ static void test_split_runs(void) {
  * and 2-sample chunks go to the interleaved walk far end first (3 samples:
  * bundles again). Every policy and the reference mode agree bit for bit,
  * and equal brute force on one pair in 31, toward a narrow and a wide light
- * (whose samples diverge most), with 1e-4 offsets too. */
+ * (whose samples diverge most) and both in one query, with 1e-4 offsets
+ * too. */
 static void test_unwalked_routes(void) {
     for (int big = 0; big < 2; big++) {
         tri_buf b = {0};
@@ -669,19 +670,21 @@ static void test_unwalked_routes(void) {
         floor_points(s, 40, 0.95f, &fp);
         const kdr_sphere_light lights[2] = {{{0.3f, 3.0f, 0.2f}, 0.1f},
                                             {{-0.2f, 1.2f, 0.1f}, 0.5f}};
-        for (int l = 0; l < 2; l++)
+        static const char *const lname[3] = {"narrow light", "wide light", "both lights"};
+        for (int l = 0; l < 3; l++) /* l == 2: both lights in one query */
             for (uint32_t spp = 1; spp <= 3; spp++) {
                 kdr_shadow_query q = {.n = fp.count, .points = fp.p, .normals = fp.n,
-                                      .lights = &lights[l], .nlights = 1, .samples = spp,
+                                      .lights = &lights[l == 2 ? 0 : l],
+                                      .nlights = l == 2 ? 2 : 1, .samples = spp,
                                       .seed = 17, .offset = KDR_OFFSET_AUTO};
                 char label[96];
-                snprintf(label, sizeof label, "%s floor, %s light, %u spp",
-                         big ? "large" : "small", l ? "wide" : "narrow", spp);
+                snprintf(label, sizeof label, "%s floor, %s, %u spp",
+                         big ? "large" : "small", lname[l], spp);
                 check_policies(label, s, &b, &q);
                 q.offset = KDR_OFFSET_DIAGONAL;
                 q.epsilon = 1e-4f;
-                snprintf(label, sizeof label, "%s floor, %s light, %u spp, 1e-4",
-                         big ? "large" : "small", l ? "wide" : "narrow", spp);
+                snprintf(label, sizeof label, "%s floor, %s, %u spp, 1e-4",
+                         big ? "large" : "small", lname[l], spp);
                 check_policies(label, s, &b, &q);
             }
         free(fp.p), free(fp.n);
