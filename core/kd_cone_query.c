@@ -47,16 +47,22 @@ static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
  * tree's memory latency. Else bundles, without kdr_trace_batch's fallback
  * to the interleaved walk: its tests (directions spread over 8 rays, the
  * lanes' occupancy) were tuned on AO rays and send a wide light's 1-8
- * samples there, where bundles trace them faster (kd_tune.h). Every route
- * returns the single-ray walk's answers. */
+ * samples there, where bundles trace them faster; on scenes of at least
+ * UNWALKED_NARROW_MIN_BYTES, 8 lanes at most up to
+ * UNWALKED_NARROW_MAX_SAMPLES samples (fewer points a bundle; kd_tune.h).
+ * Every route returns the single-ray walk's answers. */
 static void trace_chunk(const kdr_scene *scene, const kdr_ray_batch *b, size_t m,
                         uint32_t n, uint8_t *hit, kdr_trav_stats *ts) {
     kdr_hits out = {.hit = hit};
+    const uint64_t bytes = scene->stats.bytes;
     if (scene->nodes && n <= UNWALKED_STREAM_MAX_SAMPLES &&
-        scene->stats.bytes >= (uint64_t)n * UNWALKED_STREAM_BYTES_PER_SAMPLE)
+        bytes >= (uint64_t)n * UNWALKED_STREAM_BYTES_PER_SAMPLE) {
         kd_stream_trace_far(scene, b, NULL, 0, m, KDR_ANY, &out, ts);
-    else
-        kd_batch_bundles(scene, b, 0, m, KDR_ANY, KB_SORT | KB_LIVE | KB_FAR_AUTO, &out, ts);
+        return;
+    }
+    const int narrow = n <= UNWALKED_NARROW_MAX_SAMPLES && bytes >= UNWALKED_NARROW_MIN_BYTES;
+    kd_batch_bundles(scene, b, 0, m, KDR_ANY, KB_SORT | KB_LIVE | KB_FAR_AUTO,
+                     narrow ? 8 : 16, &out, ts);
 }
 
 /* Points that do not walk their cones, a chunk at a time: the samples of

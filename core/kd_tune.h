@@ -255,6 +255,25 @@
  * back lost everywhere. */
 #define UNWALKED_STREAM_MAX_SAMPLES 2u
 #define UNWALKED_STREAM_BYTES_PER_SAMPLE ((uint64_t)3 << 19)
+/* ... and of the bundles: on scenes of at least UNWALKED_NARROW_MIN_BYTES,
+ * chunks of 3 to UNWALKED_NARROW_MAX_SAMPLES samples go to 8-lane bundles
+ * even with AVX-512 (one or two points a bundle instead of two to five).
+ * Measured in one build (8 lanes against 16, kdray_bench_cone --only haus
+ * --only engine3 --only engine9 [--only default --only engine]
+ * --ref-samples 0 --repeat 3, kd_cone against Embree, two runs each, load
+ * 4.3-5.8): 8 spp small / large light 2CylinderEngine 0.84 0.83 / 0.74
+ * 0.75x against 0.80 0.79 / 0.70 0.67x, engine3 0.84 0.82 / 0.78 0.77x
+ * against 0.81 0.79 / 0.69 0.66x, engine9 0.89 0.90 / 0.82 0.72x against
+ * 0.78 0.81 / 0.66 0.66x; 4 spp engine3 large 0.61 0.61 against 0.56
+ * 0.55x, engine9 small / large 0.70 0.67 / 0.67 0.66x against 0.64 0.63 /
+ * 0.58 0.58x, 2CylinderEngine within 3%; 3 spp engine3 / engine9 large
+ * 0.53-0.57 against 0.49-0.51x. It lost on haus (2 MB; 8 spp small 0.77
+ * 0.78 against 0.79 0.80x) and default (4 spp large 0.43 against 0.46
+ * 0.47x), and at 16 spp everywhere (engine9 0.69 / 0.65x against 0.88 /
+ * 0.86x, one point fills a 16-lane bundle); 4 lanes at 4 spp lost
+ * everywhere (default large 0.30 against 0.46x). */
+#define UNWALKED_NARROW_MAX_SAMPLES 8u
+#define UNWALKED_NARROW_MIN_BYTES ((uint64_t)4 << 20)
 /* Shared walks (kd_cone_query.c trace_grouped, kd_cone_group.c): up to
  * GROUP_POINTS consecutive points walk one cone toward a light when the
  * ball around their apexes is at most GROUP_MAX_SPREAD times the light's;

@@ -27,9 +27,10 @@
  *    full proof does and no float ray of the cone hits the triangle;
  *  - sharing: points in free space under an empty sky are decided by one
  *    walk per group (fewer nodes than their own walks), and all lit;
- *  - unwalked routes: at 1-3 samples on a small and a large scene (bundles,
- *    and the interleaved walk far end first), every policy equals the
- *    reference mode and brute force (test_unwalked_routes).
+ *  - unwalked routes: at 1, 2, 3 and 8 samples on a small and a large
+ *    scene (16- and 8-lane bundles, and the interleaved walk far end
+ *    first), every policy equals the reference mode and brute force
+ *    (test_unwalked_routes).
  */
 #include <math.h>
 #include <stdio.h>
@@ -643,18 +644,19 @@ static void test_split_runs(void) {
                          "the halves did not share walks");
 }
 
-/* Unwalked points (below CONE_WALK_FROM samples), both routes of
+/* Unwalked points (below CONE_WALK_FROM samples), every route of
  * kd_cone_query.c's trace_chunk: on a small scene every chunk goes to the
- * bundles; on one past 2 x UNWALKED_STREAM_BYTES_PER_SAMPLE bytes the 1-
- * and 2-sample chunks go to the interleaved walk far end first (3 samples:
- * bundles again). Every policy and the reference mode agree bit for bit,
+ * widest bundles; on one past 2 x UNWALKED_STREAM_BYTES_PER_SAMPLE and
+ * UNWALKED_NARROW_MIN_BYTES bytes the 1- and 2-sample chunks go to the
+ * interleaved walk far end first, the 3- and 8-sample ones to 8-lane
+ * bundles. Every policy and the reference mode agree bit for bit,
  * and equal brute force on one pair in 31, toward a narrow and a wide light
  * (whose samples diverge most) and both in one query, with 1e-4 offsets
  * too. */
 static void test_unwalked_routes(void) {
     for (int big = 0; big < 2; big++) {
         tri_buf b = {0};
-        floor_grid(&b, big ? 200 : 24, 0.004f);
+        floor_grid(&b, big ? 230 : 24, 0.004f);
         const float lo[3] = {-0.8f, 0.05f, -0.8f}, hi[3] = {0.8f, 0.6f, 0.8f};
         soup(&b, 300, lo, hi, 0.12f);
         const float sc[3] = {-0.3f, 0.35f, 0.2f};
@@ -662,7 +664,8 @@ static void test_unwalked_routes(void) {
         kdr_scene *s = build(&b);
         kdr_tree_stats ts;
         kdr_scene_tree_stats(s, &ts);
-        const uint64_t need = 2 * UNWALKED_STREAM_BYTES_PER_SAMPLE;
+        uint64_t need = 2 * UNWALKED_STREAM_BYTES_PER_SAMPLE;
+        need = need > UNWALKED_NARROW_MIN_BYTES ? need : UNWALKED_NARROW_MIN_BYTES;
         CHECK(big ? ts.bytes >= need : ts.bytes < UNWALKED_STREAM_BYTES_PER_SAMPLE,
               "unwalked routes: the %s scene takes %llu bytes", big ? "large" : "small",
               (unsigned long long)ts.bytes);
@@ -671,8 +674,10 @@ static void test_unwalked_routes(void) {
         const kdr_sphere_light lights[2] = {{{0.3f, 3.0f, 0.2f}, 0.1f},
                                             {{-0.2f, 1.2f, 0.1f}, 0.5f}};
         static const char *const lname[3] = {"narrow light", "wide light", "both lights"};
+        static const uint32_t spps[4] = {1, 2, 3, 8};
         for (int l = 0; l < 3; l++) /* l == 2: both lights in one query */
-            for (uint32_t spp = 1; spp <= 3; spp++) {
+            for (int k = 0; k < 4; k++) {
+                const uint32_t spp = spps[k];
                 kdr_shadow_query q = {.n = fp.count, .points = fp.p, .normals = fp.n,
                                       .lights = &lights[l == 2 ? 0 : l],
                                       .nlights = l == 2 ? 2 : 1, .samples = spp,
