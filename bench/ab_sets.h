@@ -40,6 +40,8 @@
  *            kd_batch row, the one issue 11's AO target is read from; on
  *            large scenes kd_batch_scattered sends its chunks to the
  *            interleaved walk, where b8ao's one-origin calls stay bundles)
+ *   bao1     AO any hit with one ray per surface point (ao_rays with a
+ *            run of 1: a renderer's one AO sample per pixel), as bao
  *   bshadow16
  *            any hit, 16 rays per surface point (ao_rays' points) toward
  *            the small light, as bshadow (kdray_bench's shadow workload:
@@ -72,6 +74,7 @@ enum {
     SET_BSHADOW, SET_BSHADOW16, SET_B16CAM, SET_CONECAM,
     SET_B8AO8, /* b8ao through the 8-wide driver (KDR_TRAV_BUNDLE8), issue 11 */
     SET_BAO64, /* ao64 as bao: calls of AB_BATCH with per-ray origins */
+    SET_BAO1,  /* AO any hit, one ray per point, as bao */
     SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
     SET_BALL16, SET_BALL, SET_BCOUNT, NSETS
 };
