@@ -191,6 +191,10 @@ static inline int kd_far_probing(const kd_far_probe *p) {
 #define KB_ORDER_NEAR 0
 #define KB_ORDER_FAR 1
 #define KB_ORDER_PROBE 2
+/* far end first for rays whose ends spread (KB_ENDS_SPREAD: AO), only in
+ * the interleaved walk, whose leaves are then staged from
+ * KD_FAR_STAGE_MIN_BYTES */
+#define KB_ORDER_FAR_SPREAD 3
 /* The incoherence probe's knobs (KB_OCC_MIN, KB_PROBE, KB_FALLBACK_CHUNKS)
  * are in kd_tune.h with KB_CHUNK. */
 

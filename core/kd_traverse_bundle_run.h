@@ -137,12 +137,17 @@ KD_FN void KD_WN(kb_stats_add)(kdr_trav_stats *stats, const KD_WN(kb_bundle) *b,
 }
 
 /* The interleaved walk over ids[0..m) (ids NULL: [first, first + m)),
- * far end first or not. */
+ * front to back (order KB_ORDER_NEAR) or far end first (the others). */
 KD_FN void KD_WN(kb_stream)(const kdr_scene *s, const kdr_ray_batch *rb,
                             const size_t *ids, size_t first, size_t m, kdr_query q,
-                            int far, kdr_hits *out, kdr_trav_stats *stats) {
-    if (far)
-        kd_stream_trace_far(s, rb, ids, first, m, q, out, stats);
+                            int order, kdr_hits *out, kdr_trav_stats *stats) {
+    if (order != KB_ORDER_NEAR)
+        kd_stream_trace_far(s, rb, ids, first, m, q,
+                            order == KB_ORDER_FAR_SPREAD &&
+                                    s->stats.bytes >= KD_FAR_STAGE_MIN_BYTES
+                                ? KD_STREAM_STAGE
+                                : 0,
+                            out, stats);
     else
         kd_stream_trace(s, rb, ids, first, m, q, out, stats);
 }
@@ -253,7 +258,7 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
                                       : KB_ENDS_NONE;
             const int order = far_all                    ? KB_ORDER_FAR
                               : ends == KB_ENDS_CLUSTER ? KB_ORDER_PROBE
-                              : ends == KB_ENDS_SPREAD  ? KB_ORDER_FAR
+                              : ends == KB_ENDS_SPREAD  ? KB_ORDER_FAR_SPREAD
                                                         : KB_ORDER_NEAR;
             KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, order, &fp, out, stats);
             base = alone;

@@ -161,6 +161,14 @@
  * one point per call decides it (bao64 engine3 1.37 with it against 1.67
  * without). docs/TRAVERSAL.md, "Round: AO batches". */
 #define KD_FAR_RUNS_MIN_BYTES ((size_t)4 << 20)
+/* Those far walks stage their leaves (KD_STREAM_STAGE) from this size on
+ * (others from KD_STREAM_STAGE_MIN_BYTES): their ends scatter over the
+ * scene, so each far descent misses where a shadow ray's shares the
+ * light's path. bench/ab 0678403 ., staged from 1 MiB, 5 rounds:
+ * 2CylinderEngine bao / bao64 / bao1 1.083 / 1.040 / 1.172, haus bao1
+ * 0.840; shadow rays' far walks staged lost (bshadow 0.765 / 0.835), so
+ * they keep the old threshold. */
+#define KD_FAR_STAGE_MIN_BYTES ((size_t)4 << 20)
 
 /* ---- cone shadows (kd_cone.c, kd_cone_cells.c) ------------------------------
  * Measured with kdray_bench_cone (default scene and 2CylinderEngine, a small
