@@ -18,7 +18,9 @@
  * kd_batch_far_first, which offers any-hit chunks whose ends cluster
  * (shadow rays of many points toward one light) the far end first order,
  * and kd_far_pick, which takes it where the call's probe measured it
- * cheaper.
+ * cheaper; chunks whose ends spread (AO) walk far end first in the
+ * interleaved walk, where kd_batch_scattered_any sends their runs of
+ * shared origins from KD_FAR_RUNS_MIN_BYTES on.
  */
 #include <math.h>
 #include <stdio.h>
