@@ -144,8 +144,9 @@ int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, s
  *   KB_ENDS_SPREAD   own origins, every end finite, not clustered (AO
  *                    rays: ends around their origins): far end first in
  *                    the interleaved walk (KD_FAR_RUNS_MIN_BYTES);
- *   KB_ENDS_NONE     one origin (stride 0: its path replay stays), no tmax
- *                    array or some end not finite: front to back. */
+ *   KB_ENDS_NONE     one origin (stride 0, or one over the sample: its
+ *                    path replay stays), no tmax array or some end not
+ *                    finite: front to back. */
 #define KB_ENDS_NONE 0
 #define KB_ENDS_CLUSTER 1
 #define KB_ENDS_SPREAD 2
