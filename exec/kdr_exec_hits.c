@@ -188,9 +188,9 @@ static int encode_hits(kdr_exec_job *j, kdr_hits *h, size_t n, kdr_query query,
         return rc;
     }
     const kdr_hit_attrs attrs = {normal, mesh};
-    if (rc == 0)
-        rc = kdr_proto_encode_hits_attrs(h, &attrs, n, query, fields, enc,
-                                         &j->q->result.body);
+    if (rc == 0) /* the core's arrays: misses are in wire form already */
+        rc = kdr_proto_encode_hits_wire(h, &attrs, n, query, fields, enc,
+                                        &j->q->result.body);
     free(normal);
     free(mesh);
     return kdr_exec_encoded(j, rc, enc);

@@ -323,6 +323,15 @@ typedef struct kdr_hit_attrs {
 int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
                                 kdr_query query, unsigned fields, kdr_encoding enc,
                                 kdr_buf *out);
+/* kdr_proto_encode_hits_attrs for arrays already in wire form, as the core
+ * writes them (kdray.h: a miss has prim = -1, t = -1, u = v = 0; any-hit
+ * bytes are 0 or 1) and the executor fills the attributes (a miss: 0,0,0
+ * and -1,-1,-1): the same bytes for such arrays, without the pass that
+ * normalises misses (which reads prim again for each of t, u and v): base64
+ * is encoded from the arrays themselves, CBOR copied in one piece. */
+int kdr_proto_encode_hits_wire(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                               kdr_query query, unsigned fields, kdr_encoding enc,
+                               kdr_buf *out);
 
 /* The CBOR answer of kdr_proto_encode_hits_attrs, byte for byte, as pieces
  * to be sent one after another (writev; kdrayd's large answers): the small

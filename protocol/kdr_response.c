@@ -29,6 +29,9 @@ typedef struct array_src {
     const int32_t *hit_of;
     const int32_t *prim;
     float miss_f;
+    /* f or i already hold the wire's values (the core's convention: a miss
+     * is -1 / 0, no other negative int): written as they lie */
+    int wire;
 } array_src;
 
 static int src_is_bytes(const array_src *s) { return s->u8 || s->hit_of; }
@@ -116,6 +119,11 @@ static int base64_array(kdr_buf *b, const array_src *s, size_t n) {
     if (kdr_buf_append(b, s->f ? "{\"f32\":\"" : "{\"i32\":\"", 8) ||
         kdr_buf_reserve(b, kdr_base64_encoded_len(4 * n) + 2))
         return KDR_ENOMEM;
+    if (s->wire && !src_is_bytes(s)) { /* from the array itself, in one pass */
+        const void *src = s->f ? (const void *)s->f : (const void *)s->i;
+        b->len += kdr_base64_encode(src, 4 * n, b->data + b->len);
+        return KDR_BUF_LIT(b, "\"}");
+    }
     for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
         const size_t m = n - k0 < KDR_CHUNK ? n - k0 : KDR_CHUNK;
         stage_words(s, k0, m, stage);
@@ -141,6 +149,10 @@ static int cbor_array(kdr_buf *b, const array_src *s, size_t n) {
     }
     if (kdr_cbor_typed_head(b, s->f ? KDR_CBOR_TAG_F32LE : KDR_CBOR_TAG_I32LE, 4 * n))
         return KDR_ENOMEM;
+    if (s->wire) {
+        kdr_buf_put(b, s->f ? (const void *)s->f : (const void *)s->i, 4 * n);
+        return 0;
+    }
     _Alignas(16) unsigned char stage[4 * KDR_CHUNK];
     for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
         const size_t m = n - k0 < KDR_CHUNK ? n - k0 : KDR_CHUNK;
@@ -234,9 +246,10 @@ static int close_answer(kdr_buf *b, kdr_encoding enc) {
     return enc == KDR_ENCODING_CBOR ? 0 : kdr_buf_append(b, "}", 1);
 }
 
-/* The source of answer field bit for a query. */
+/* The source of answer field bit for a query; wire: the arrays are in wire
+ * form (no miss normalisation, float and int arrays written as they lie). */
 static array_src field_src(const kdr_hits *h, const kdr_hit_attrs *a, kdr_query query,
-                           unsigned bit) {
+                           unsigned bit, int wire) {
     array_src s = {0};
     switch (bit) {
     case KDR_FIELD_NORMAL:
@@ -264,6 +277,10 @@ static array_src field_src(const kdr_hits *h, const kdr_hit_attrs *a, kdr_query 
             s.hit_of = h->prim;
         break;
     }
+    if (wire && !src_is_bytes(&s)) {
+        s.prim = NULL;
+        s.wire = 1;
+    }
     return s;
 }
 
@@ -289,9 +306,9 @@ static size_t hits_members(const kdr_hit_attrs *attrs, kdr_query query, unsigned
     return members;
 }
 
-int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs,
-                                size_t n, kdr_query query, unsigned fields,
-                                kdr_encoding enc, kdr_buf *out) {
+static int encode_hits(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                       kdr_query query, unsigned fields, kdr_encoding enc, int wire,
+                       kdr_buf *out) {
     const size_t members = hits_members(attrs, query, fields);
     if (members == 0) return KDR_EINVAL;
     if (presize(out, kdr_proto_hits_answer_max(n, query, fields, enc)) ||
@@ -300,10 +317,22 @@ int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
         if (!(fields & fi->bit)) continue;
-        const array_src s = field_src(hits, attrs, query, fi->bit);
+        const array_src s = field_src(hits, attrs, query, fi->bit, wire);
         if (named_array(out, fi->name, &s, n * fi->width, enc)) return KDR_ENOMEM;
     }
     return close_answer(out, enc);
+}
+
+int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs,
+                                size_t n, kdr_query query, unsigned fields,
+                                kdr_encoding enc, kdr_buf *out) {
+    return encode_hits(hits, attrs, n, query, fields, enc, 0, out);
+}
+
+int kdr_proto_encode_hits_wire(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                               kdr_query query, unsigned fields, kdr_encoding enc,
+                               kdr_buf *out) {
+    return encode_hits(hits, attrs, n, query, fields, enc, 1, out);
 }
 
 /* Bytes of the heads of a pieces answer: the map and "count" (<= 16), and
@@ -338,7 +367,7 @@ int kdr_proto_hits_pieces(const kdr_hits *hits, const kdr_hit_attrs *attrs, size
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
         if (!(fields & fi->bit)) continue;
-        const array_src s = field_src(hits, attrs, query, fi->bit);
+        const array_src s = field_src(hits, attrs, query, fi->bit, 1);
         const size_t m = n * fi->width;
         const void *data;
         size_t bytes;

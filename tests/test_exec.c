@@ -110,7 +110,10 @@ static void make_cases(cases *c, const kdr_scene *s) {
     c->bodies[0] = bundle_body(10000, "closest", ""); /* 3 chunks */
     c->bodies[1] = bundle_body(9000, "any", ",\"encoding\":\"base64\"");
     c->bodies[2] = bundle_body(1, "closest", "");
-    c->bodies[3] = frustum_body(97, 61, "closest", ""); /* 13 x 8 tiles: 7 chunks */
+    /* 13 x 8 tiles: 7 chunks; base64 (frustum_body's encoding) of the
+     * core's arrays as they lie (kdr_proto_encode_hits_wire), misses
+     * included, against the normalising encoder */
+    c->bodies[3] = frustum_body(97, 61, "closest", "");
     c->bodies[4] = frustum_body(40, 30, "any", "");
     c->bodies[5] = shadow_body(150, 16, ""); /* 3 chunks */
     c->bodies[6] = shadow_body(1, 64, ",\"encoding\":\"base64\"");
