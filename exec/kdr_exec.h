@@ -58,12 +58,15 @@ extern "C" {
 #define KDR_EXEC_CHUNK_RAYS 4096
 #define KDR_EXEC_CHUNK_TILES 16
 #define KDR_EXEC_CHUNK_POINTS 64
-/* Arrays of an answer in pieces (kdr_exec_query.pieces): at least 64 KiB
- * (4096 closest hits). A smaller answer is copied into one buffer as
- * before: its copy takes microseconds, and one buffer lets libmicrohttpd
- * send headers and body in one write. Not measured at the boundary; the
- * round "answers without copies" in docs/BENCHMARKS.md measured 1M rays. */
-#define KDR_EXEC_PIECES_MIN ((size_t)64 << 10)
+/* Arrays of an answer in pieces (kdr_exec_query.pieces): at least 1 MiB
+ * (64K closest hits, 1M any hits). A smaller answer is copied into one
+ * buffer as before (its copy takes at most ~0.1-0.2 ms; one buffer lets
+ * libmicrohttpd send headers and body in one write, and answers of one
+ * chunk, which kdrayd may answer on its HTTP thread, keep the path they
+ * were measured on). Not measured at the boundary: the round "answers
+ * without copies" in docs/BENCHMARKS.md measured 1M rays (the copy of a
+ * 16 MB answer: 4-8 ms of encode). */
+#define KDR_EXEC_PIECES_MIN ((size_t)1 << 20)
 #define KDR_EXEC_CHUNK_SHADOW_RAYS 65536
 /* closest-point: points per chunk (a few microseconds each) */
 #define KDR_EXEC_CHUNK_CLOSEST 2048

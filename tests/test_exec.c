@@ -281,17 +281,17 @@ static void test_pieces(const kdr_scene *s) {
                                KDR_EXEC_BUNDLE,  KDR_EXEC_BUNDLE,     KDR_EXEC_FRUSTUM,
                                KDR_EXEC_CONE_SHADOW};
     const int want_pieces[NP] = {1, 1, 1, 1, 0, 0, 0};
-    b[0] = frustum_body(256, 200, "closest", "");
+    b[0] = frustum_body(320, 240, "closest", "");
     b[0].answer = KDR_MEDIA_CBOR;
-    b[1] = frustum_body(400, 300, "any", "");
+    b[1] = frustum_body(1024, 1024, "any", "");
     b[1].answer = KDR_MEDIA_CBOR;
     b[2] = bundle_body(
-        10000, "closest",
+        30000, "closest",
         ",\"fields\":[\"mesh\",\"hit\",\"v\",\"normal\",\"t\",\"prim\",\"u\"]");
     b[2].answer = KDR_MEDIA_CBOR;
-    b[3] = cbor_bundle_body(20000, "closest");
-    b[4] = cbor_bundle_body(1000, "closest"); /* 16 KB of arrays: one buffer */
-    b[5] = frustum_body(256, 200, "closest", ",\"encoding\":\"base64\"");
+    b[3] = cbor_bundle_body(70000, "closest");
+    b[4] = cbor_bundle_body(65000, "closest"); /* 1040000 B of arrays: one buffer */
+    b[5] = frustum_body(320, 240, "closest", ""); /* base64: one buffer */
     b[6] = cbor_shadow_body(3000);
     kdr_exec_config cfg = {2, 8, 0, NULL, NULL};
     kdr_exec *ex = kdr_exec_create(&cfg);
@@ -336,7 +336,7 @@ static void test_pieces(const kdr_scene *s) {
                 size_t misses = 0, n = p->v[3].len / 4;
                 for (size_t k = 0; k < n; k++)
                     misses += prim[k] == -1;
-                CHECK(p->n == 8 && n == 256 * 200 && misses > 0 && misses < n,
+                CHECK(p->n == 8 && n == 320 * 240 && misses > 0 && misses < n,
                       "case 0: %zu pieces, %zu of %zu rays missed", p->n, misses, n);
             }
             CHECK(cl.bytes == b[i].len + p->held && p->held >= p->len - 200,
