@@ -107,10 +107,16 @@ static void stage_words(const array_src *s, size_t k0, size_t m, void *stage) {
         int32_t *i = stage;
         for (size_t k = 0; k < m; k++)
             i[k] = src[k] < 0 ? -1 : src[k];
-    } else {
+    } else if (s->u8) { /* hoisted as above, so that GCC vectorises it */
+        const uint8_t *src = s->u8 + k0;
         int32_t *i = stage;
         for (size_t k = 0; k < m; k++)
-            i[k] = src_int(s, k0 + k);
+            i[k] = src[k] != 0;
+    } else {
+        const int32_t *src = s->hit_of + k0;
+        int32_t *i = stage;
+        for (size_t k = 0; k < m; k++)
+            i[k] = src[k] >= 0;
     }
 }
 
