@@ -471,6 +471,14 @@ static int run_scene(const opts *o, const ladder_entry *e) {
         case SET_BAOC:
             ao_rays(&si, n, 16, rays);
             break;
+        case SET_CAMSHADOW:
+            light_of(&si, 0, &li);
+            j.n = camshadow_rays(&si, cores[0].intersect1, kd[0], n, &li, rays);
+            j.q = KDR_ANY;
+            break;
+        case SET_BAO1:
+            ao_rays(&si, n, 1, rays), j.q = KDR_ANY;
+            break;
         case SET_SHADOW:
         case SET_BSHADOW:
             light_of(&si, 0, &li);
@@ -558,7 +566,7 @@ int main(int argc, char **argv) {
     if (parse(argc, argv, &o) != 0) {
         fprintf(stderr, "usage: %s [--dir DIR] [--only NAME]... [--rays N] "
                         "[--rounds R] [--set camera|random|ao|ao64|b8ao|b8cam|"
-                        "frustum|cone16|cone64|shadow|brandom|bao|baoc|bshadow|conecam|b8ao8|bao64|all16|all|"
+                        "frustum|cone16|cone64|shadow|camshadow|brandom|bao|baoc|bshadow|conecam|b8ao8|bao64|bao1|all16|all|"
                         "count|closest|ball16|ball|bcount]...\n", argv[0]);
         return 2;
     }

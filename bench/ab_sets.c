@@ -14,12 +14,13 @@
 
 const char *const set_names[NSETS] = {"camera",  "random",  "ao",     "ao64",   "b8ao",
                                       "b8cam",   "frustum", "cone16", "cone64", "shadow",
+                                      "camshadow",
                                       "brandom", "bao",     "baoc",   "bshadow", "bshadow16",
-                                      "b16cam",  "conecam", "b8ao8",   "bao64",
+                                      "b16cam",  "conecam", "b8ao8",   "bao64",  "bao1",
                                       "all16",   "all",     "count",  "closest", "ball16",
                                       "ball",    "bcount"};
-const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0, 1,
-                                         1, 1, 1, 1, 1, 0, 0, 0, 1, 0, 0,
+const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0, 1, 1,
+                                         1, 1, 1, 1, 1, 0, 0, 0, 1, 1, 0, 0,
                                          0, 0, 0, 0, 0};
 
 void scene_bounds(scene_in *s) {
@@ -190,6 +191,45 @@ void conecam_query(const scene_in *s, ab_intersect1_fn intersect1, const kdr_sce
                             .lights = li, .nlights = 1, .samples = 64,
                             .seed = 7, .offset = KDR_OFFSET_DIAGONAL,
                             .epsilon = 1e-4f};
+}
+
+size_t camshadow_rays(const scene_in *s, ab_intersect1_fn intersect1, const kdr_scene *kd,
+                      size_t max, const kdr_sphere_light *li, kdr_ray *out) {
+    kdr_camera cam;
+    camera_of(s, max, &cam);
+    stress_rng r;
+    stress_rng_seed(&r, 13);
+    size_t m = 0;
+    for (uint32_t y = 0; y < cam.height; y++)
+        for (uint32_t x = 0; x < cam.width; x++) {
+            kdr_ray c;
+            kdr_hit h;
+            kdr_camera_ray(&cam, x, y, &c);
+            if (!intersect1(kd, &c, &h, NULL))
+                continue;
+            const float *t = s->tris + 9 * (size_t)h.prim;
+            float e1[3], e2[3], n[3], p[3], d[3], dot = 0.0f, len = 0.0f;
+            for (int k = 0; k < 3; k++) {
+                p[k] = c.org[k] + h.t * c.dir[k];
+                e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
+            }
+            n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+            n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+            n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+            for (int k = 0; k < 3; k++)
+                dot += n[k] * c.dir[k], len += n[k] * n[k];
+            const float off = (dot > 0.0f ? -1e-4f : 1e-4f) * s->diag / sqrtf(len);
+            stress_rng_dir(&r, d);
+            const float u = stress_rng_float(&r);
+            for (int k = 0; k < 3; k++) {
+                out[m].org[k] = p[k] + off * n[k];
+                out[m].dir[k] = li->center[k] + u * li->radius * d[k] - out[m].org[k];
+            }
+            out[m].tmin = 1e-4f;
+            out[m].tmax = 1.0f;
+            m++;
+        }
+    return m;
 }
 
 void closest_points(const scene_in *s, size_t n, float *pts) {

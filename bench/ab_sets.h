@@ -28,6 +28,10 @@
  *            a render asks: coherent runs of points; rays / 64 pixels)
  *   shadow   any hit, one ray per surface point (ao's points) toward a
  *            random point of bench_cone's small light, tmax 1, per ray
+ *   camshadow
+ *            any hit, one ray per hit point of the camera (offset 1e-4
+ *            diagonal toward the eye) to a random point of the small
+ *            light, tmax 1, single rays (what a renderer's shadow pass asks)
  *   brandom, bao, baoc, bshadow
  *            random (closest), ao (any hit), ao with closest hit and shadow
  *            rays through kdr_trace_batch(AUTO) in calls of 4096 rays
@@ -40,6 +44,8 @@
  *            kd_batch row, the one issue 11's AO target is read from; on
  *            large scenes kd_batch_scattered sends its chunks to the
  *            interleaved walk, where b8ao's one-origin calls stay bundles)
+ *   bao1     AO any hit with one ray per surface point (ao_rays with a
+ *            run of 1: a renderer's one AO sample per pixel), as bao
  *   bshadow16
  *            any hit, 16 rays per surface point (ao_rays' points) toward
  *            the small light, as bshadow (kdray_bench's shadow workload:
@@ -68,10 +74,13 @@
 
 enum {
     SET_CAMERA, SET_RANDOM, SET_AO, SET_AO64, SET_B8AO, SET_B8CAM, SET_FRUSTUM,
-    SET_CONE16, SET_CONE64, SET_SHADOW, SET_BRANDOM, SET_BAO, SET_BAOC,
+    SET_CONE16, SET_CONE64, SET_SHADOW,
+    SET_CAMSHADOW, /* shadow rays from the camera's hit points, one each, single rays */
+    SET_BRANDOM, SET_BAO, SET_BAOC,
     SET_BSHADOW, SET_BSHADOW16, SET_B16CAM, SET_CONECAM,
     SET_B8AO8, /* b8ao through the 8-wide driver (KDR_TRAV_BUNDLE8), issue 11 */
     SET_BAO64, /* ao64 as bao: calls of AB_BATCH with per-ray origins */
+    SET_BAO1,  /* AO any hit, one ray per point, as bao */
     SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
     SET_BALL16, SET_BALL, SET_BCOUNT, NSETS
 };
@@ -131,6 +140,13 @@ typedef int (*ab_intersect1_fn)(const kdr_scene *, const kdr_ray *, kdr_hit *,
  * pts holds 6 * max floats. */
 void conecam_query(const scene_in *s, ab_intersect1_fn intersect1, const kdr_scene *kd,
                    size_t max, float *pts, kdr_sphere_light *li, kdr_shadow_query *q);
+
+/* camshadow's rays: one shadow ray per hit point of a side x side camera
+ * (side^2 <= max pixels, traced by intersect1 on kd), from the point
+ * offset 1e-4 diagonal off its triangle toward the eye's side, to a random
+ * point of the light, [1e-4, 1]; returns how many. */
+size_t camshadow_rays(const scene_in *s, ab_intersect1_fn intersect1, const kdr_scene *kd,
+                      size_t max, const kdr_sphere_light *li, kdr_ray *out);
 
 /* bench_queries' closest-point workload (3 floats per point). */
 void closest_points(const scene_in *s, size_t n, float *pts);

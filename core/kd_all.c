@@ -47,7 +47,7 @@ static void walk(const kdr_scene *sc, const kdr_ray *r, all_sink *s) {
     kd_ntri_pre_init4(&pre, &pre4);
     const int avx2 = __builtin_cpu_supports("avx2") ? 1 : 0;
     uint32_t mb[KD_ALL_MBOX_SLOTS];
-    if (all_use_mbox(sc)) all_mbox_start(s, mb);
+    if (all_use_mbox(sc, s->hits != NULL)) all_mbox_start(s, mb);
     kd_todo stack[KD_MAX_DEPTH];
     int sp = 0;
     const kd_node *nodes = sc->nodes, *n = nodes;

@@ -33,8 +33,9 @@
  * whole: the filtered list lives on the stack). */
 #define KD_ALL_MBOX_SLOTS 64
 #define KD_ALL_MBOX_LEAF 64
-/* Walks use the mailbox on scenes of at least KD_ALL_MBOX_REFS_NUM /
- * KD_ALL_MBOX_REFS_DEN references per triangle, where repeated tests are
+/* Counts use the mailbox on scenes of at least KD_ALL_MBOX_REFS_NUM /
+ * KD_ALL_MBOX_REFS_DEN references per triangle (lists on every scene:
+ * all_use_mbox), where repeated tests are
  * common enough to pay for it (docs/TRAVERSAL.md, round 6: haus 3.28 and
  * engine9 2.93 gained, 2CylinderEngine 2.39 even, duck 2.16 lost). */
 #define KD_ALL_MBOX_REFS_NUM 5
@@ -228,9 +229,15 @@ static void test_leaf(const kdr_scene *sc, const kd_node *n, const kd_ray_pre *p
     }
 }
 
-/* Whether walks on sc use the sink's mailbox (test_leaf's mbox). */
-static inline int all_use_mbox(const kdr_scene *sc) {
-    return KD_ALL_MBOX_REFS_DEN * sc->nrefs >= KD_ALL_MBOX_REFS_NUM * sc->ntris;
+/* Whether walks on sc use the sink's mailbox (test_leaf's mbox): lists
+ * (list: max_hits > 0) on every scene, counts on scenes of many references
+ * per triangle. Lists with it against without (bench/ab c2c189b . --rays
+ * 32768 --rounds 3, load 3.1-3.5, docs/TRAVERSAL.md round 8): duck all16 /
+ * all / ball16 / ball 1.073 / 1.038 / 1.049 / 1.068, 2CylinderEngine
+ * 1.102 / 1.094 / 1.121 / 1.074; counts with it lost on duck (count 0.945,
+ * bcount 0.958, load 2.2-2.7). */
+static inline int all_use_mbox(const kdr_scene *sc, int list) {
+    return list || KD_ALL_MBOX_REFS_DEN * sc->nrefs >= KD_ALL_MBOX_REFS_NUM * sc->ntris;
 }
 
 /* The ray's set-up as kd_all.c's walk() writes it out (the single-ray

@@ -246,7 +246,7 @@ KD_AVX512 int kd_all_lanes16(const kdr_scene *sc, const kdr_ray_batch *b, size_t
                 stats,
                 stage ? KL_ALL : 0u,
                 __builtin_cpu_supports("avx2") ? 1 : 0,
-                (flags & KD_ALL_MBOX) || all_use_mbox(sc),
+                (flags & KD_ALL_MBOX) || all_use_mbox(sc, max_hits > 0),
                 KDR_OK};
     kl_lanes w;
     w.node = w.sp = w.visits = i16_set1(0);

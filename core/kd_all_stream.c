@@ -149,7 +149,7 @@ int kd_all_stream(const kdr_scene *sc, const kdr_ray_batch *b, size_t first,
                 stats,
                 (flags & KD_ALL_STAGE) || sc->stats.bytes >= KD_STREAM_STAGE_MIN_BYTES,
                 __builtin_cpu_supports("avx2") ? 1 : 0,
-                (flags & KD_ALL_MBOX) || all_use_mbox(sc),
+                (flags & KD_ALL_MBOX) || all_use_mbox(sc, max_hits > 0),
                 KDR_OK};
     size_t next = first;
     const size_t end = first + count;

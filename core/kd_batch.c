@@ -314,8 +314,10 @@ int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, s
     return 1;
 }
 
-int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
-                       size_t count) {
+/* kd_batch_scattered with runs of shared origins sent to the walk from
+ * scenes of runs_min bytes */
+static int scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                     size_t count, size_t runs_min) {
     if (b->org_stride == 0 || count <= 8)
         return 0;
     size_t runs = 1;
@@ -324,9 +326,26 @@ int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
     /* one origin for the whole chunk (a cone's samples of one point) is
      * the shared-origin case whatever the stride says: bundles */
     if (runs * KD_STREAM_MAX_RUN < count &&
-        (runs == 1 || s->stats.bytes < KD_STREAM_RUNS_MIN_BYTES))
+        (runs == 1 || s->stats.bytes < runs_min))
         return 0;
     return order_spread(b, NULL, first, count) >= KB_SORT_SPREAD;
+}
+
+int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                       size_t count) {
+    return scattered(s, b, first, count, KD_STREAM_RUNS_MIN_BYTES);
+}
+
+_Static_assert(KD_FAR_RUNS_MIN_BYTES <= KD_STREAM_RUNS_MIN_BYTES,
+               "AO runs walked far end first would leave the walk on mid-sized scenes");
+
+int kd_batch_scattered_any(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                           size_t count) {
+    size_t runs_min = KD_STREAM_RUNS_MIN_BYTES;
+    if (s->stats.bytes >= KD_FAR_RUNS_MIN_BYTES && s->stats.bytes < runs_min &&
+        kd_batch_far_first(b, NULL, first, count) == KB_ENDS_SPREAD)
+        runs_min = KD_FAR_RUNS_MIN_BYTES;
+    return scattered(s, b, first, count, runs_min);
 }
 
 #define FAR_SAMPLE 32
@@ -334,7 +353,7 @@ int kd_batch_scattered(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
 int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
                        size_t count) {
     if (b->org_stride == 0 || !b->tmax || count == 0)
-        return 0;
+        return KB_ENDS_NONE;
     float olo[3], ohi[3], elo[3], ehi[3];
     for (int k = 0; k < 3; k++)
         olo[k] = elo[k] = INFINITY, ohi[k] = ehi[k] = -INFINITY;
@@ -348,7 +367,7 @@ int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
         for (int k = 0; k < 3; k++) {
             const float e = o[k] + tmax * d[k];
             if (!(e - e == 0.0f)) /* no finite end (tmax = inf, NaN) */
-                return 0;
+                return KB_ENDS_NONE;
             olo[k] = o[k] < olo[k] ? o[k] : olo[k];
             ohi[k] = o[k] > ohi[k] ? o[k] : ohi[k];
             elo[k] = e < elo[k] ? e : elo[k];
@@ -360,7 +379,11 @@ int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
         ow = ohi[k] - olo[k] > ow ? ohi[k] - olo[k] : ow;
         ew = ehi[k] - elo[k] > ew ? ehi[k] - elo[k] : ew;
     }
-    return ew < KD_FAR_END_SPREAD * ow;
+    /* one origin over the sample (a point's samples in stride 3): its
+     * path replay stays, as with stride 0 */
+    if (ow == 0.0f)
+        return KB_ENDS_NONE;
+    return ew < KD_FAR_END_SPREAD * ow ? KB_ENDS_CLUSTER : KB_ENDS_SPREAD;
 }
 
 void kd_batch_bundles(const kdr_scene *s, const kdr_ray_batch *b, size_t first,

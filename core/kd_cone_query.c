@@ -57,7 +57,7 @@ static void trace_chunk(const kdr_scene *scene, const kdr_ray_batch *b, size_t m
     const uint64_t bytes = scene->stats.bytes;
     if (scene->nodes && n <= UNWALKED_STREAM_MAX_SAMPLES &&
         bytes >= (uint64_t)n * UNWALKED_STREAM_BYTES_PER_SAMPLE) {
-        kd_stream_trace_far(scene, b, NULL, 0, m, KDR_ANY, &out, ts);
+        kd_stream_trace_far(scene, b, NULL, 0, m, KDR_ANY, 0, &out, ts);
         return;
     }
     const int narrow = n <= UNWALKED_NARROW_MAX_SAMPLES && bytes >= UNWALKED_NARROW_MIN_BYTES;

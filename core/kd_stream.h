@@ -23,9 +23,10 @@ void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *i
                      size_t first, size_t m, kdr_query q, kdr_hits *out,
                      kdr_trav_stats *stats);
 /* The same with any-hit rays walked far end first (KD_STREAM_FAR in the
- * lane forms; the scalar form walks them front to back: same answers). */
+ * lane forms; the scalar form walks them front to back: same answers);
+ * flags: 0 or KD_STREAM_STAGE (leaves staged whatever the scene's size). */
 void kd_stream_trace_far(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
-                         size_t first, size_t m, kdr_query q, kdr_hits *out,
+                         size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
                          kdr_trav_stats *stats);
 
 /* The forms, same contract (tests call each): KD_STREAM_RAYS rays

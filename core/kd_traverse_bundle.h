@@ -138,17 +138,34 @@ int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, s
 #define KB_FAR_AUTO 16 /* any hit: chunks kd_batch_far_first picks walk far end first */
 #define KB_FAR 32     /* any hit: every chunk walks far end first (tests, A/B) */
 
-/* 1 when the rays ids[0..count) (ids NULL: [first, first + count)) may
- * walk far end first for any hit: they have their own origins, and over
- * 32 of them spread evenly over the list every end o + tmax d is finite
- * and the ends' box is narrower than KD_FAR_END_SPREAD times the origins'
- * box on its widest axis (shadow rays of many points
- * toward one light: the walk from each end meets the blockers near the
- * light and shares its top path with the chunk's other rays; AO ends
- * spread as their origins do, and one point's samples keep their origin's
- * path). kd_batch.c. */
+/* Where the ends o + tmax d of the rays ids[0..count) (ids NULL: [first,
+ * first + count)) lie, sampled over 32 rays spread evenly over the list,
+ * for the any-hit order (kd_batch.c):
+ *   KB_ENDS_CLUSTER  own origins, every end finite, the ends' box narrower
+ *                    than KD_FAR_END_SPREAD times the origins' box on its
+ *                    widest axis (shadow rays of many points toward one
+ *                    light: the walk from each end meets the blockers near
+ *                    the light and shares its top path with the chunk's
+ *                    other rays): far end first where the call's probe
+ *                    measures it cheaper;
+ *   KB_ENDS_SPREAD   own origins, every end finite, not clustered (AO
+ *                    rays: ends around their origins): far end first in
+ *                    the interleaved walk (KD_FAR_RUNS_MIN_BYTES);
+ *   KB_ENDS_NONE     one origin (stride 0, or one over the sample: its
+ *                    path replay stays), no tmax array or some end not
+ *                    finite: front to back. */
+#define KB_ENDS_NONE 0
+#define KB_ENDS_CLUSTER 1
+#define KB_ENDS_SPREAD 2
 int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
                        size_t count);
+
+/* kd_batch_scattered for an any-hit call that offers the far order
+ * (KB_FAR_AUTO): chunks whose ends spread (KB_ENDS_SPREAD) with runs of
+ * shared origins go to the interleaved walk from scenes of
+ * KD_FAR_RUNS_MIN_BYTES, where they walk far end first. */
+int kd_batch_scattered_any(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                           size_t count);
 
 /* Which order a batch call's clustered-end chunks take (kd_batch_far_first
  * says the ends cluster; whether the far end finds the blockers sooner
@@ -182,6 +199,10 @@ static inline int kd_far_probing(const kd_far_probe *p) {
 #define KB_ORDER_NEAR 0
 #define KB_ORDER_FAR 1
 #define KB_ORDER_PROBE 2
+/* far end first for rays whose ends spread (KB_ENDS_SPREAD: AO), only in
+ * the interleaved walk, whose leaves are then staged from
+ * KD_FAR_STAGE_MIN_BYTES */
+#define KB_ORDER_FAR_SPREAD 3
 /* The incoherence probe's knobs (KB_OCC_MIN, KB_PROBE, KB_FALLBACK_CHUNKS)
  * are in kd_tune.h with KB_CHUNK. */
 

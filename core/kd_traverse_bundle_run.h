@@ -13,7 +13,9 @@
  * whose first bundles' lane occupancy fell under KB_OCC_MIN. Any-hit
  * chunks whose rays' ends cluster (kd_batch_far_first: shadow rays toward a
  * light) walk far end first, in bundles and in the interleaved walk, where
- * the call's first such rays measured that order cheaper (kd_far_probe).
+ * the call's first such rays measured that order cheaper (kd_far_probe);
+ * any-hit chunks whose ends spread (AO) walk far end first wherever they
+ * go to the interleaved walk (kd_batch_scattered_any).
  */
 #ifndef KD_W
 #error "include kd_traverse_bundle.h's template (define KD_W) before kd_traverse_bundle_run.h"
@@ -135,12 +137,17 @@ KD_FN void KD_WN(kb_stats_add)(kdr_trav_stats *stats, const KD_WN(kb_bundle) *b,
 }
 
 /* The interleaved walk over ids[0..m) (ids NULL: [first, first + m)),
- * far end first or not. */
+ * front to back (order KB_ORDER_NEAR) or far end first (the others). */
 KD_FN void KD_WN(kb_stream)(const kdr_scene *s, const kdr_ray_batch *rb,
                             const size_t *ids, size_t first, size_t m, kdr_query q,
-                            int far, kdr_hits *out, kdr_trav_stats *stats) {
-    if (far)
-        kd_stream_trace_far(s, rb, ids, first, m, q, out, stats);
+                            int order, kdr_hits *out, kdr_trav_stats *stats) {
+    if (order != KB_ORDER_NEAR)
+        kd_stream_trace_far(s, rb, ids, first, m, q,
+                            order == KB_ORDER_FAR_SPREAD &&
+                                    s->stats.bytes >= KD_FAR_STAGE_MIN_BYTES
+                                ? KD_STREAM_STAGE
+                                : 0,
+                            out, stats);
     else
         kd_stream_trace(s, rb, ids, first, m, q, out, stats);
 }
@@ -236,16 +243,23 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
          * probe, in one call: the walk's lanes stay full longer */
         size_t alone = base;
         if (flags & KB_FALLBACK)
-            while (alone < end &&
-                   kd_batch_scattered(s, rb, alone,
-                                      end - alone < KB_CHUNK ? end - alone : KB_CHUNK))
-                alone += end - alone < KB_CHUNK ? end - alone : KB_CHUNK;
+            while (alone < end) {
+                const size_t n = end - alone < KB_CHUNK ? end - alone : KB_CHUNK;
+                if (!(far_auto ? kd_batch_scattered_any(s, rb, alone, n)
+                               : kd_batch_scattered(s, rb, alone, n)))
+                    break;
+                alone += n;
+            }
         if (alone > base) {
+            /* clustered ends: the probe decides; spread ends (AO): far
+             * end first (KD_FAR_RUNS_MIN_BYTES) */
             const size_t probe = alone - base < KB_CHUNK ? alone - base : KB_CHUNK;
-            const int order = far_all ? KB_ORDER_FAR
-                              : far_auto && kd_batch_far_first(rb, NULL, base, probe)
-                                  ? KB_ORDER_PROBE
-                                  : KB_ORDER_NEAR;
+            const int ends = far_auto ? kd_batch_far_first(rb, NULL, base, probe)
+                                      : KB_ENDS_NONE;
+            const int order = far_all                    ? KB_ORDER_FAR
+                              : ends == KB_ENDS_CLUSTER ? KB_ORDER_PROBE
+                              : ends == KB_ENDS_SPREAD  ? KB_ORDER_FAR_SPREAD
+                                                        : KB_ORDER_NEAR;
             KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, order, &fp, out, stats);
             base = alone;
             continue;
@@ -266,10 +280,13 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
         if (!(flags & KB_SORT) || !kd_batch_runs_fit(rb, ids, (size_t)m, KD_W))
             kd_batch_order(rb, (size_t)m, (flags & KB_SORT) != 0, ids);
         base += c;
-        const int order = far_all ? KB_ORDER_FAR
-                          : far_auto && m > 0 && kd_batch_far_first(rb, ids, 0, (size_t)m)
-                              ? KB_ORDER_PROBE
-                              : KB_ORDER_NEAR;
+        /* in bundles only clustered ends are offered the far order: AO
+         * bundles keep their origin's path replay (KD_FAR_RUNS_MIN_BYTES) */
+        const int order =
+            far_all ? KB_ORDER_FAR
+            : far_auto && m > 0 && kd_batch_far_first(rb, ids, 0, (size_t)m) == KB_ENDS_CLUSTER
+                ? KB_ORDER_PROBE
+                : KB_ORDER_NEAR;
         if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, order, &fp, out, stats)) {
             const size_t skip = end - base < KB_FALLBACK_CHUNKS * KB_CHUNK
                                     ? end - base

@@ -208,7 +208,8 @@ void kd_stream_trace(const kdr_scene *s, const kdr_ray_batch *b, const size_t *i
 }
 
 void kd_stream_trace_far(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
-                         size_t first, size_t m, kdr_query q, kdr_hits *out,
+                         size_t first, size_t m, kdr_query q, int flags, kdr_hits *out,
                          kdr_trav_stats *stats) {
-    stream_trace(s, b, ids, first, m, q, KD_STREAM_FAR, out, stats);
+    stream_trace(s, b, ids, first, m, q, KD_STREAM_FAR | (flags & KD_STREAM_STAGE), out,
+                 stats);
 }

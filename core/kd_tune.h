@@ -147,6 +147,28 @@
  * stays under KD_FAR_GAIN times the other's (kd_far_pick). */
 #define KD_FAR_PROBE_RAYS 32
 #define KD_FAR_GAIN 0.85
+/* Any-hit chunks whose ends are finite but do not cluster (AO rays: short,
+ * from surface points, ends around their origins) walk far end first in
+ * the interleaved walk, without a probe, and their runs of shared origins
+ * go to that walk from scenes of KD_FAR_RUNS_MIN_BYTES (not
+ * KD_STREAM_RUNS_MIN_BYTES); below it they stay front to back in bundles.
+ * bench/ab main, AO 16 / 64 rays per point in calls of 4096 (bao / bao64),
+ * far walk against the front-to-back route before: haus (2 MiB) 0.94 /
+ * 0.88 (bundles stay), 2CylinderEngine (6 MiB) 1.29 / 1.08, engine3 1.83 /
+ * 1.65, engine9 1.60 / 1.40; far bundles instead lost on bao64 (0.90,
+ * 0.91): they give up the origin's path replay. The probe's work count
+ * (node steps + tests, replayed levels included) misjudges these rays and
+ * one point per call decides it (bao64 engine3 1.37 with it against 1.67
+ * without). docs/TRAVERSAL.md, "Round: AO batches". */
+#define KD_FAR_RUNS_MIN_BYTES ((size_t)4 << 20)
+/* Those far walks stage their leaves (KD_STREAM_STAGE) from this size on
+ * (others from KD_STREAM_STAGE_MIN_BYTES): their ends scatter over the
+ * scene, so each far descent misses where a shadow ray's shares the
+ * light's path. bench/ab 0678403 ., staged from 1 MiB, 5 rounds:
+ * 2CylinderEngine bao / bao64 / bao1 1.083 / 1.040 / 1.172, haus bao1
+ * 0.840; shadow rays' far walks staged lost (bshadow 0.765 / 0.835), so
+ * they keep the old threshold. */
+#define KD_FAR_STAGE_MIN_BYTES ((size_t)4 << 20)
 
 /* ---- cone shadows (kd_cone.c, kd_cone_cells.c) ------------------------------
  * Measured with kdray_bench_cone (default scene and 2CylinderEngine, a small

@@ -120,6 +120,8 @@ static void finish_job(kdr_exec_job *j) {
     }
     if (r->status != 200) {
         kdr_buf_free(&r->body);
+        kdr_exec_pieces_free(r->pieces);
+        r->pieces = NULL;
         r->rays = 0;
     }
     double t_done = kdr_exec_now();
@@ -129,7 +131,10 @@ static void finish_job(kdr_exec_job *j) {
      * kdr_exec_query_done. */
     if (!q->stream) {
         j->ops->release(j);
-        if (q->claim) kdr_exec_settle(ex, q->claim, kdr_exec_body_held(q) + r->body.cap);
+        if (q->claim)
+            kdr_exec_settle(ex, q->claim,
+                            kdr_exec_body_held(q) + r->body.cap +
+                                (r->pieces ? r->pieces->held : 0));
     }
     r->stopped = stop;
     r->deadline_ms = j->deadline_ms;
@@ -385,6 +390,8 @@ void kdr_exec_query_done(kdr_exec_query *q) {
     }
     q->job = NULL;
     kdr_buf_free(&q->result.body);
+    kdr_exec_pieces_free(q->result.pieces);
+    q->result.pieces = NULL;
 }
 
 void kdr_exec_shutdown(kdr_exec *ex) {

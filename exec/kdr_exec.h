@@ -58,6 +58,15 @@ extern "C" {
 #define KDR_EXEC_CHUNK_RAYS 4096
 #define KDR_EXEC_CHUNK_TILES 16
 #define KDR_EXEC_CHUNK_POINTS 64
+/* Arrays of an answer in pieces (kdr_exec_query.pieces): at least 1 MiB
+ * (64K closest hits, 1M any hits). A smaller answer is copied into one
+ * buffer as before (its copy takes at most ~0.1-0.2 ms; one buffer lets
+ * libmicrohttpd send headers and body in one write, and answers of one
+ * chunk, which kdrayd may answer on its HTTP thread, keep the path they
+ * were measured on). Not measured at the boundary: the round "answers
+ * without copies" in docs/BENCHMARKS.md measured 1M rays (the copy of a
+ * 16 MB answer: 4-8 ms of encode). */
+#define KDR_EXEC_PIECES_MIN ((size_t)1 << 20)
 #define KDR_EXEC_CHUNK_SHADOW_RAYS 65536
 /* closest-point: points per chunk (a few microseconds each) */
 #define KDR_EXEC_CHUNK_CLOSEST 2048
@@ -142,10 +151,29 @@ typedef enum kdr_exec_stop {
     KDR_STOP_SHUTDOWN,  /* kdr_exec_shutdown: 503 */
 } kdr_exec_stop;
 
+/* A 200 answer in pieces (kdr_exec_query.pieces): sent one after another
+ * (writev), pieces v[0..n) are the answer's len bytes, the same bytes the
+ * one-buffer answer has. The struct owns the blocks they lie in (the
+ * result arrays the core wrote, the attribute arrays, the CBOR heads), so
+ * the arrays go out where they are, with no copy; held is what those
+ * blocks take (charged to the query's claim until the caller releases it).
+ * kdr_exec_pieces_free frees all of it (its type fits libmicrohttpd's free
+ * callback). */
+#define KDR_EXEC_PIECES_BLOCKS 8
+typedef struct kdr_exec_pieces {
+    size_t n, len, held;
+    kdr_piece v[KDR_HITS_PIECES_MAX];
+    kdr_buf head;
+    void *blocks[KDR_EXEC_PIECES_BLOCKS];
+    size_t nblocks;
+} kdr_exec_pieces;
+void kdr_exec_pieces_free(void *pieces);
+
 typedef struct kdr_exec_result {
     int status;               /* 200, or the problem's status */
     char detail[256];         /* problem detail when status != 200 */
-    kdr_buf body;             /* the 200 answer */
+    kdr_buf body;             /* the 200 answer (unless pieces is set) */
+    kdr_exec_pieces *pieces;  /* or the 200 answer in pieces (query.pieces) */
     const char *content_type; /* of a 200 answer: application/json or
                                  application/cbor (a static string) */
     unsigned retry_after;     /* > 0 on a 503 that a later retry may cure */
@@ -205,6 +233,12 @@ typedef struct kdr_exec_query {
      * (kdr_exec_stream_*) while later chunks trace. The result arrays stay
      * allocated (and charged) until kdr_exec_query_done. */
     int stream;
+    /* The caller can send an answer in pieces (kdrayd): a one-shot CBOR
+     * answer of closest or any hits (bundle, frustum) of at least
+     * KDR_EXEC_PIECES_MIN bytes of arrays comes in result.pieces, its
+     * arrays where the core wrote them, instead of being copied into
+     * result.body. 0: always result.body (kdray-trace). */
+    int pieces;
     /* optional, stream only: called (with done_ctx) once the parse
      * succeeded and the chunks opened, and after every chunk traced, by the
      * worker; it must not block. Never called after on_done. */
@@ -234,8 +268,9 @@ int kdr_exec_wait(kdr_exec_query *q, double timeout_s);
 /* Asks q to stop at its next chunk (a queued q is finished at once). The
  * caller still waits for it; the result is then KDR_STOP_CANCELLED. */
 void kdr_exec_cancel(kdr_exec_query *q);
-/* After kdr_exec_wait returned 1: frees the job and the result body
- * (unless the caller took it: set q->result.body to {0}). */
+/* After kdr_exec_wait returned 1: frees the job and the result body or
+ * pieces (unless the caller took them: set q->result.body to {0},
+ * q->result.pieces to NULL). */
 void kdr_exec_query_done(kdr_exec_query *q);
 /* ---- streamed answers (kdr_exec_stream.c) ----------------------------------------
  * One caller thread at a time takes a stream query's items, in order:

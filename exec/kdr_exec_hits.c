@@ -104,17 +104,93 @@ static int attrs_fill(const kdr_exec_query *q, const int32_t *prims, size_t n,
     return 0;
 }
 
-/* Encodes closest / any hits with the attributes the fields ask for. */
-static int encode_hits(kdr_exec_job *j, const kdr_hits *h, size_t n, kdr_query query,
+/* Bytes of the arrays of a hits answer with these fields (its size less
+ * the CBOR heads). */
+static size_t hits_array_bytes(size_t n, kdr_query query, unsigned fields) {
+    size_t b = 0;
+    if (fields & KDR_FIELD_HIT) b += n;
+    if (query == KDR_ANY) return b;
+    for (unsigned bit = KDR_FIELD_T; bit <= KDR_FIELD_V; bit <<= 1)
+        if (fields & bit) b += 4 * n;
+    return b + (fields & KDR_FIELD_NORMAL ? 12 * n : 0) + (fields & KDR_FIELD_MESH ? 12 * n : 0);
+}
+
+/* Moves block (bytes long) into p, or frees it when no piece uses it. */
+static void pieces_take(kdr_exec_pieces *p, void *block, size_t bytes, int used) {
+    if (!block) return;
+    if (!used) {
+        free(block);
+        return;
+    }
+    p->blocks[p->nblocks++] = block;
+    p->held += bytes;
+}
+
+void kdr_exec_pieces_free(void *pieces) {
+    kdr_exec_pieces *p = pieces;
+    if (!p) return;
+    for (size_t i = 0; i < p->nblocks; i++)
+        free(p->blocks[i]);
+    kdr_buf_free(&p->head);
+    free(p);
+}
+
+/* The answer in pieces (kdr_exec_query.pieces): the heads are written, the
+ * arrays stay where the core wrote them and move, with the attribute
+ * arrays, from the job (h is emptied) to the result's pieces. */
+static int pieces_hits(kdr_exec_job *j, kdr_hits *h, size_t n, kdr_query query,
+                       unsigned fields, float *normal, int32_t *mesh) {
+    kdr_exec_pieces *p = calloc(1, sizeof *p);
+    uint8_t *hit_bytes = NULL;
+    const kdr_hit_attrs attrs = {normal, mesh};
+    int rc = p ? kdr_proto_hits_pieces(h, &attrs, n, query, fields, &p->head, &hit_bytes,
+                                       p->v, &p->n)
+               : KDR_ENOMEM;
+    if (rc != 0) {
+        free(hit_bytes);
+        free(normal);
+        free(mesh);
+        kdr_exec_pieces_free(p);
+        return rc;
+    }
+    for (size_t i = 0; i < p->n; i++)
+        p->len += p->v[i].len;
+    p->held = p->head.cap;
+    const size_t f4 = 4 * n;
+    pieces_take(p, h->t, f4, (fields & KDR_FIELD_T) != 0);
+    pieces_take(p, h->prim, f4, (fields & KDR_FIELD_PRIM) != 0);
+    pieces_take(p, h->u, f4, (fields & KDR_FIELD_U) != 0);
+    pieces_take(p, h->v, f4, (fields & KDR_FIELD_V) != 0);
+    pieces_take(p, h->hit, n, (fields & KDR_FIELD_HIT) != 0);
+    pieces_take(p, hit_bytes, n, 1);
+    pieces_take(p, normal, 3 * f4, 1);
+    pieces_take(p, mesh, 3 * f4, 1);
+    memset(h, 0, sizeof *h);
+    j->q->result.pieces = p;
+    return 0;
+}
+
+/* Encodes closest / any hits with the attributes the fields ask for: in
+ * pieces when the caller takes them and the answer is large CBOR, else
+ * into one buffer. */
+static int encode_hits(kdr_exec_job *j, kdr_hits *h, size_t n, kdr_query query,
                        unsigned fields, kdr_encoding enc) {
     float *normal = NULL;
     int32_t *mesh = NULL;
     int rc = 0;
     if (fields & KDR_FIELDS_ATTRS) rc = attrs_fill(j->q, h->prim, n, &normal, &mesh);
+    if (rc == 0 && j->q->pieces && enc == KDR_ENCODING_CBOR &&
+        hits_array_bytes(n, query, fields) >= KDR_EXEC_PIECES_MIN) {
+        rc = pieces_hits(j, h, n, query, fields, normal, mesh);
+        /* normal and mesh now belong to the pieces (or were freed) */
+        j->q->result.content_type = kdr_proto_encoding_media(enc);
+        if (rc != 0) kdr_exec_fail(j, 503, "out of memory while encoding the answer");
+        return rc;
+    }
     const kdr_hit_attrs attrs = {normal, mesh};
-    if (rc == 0)
-        rc = kdr_proto_encode_hits_attrs(h, &attrs, n, query, fields, enc,
-                                         &j->q->result.body);
+    if (rc == 0) /* the core's arrays: misses are in wire form already */
+        rc = kdr_proto_encode_hits_wire(h, &attrs, n, query, fields, enc,
+                                        &j->q->result.body);
     free(normal);
     free(mesh);
     return kdr_exec_encoded(j, rc, enc);

@@ -7,6 +7,7 @@
  * is built: an answer of millions of rays is a few heads and raw arrays.
  */
 #include <cbor.h>
+#include <stdint.h>
 
 #include "kdr_proto_internal.h"
 
@@ -39,7 +40,14 @@ int kdr_cbor_uint(kdr_buf *b, uint64_t v) {
 }
 
 int kdr_cbor_typed_head(kdr_buf *b, uint64_t tag, size_t nbytes) {
-    if (kdr_buf_reserve(b, 2 * KDR_CBOR_HEAD_MAX + nbytes))
+    if (nbytes > SIZE_MAX - 2 * KDR_CBOR_HEAD_MAX ||
+        kdr_buf_reserve(b, 2 * KDR_CBOR_HEAD_MAX + nbytes))
+        return KDR_ENOMEM;
+    return kdr_cbor_typed_head_only(b, tag, nbytes);
+}
+
+int kdr_cbor_typed_head_only(kdr_buf *b, uint64_t tag, size_t nbytes) {
+    if (kdr_buf_reserve(b, 2 * KDR_CBOR_HEAD_MAX))
         return KDR_ENOMEM;
     unsigned char *p = (unsigned char *)b->data + b->len;
     size_t k = cbor_encode_tag(tag, p, KDR_CBOR_HEAD_MAX);

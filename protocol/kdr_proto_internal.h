@@ -61,6 +61,9 @@ int kdr_cbor_uint(kdr_buf *b, uint64_t v);
 /* Tag + byte-string head of nbytes, with room reserved for the nbytes the
  * caller appends next (kdr_buf_put or direct writes). */
 int kdr_cbor_typed_head(kdr_buf *b, uint64_t tag, size_t nbytes);
+/* The same heads with no room reserved for the payload, which is sent
+ * from elsewhere (kdr_proto_hits_pieces). */
+int kdr_cbor_typed_head_only(kdr_buf *b, uint64_t tag, size_t nbytes);
 
 /* ---- field readers (kdr_fields.c, kdr_json_fast.c) ---------------------- */
 

@@ -323,6 +323,40 @@ typedef struct kdr_hit_attrs {
 int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
                                 kdr_query query, unsigned fields, kdr_encoding enc,
                                 kdr_buf *out);
+/* kdr_proto_encode_hits_attrs for arrays already in wire form, as the core
+ * writes them (kdray.h: a miss has prim = -1, t = -1, u = v = 0; any-hit
+ * bytes are 0 or 1) and the executor fills the attributes (a miss: 0,0,0
+ * and -1,-1,-1): the same bytes for such arrays, without the pass that
+ * normalises misses (which reads prim again for each of t, u and v): base64
+ * is encoded from the arrays themselves, CBOR copied in one piece. */
+int kdr_proto_encode_hits_wire(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                               kdr_query query, unsigned fields, kdr_encoding enc,
+                               kdr_buf *out);
+
+/* The CBOR answer of kdr_proto_encode_hits_attrs, byte for byte, as pieces
+ * to be sent one after another (writev; kdrayd's large answers): the small
+ * heads (map, "count", each member's name and typed-array head) are
+ * written into head, and the arrays are referenced where they lie, so the
+ * answer costs no copy of its arrays. The arrays must already be in wire
+ * form, as the core writes them (kdray.h: a miss has prim = -1, t = -1,
+ * u = v = 0; any-hit bytes are 0 or 1) and as the executor fills the
+ * attributes (a miss: 0,0,0 and -1,-1,-1); the one-buffer encoder
+ * normalises them on the way, so answers of arrays that break this
+ * convention would differ. The one array that has no wire form in memory,
+ * "hit" of a closest query (prim >= 0 as bytes), is written into a block
+ * of n bytes returned in *hit_bytes (the caller frees it, also when this
+ * fails; NULL when not needed). head must be empty: it gets one allocation that never moves, so
+ * pieces may point into it. pieces has room for KDR_HITS_PIECES_MAX; empty
+ * arrays make no piece. 0, KDR_EINVAL (as kdr_proto_encode_hits_attrs) or
+ * KDR_ENOMEM. */
+typedef struct kdr_piece {
+    const void *data;
+    size_t len;
+} kdr_piece;
+#define KDR_HITS_PIECES_MAX 16
+int kdr_proto_hits_pieces(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                          kdr_query query, unsigned fields, kdr_buf *head,
+                          uint8_t **hit_bytes, kdr_piece *pieces, size_t *npieces);
 
 /* Bundle "query": "all": {"count":N,"nhits":[N],"offset":[N+1], then the
  * chosen fields of t, prim, u, v, each offset[N] long}: ray i's hits are

@@ -29,6 +29,9 @@ typedef struct array_src {
     const int32_t *hit_of;
     const int32_t *prim;
     float miss_f;
+    /* f or i already hold the wire's values (the core's convention: a miss
+     * is -1 / 0, no other negative int): written as they lie */
+    int wire;
 } array_src;
 
 static int src_is_bytes(const array_src *s) { return s->u8 || s->hit_of; }
@@ -104,10 +107,16 @@ static void stage_words(const array_src *s, size_t k0, size_t m, void *stage) {
         int32_t *i = stage;
         for (size_t k = 0; k < m; k++)
             i[k] = src[k] < 0 ? -1 : src[k];
-    } else {
+    } else if (s->u8) { /* hoisted as above, so that GCC vectorises it */
+        const uint8_t *src = s->u8 + k0;
         int32_t *i = stage;
         for (size_t k = 0; k < m; k++)
-            i[k] = src_int(s, k0 + k);
+            i[k] = src[k] != 0;
+    } else {
+        const int32_t *src = s->hit_of + k0;
+        int32_t *i = stage;
+        for (size_t k = 0; k < m; k++)
+            i[k] = src[k] >= 0;
     }
 }
 
@@ -116,6 +125,11 @@ static int base64_array(kdr_buf *b, const array_src *s, size_t n) {
     if (kdr_buf_append(b, s->f ? "{\"f32\":\"" : "{\"i32\":\"", 8) ||
         kdr_buf_reserve(b, kdr_base64_encoded_len(4 * n) + 2))
         return KDR_ENOMEM;
+    if (s->wire && !src_is_bytes(s)) { /* from the array itself, in one pass */
+        const void *src = s->f ? (const void *)s->f : (const void *)s->i;
+        b->len += kdr_base64_encode(src, 4 * n, b->data + b->len);
+        return KDR_BUF_LIT(b, "\"}");
+    }
     for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
         const size_t m = n - k0 < KDR_CHUNK ? n - k0 : KDR_CHUNK;
         stage_words(s, k0, m, stage);
@@ -141,6 +155,10 @@ static int cbor_array(kdr_buf *b, const array_src *s, size_t n) {
     }
     if (kdr_cbor_typed_head(b, s->f ? KDR_CBOR_TAG_F32LE : KDR_CBOR_TAG_I32LE, 4 * n))
         return KDR_ENOMEM;
+    if (s->wire) {
+        kdr_buf_put(b, s->f ? (const void *)s->f : (const void *)s->i, 4 * n);
+        return 0;
+    }
     _Alignas(16) unsigned char stage[4 * KDR_CHUNK];
     for (size_t k0 = 0; k0 < n; k0 += KDR_CHUNK) {
         const size_t m = n - k0 < KDR_CHUNK ? n - k0 : KDR_CHUNK;
@@ -234,9 +252,10 @@ static int close_answer(kdr_buf *b, kdr_encoding enc) {
     return enc == KDR_ENCODING_CBOR ? 0 : kdr_buf_append(b, "}", 1);
 }
 
-/* The source of answer field bit for a query. */
+/* The source of answer field bit for a query; wire: the arrays are in wire
+ * form (no miss normalisation, float and int arrays written as they lie). */
 static array_src field_src(const kdr_hits *h, const kdr_hit_attrs *a, kdr_query query,
-                           unsigned bit) {
+                           unsigned bit, int wire) {
     array_src s = {0};
     switch (bit) {
     case KDR_FIELD_NORMAL:
@@ -264,6 +283,10 @@ static array_src field_src(const kdr_hits *h, const kdr_hit_attrs *a, kdr_query 
             s.hit_of = h->prim;
         break;
     }
+    if (wire && !src_is_bytes(&s)) {
+        s.prim = NULL;
+        s.wire = 1;
+    }
     return s;
 }
 
@@ -272,32 +295,115 @@ int kdr_proto_encode_hits_fields(const kdr_hits *hits, size_t n, kdr_query query
     return kdr_proto_encode_hits_attrs(hits, NULL, n, query, fields, enc, out);
 }
 
-int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs,
-                                size_t n, kdr_query query, unsigned fields,
-                                kdr_encoding enc, kdr_buf *out) {
+/* The members a hits answer of fields has, or 0 when the fields cannot be
+ * encoded for query (or their attributes are missing). */
+static size_t hits_members(const kdr_hit_attrs *attrs, kdr_query query, unsigned fields) {
     size_t members = 0;
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
         if (!(fields & fi->bit)) continue;
-        if (fi->closest_only && query == KDR_ANY) return KDR_EINVAL;
+        if (fi->closest_only && query == KDR_ANY) return 0;
         members++;
     }
-    if (members == 0 ||
-        (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY | KDR_FIELDS_ATTRS)))
-        return KDR_EINVAL;
+    if (fields & ~(KDR_FIELDS_CLOSEST | KDR_FIELDS_ANY | KDR_FIELDS_ATTRS)) return 0;
     if ((fields & KDR_FIELD_NORMAL && (!attrs || !attrs->normal)) ||
         (fields & KDR_FIELD_MESH && (!attrs || !attrs->mesh)))
-        return KDR_EINVAL;
+        return 0;
+    return members;
+}
+
+static int encode_hits(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                       kdr_query query, unsigned fields, kdr_encoding enc, int wire,
+                       kdr_buf *out) {
+    const size_t members = hits_members(attrs, query, fields);
+    if (members == 0) return KDR_EINVAL;
     if (presize(out, kdr_proto_hits_answer_max(n, query, fields, enc)) ||
         count_head(out, n, members, enc))
         return KDR_ENOMEM;
     for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
         const kdr_field_info *fi = &kdr_field_table[k];
         if (!(fields & fi->bit)) continue;
-        const array_src s = field_src(hits, attrs, query, fi->bit);
+        const array_src s = field_src(hits, attrs, query, fi->bit, wire);
         if (named_array(out, fi->name, &s, n * fi->width, enc)) return KDR_ENOMEM;
     }
     return close_answer(out, enc);
+}
+
+int kdr_proto_encode_hits_attrs(const kdr_hits *hits, const kdr_hit_attrs *attrs,
+                                size_t n, kdr_query query, unsigned fields,
+                                kdr_encoding enc, kdr_buf *out) {
+    return encode_hits(hits, attrs, n, query, fields, enc, 0, out);
+}
+
+int kdr_proto_encode_hits_wire(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                               kdr_query query, unsigned fields, kdr_encoding enc,
+                               kdr_buf *out) {
+    return encode_hits(hits, attrs, n, query, fields, enc, 1, out);
+}
+
+/* Bytes of the heads of a pieces answer: the map and "count" (<= 16), and
+ * per member its name (<= 9 + 8 bytes) and typed-array head (<= 18). */
+#define KDR_PIECES_HEAD_FIXED 32
+#define KDR_PIECES_HEAD_MEMBER 48
+
+_Static_assert(KDR_HITS_PIECES_MAX >= 2 * KDR_FIELD_COUNT,
+               "a head piece and an array piece per field");
+
+/* head's bytes since *mark as a piece (none if empty); *mark moves on. */
+static void head_piece(const kdr_buf *head, size_t *mark, kdr_piece *pieces, size_t *np) {
+    if (head->len > *mark)
+        pieces[(*np)++] = (kdr_piece){head->data + *mark, head->len - *mark};
+    *mark = head->len;
+}
+
+int kdr_proto_hits_pieces(const kdr_hits *hits, const kdr_hit_attrs *attrs, size_t n,
+                          kdr_query query, unsigned fields, kdr_buf *head,
+                          uint8_t **hit_bytes, kdr_piece *pieces, size_t *npieces) {
+    *hit_bytes = NULL;
+    *npieces = 0;
+    const size_t members = hits_members(attrs, query, fields);
+    if (members == 0 || head->cap != 0) return KDR_EINVAL;
+    /* the one allocation of head: nothing below moves it */
+    if (kdr_buf_reserve_exact(head,
+                              KDR_PIECES_HEAD_FIXED + members * KDR_PIECES_HEAD_MEMBER) ||
+        count_head(head, n, members, KDR_ENCODING_CBOR))
+        return KDR_ENOMEM;
+    const char *const base = head->data;
+    size_t mark = 0, np = 0;
+    for (size_t k = 0; k < KDR_FIELD_COUNT; k++) {
+        const kdr_field_info *fi = &kdr_field_table[k];
+        if (!(fields & fi->bit)) continue;
+        const array_src s = field_src(hits, attrs, query, fi->bit, 1);
+        const size_t m = n * fi->width;
+        const void *data;
+        size_t bytes;
+        uint64_t tag;
+        if (src_is_bytes(&s)) {
+            tag = KDR_CBOR_TAG_U8;
+            data = s.u8;
+            bytes = m;
+            if (s.hit_of) { /* as cbor_array writes it */
+                uint8_t *hb = malloc(m ? m : 1);
+                if (!hb) return KDR_ENOMEM;
+                for (size_t i = 0; i < m; i++)
+                    hb[i] = s.hit_of[i] >= 0;
+                *hit_bytes = hb;
+                data = hb;
+            }
+        } else {
+            tag = s.f ? KDR_CBOR_TAG_F32LE : KDR_CBOR_TAG_I32LE;
+            data = s.f ? (const void *)s.f : (const void *)s.i;
+            bytes = 4 * m;
+        }
+        if (kdr_cbor_text(head, fi->name) || kdr_cbor_typed_head_only(head, tag, bytes))
+            return KDR_ENOMEM;
+        head_piece(head, &mark, pieces, &np);
+        if (bytes) pieces[np++] = (kdr_piece){data, bytes};
+    }
+    head_piece(head, &mark, pieces, &np);
+    if (head->data != base) return KDR_EINVAL; /* the bound above is wrong */
+    *npieces = np;
+    return 0;
 }
 
 int kdr_proto_encode_hits(const kdr_hits *hits, size_t n, kdr_query query,

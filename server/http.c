@@ -28,7 +28,18 @@ enum MHD_Result kdr_http_queue(kdr_http *h, struct MHD_Connection *c, req_state 
                                kdr_response *r) {
     struct MHD_Response *resp;
     size_t len = r->len;
-    if (r->len) {
+    if (r->pieces) {
+        /* the answer's arrays where the core wrote them: no copy; MHD
+         * copies the vector and frees the pieces once it is done */
+        kdr_exec_pieces *p = r->pieces;
+        struct MHD_IoVec iov[KDR_HITS_PIECES_MAX];
+        for (size_t i = 0; i < p->n; i++)
+            iov[i] = (struct MHD_IoVec){p->v[i].data, p->v[i].len};
+        resp = MHD_create_response_from_iovec(iov, (unsigned)p->n, kdr_exec_pieces_free, p);
+        if (!resp) kdr_exec_pieces_free(p);
+        r->pieces = NULL;
+        free(r->body);
+    } else if (r->len) {
         resp = MHD_create_response_from_buffer_with_free_callback(r->len, r->body, free);
         if (!resp) free(r->body);
     } else {
@@ -189,6 +200,7 @@ void kdr_http_on_completed(void *cls, struct MHD_Connection *c, void **req_cls,
         if (rs->stream) kdr_stream_wait_done(rs->stream);
         kdr_query_finish(&rs->call, &dropped);
         free(dropped.body);
+        kdr_exec_pieces_free(dropped.pieces);
     }
     kdr_stream_free(rs->stream);
     kdr_exec_release(h->srv->exec, &rs->claim);

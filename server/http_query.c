@@ -56,6 +56,7 @@ static void stream_end(void *ctx, unsigned status) {
     kdr_http_watch_remove(rs->h, rs);
     kdr_query_finish(&rs->call, &fin);
     free(fin.body);
+    kdr_exec_pieces_free(fin.pieces); /* none: a stream has no one-shot answer */
     rs->started = 2;
     rs->status = fin.no_answer ? 499 : status;
     rs->rays = fin.rays;

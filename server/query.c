@@ -132,7 +132,8 @@ static int setup(kdr_server *srv, kdr_query_call *call, size_t scene, kdr_endpoi
                                .claim = req->claim,
                                .render = ep == KDR_EP_RENDER ? &call->render : NULL,
                                .on_done = on_done,
-                               .done_ctx = ctx};
+                               .done_ctx = ctx,
+                               .pieces = 1};
     call->submitted = kdr_now();
     return 0;
 }
@@ -189,8 +190,13 @@ void kdr_query_finish(kdr_query_call *call, kdr_response *out) {
         out->content_type = r->content_type;
         out->body = r->body.data;
         out->len = r->body.len;
+        if (r->pieces) {
+            out->pieces = r->pieces;
+            out->len = r->pieces->len;
+        }
         out->rays = r->rays;
         r->body = (kdr_buf){0}; /* the response owns it now */
+        r->pieces = NULL;
         if (call->ep == KDR_EP_RENDER) {
             render_headers(call, r, out);
         } else {

@@ -56,6 +56,9 @@ typedef struct kdr_response {
     unsigned retry_after; /* seconds, sent as Retry-After when > 0 */
     char *body;
     size_t len;
+    /* or a query's answer in pieces (exec/: its arrays where the core wrote
+     * them), len bytes in all, sent with writev; body is NULL then */
+    struct kdr_exec_pieces *pieces;
     kdr_endpoint ep;
     uint64_t rays; /* traced for this answer, for the access log */
     int no_answer; /* the client left: close without answering */

@@ -17,8 +17,9 @@
  *    on one list and not the other must be a proven rounding case;
  *  - 300 stacked squares across one ray (many_hits): 300 hits in t order
  *    uncapped and counted, the first 16 when capped.
- * The stress scenes have under 2.5 references per triangle, so their walks
- * run without the per-ray mailbox (kd_all.h, all_use_mbox); "blades" (long
+ * The stress scenes have under 2.5 references per triangle, so their counts
+ * run without the per-ray mailbox (kd_all.h, all_use_mbox; lists use it on
+ * every scene); "blades" (long
  * thin triangles in random directions, asserted >= 2.5 references per
  * triangle) puts every check above through it, and mbox_between_rays
  * checks that a ray's mailbox does not outlive it (the same ray twice in a

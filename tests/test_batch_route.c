@@ -18,7 +18,9 @@
  * kd_batch_far_first, which offers any-hit chunks whose ends cluster
  * (shadow rays of many points toward one light) the far end first order,
  * and kd_far_pick, which takes it where the call's probe measured it
- * cheaper.
+ * cheaper; chunks whose ends spread (AO) walk far end first in the
+ * interleaved walk, where kd_batch_scattered_any sends their runs of
+ * shared origins from KD_FAR_RUNS_MIN_BYTES on.
  */
 #include <math.h>
 #include <stdio.h>
@@ -115,6 +117,41 @@ static void check_route(const char *scene, const kdr_scene *s, const char *what,
         fprintf(stderr, "FAIL %s/%s: route %s, want %s (rc %d, rays %llu)\n", scene, what,
                 scattered ? "walk" : "bundles", want_walk ? "walk" : "bundles", rc,
                 (unsigned long long)st.rays);
+        failures++;
+    }
+    free(c);
+}
+
+/* The any-hit route of AO-like chunks (ends spread around the origins,
+ * tmax `reach`; kd_batch_scattered_any): want_walk 1 = the interleaved
+ * walk (where they walk far end first), 0 = bundles; read from
+ * kd_batch_scattered_any and from an any-hit kdr_trace_batch call's
+ * fallbacks. want_closest: kd_batch_scattered's (closest-hit) verdict,
+ * which must not move. */
+static void check_route_any(const char *scene, const kdr_scene *s, const char *what,
+                            int run, float reach, int want_walk, int want_closest) {
+    chunk *c = malloc(sizeof *c);
+    make_chunk(c, run);
+    for (int i = 0; i < KB_CHUNK; i++)
+        c->tmax[i] = reach;
+    const int walk = kd_batch_scattered_any(s, &c->b, 0, KB_CHUNK);
+    const int closest = kd_batch_scattered(s, &c->b, 0, KB_CHUNK);
+    uint8_t hit[KB_CHUNK];
+    kdr_hits h = {NULL, NULL, NULL, NULL, hit};
+    kdr_trav_stats st = {0};
+    const int rc = kdr_trace_batch(s, &c->b, 0, KB_CHUNK, KDR_ANY, KDR_TRAV_AUTO, &h, &st);
+    const uint64_t width = kd_cpu_has_avx512() ? 16 : kdr_cpu_has_avx2() ? 8 : 4;
+    const uint64_t all = KB_CHUNK / width;
+    const int fb_ok = want_walk ? st.fallbacks == all : st.fallbacks <= all - KB_PROBE;
+    const int ok = rc == KDR_OK && walk == want_walk && closest == want_closest && fb_ok &&
+                   st.rays == KB_CHUNK;
+    printf("%-5s any hit, %-27s walk %d (closest hit %d), fallbacks %llu of %llu groups: "
+           "%s\n",
+           scene, what, walk, closest, (unsigned long long)st.fallbacks,
+           (unsigned long long)all, ok ? "ok" : "FAIL");
+    if (!ok) {
+        fprintf(stderr, "FAIL any %s/%s: walk %d closest %d, want %d %d (rc %d)\n", scene,
+                what, walk, closest, want_walk, want_closest, rc);
         failures++;
     }
     free(c);
@@ -227,9 +264,11 @@ static void check_far_pick(void) {
  * over the soup): far end first meets the roof at once, front to back
  * walks the soup first. kdr_trace_batch (KB_FAR_AUTO) must then do less
  * work (node steps + triangle tests) than the same driver without it, with
- * the same answers; AO-like rays (ends around their origins) must do
- * exactly the same work either way (the rule does not offer them the far
- * order). */
+ * the same answers. AO-like rays (ends spread as their origins) with an
+ * origin per ray go to the interleaved walk and must walk far end first
+ * there: exactly the work of the driver with KB_FAR, not the front-to-back
+ * work; in runs of 16 on this small scene (under KD_FAR_RUNS_MIN_BYTES)
+ * they stay in bundles front to back: exactly the work without the flag. */
 static void check_far_work(void) {
     const size_t nsoup = 20000, n = 4096;
     float *tris = malloc((nsoup + 2) * 9 * sizeof(float));
@@ -248,44 +287,59 @@ static void check_far_work(void) {
     }
     float *org = malloc(3 * n * sizeof(float)), *dir = malloc(3 * n * sizeof(float));
     float *tmin = malloc(n * sizeof(float)), *tmax = malloc(n * sizeof(float));
-    uint8_t *hit[2] = {malloc(n), malloc(n)};
+    uint8_t *hit[3] = {malloc(n), malloc(n), malloc(n)};
     typedef void (*bundle_fn)(const kdr_scene *, const kdr_ray_batch *, size_t, size_t,
                               kdr_query, int, kdr_hits *, kdr_trav_stats *);
     const bundle_fn fn = kd_cpu_has_avx512() ? kd_bundle16_trace
                          : kdr_cpu_has_avx2() ? kd_bundle8_trace
                                               : kd_bundle4_trace;
-    for (int ao = 0; ao < 2; ao++) {
+    static const char *const what[3] = {"shadow rays", "AO-like rays, an origin per ray",
+                                        "AO-like rays, runs of 16"};
+    for (int ao = 0; ao < 3; ao++) {
         for (size_t i = 0; i < n; i++) {
-            for (int k = 0; k < 3; k++)
-                org[3 * i + k] = 1.6f * rnd01() - 0.8f;
+            if (ao < 2 || i % 16 == 0)
+                for (int k = 0; k < 3; k++)
+                    org[3 * i + k] = 1.6f * rnd01() - 0.8f;
+            else
+                memcpy(org + 3 * i, org + 3 * (i - 1), 3 * sizeof(float));
             const float light[3] = {0.2f * rnd01(), 3.0f, 0.2f * rnd01()};
             for (int k = 0; k < 3; k++)
                 dir[3 * i + k] = ao ? 2.0f * rnd01() - 1.0f : light[k] - org[3 * i + k];
+            /* AO-like: upper hemisphere, reaching past the roof (ends
+             * spread over a box wider than the origins'), so most rays are
+             * blocked by the roof and the two orders' work differs */
+            if (ao)
+                dir[3 * i + 1] = fabsf(dir[3 * i + 1]) + 0.5f;
             tmin[i] = 1e-4f;
-            tmax[i] = ao ? 0.1f : 1.0f;
+            tmax[i] = ao ? 3.0f : 1.0f;
         }
         const kdr_ray_batch b = {n, org, 3, dir, tmin, 1, tmax, 1};
-        kdr_trav_stats st[2] = {{0, 0, 0, 0}, {0, 0, 0, 0}};
-        for (int w = 0; w < 2; w++) {
+        /* without the far order, KB_FAR_AUTO, KB_FAR */
+        kdr_trav_stats st[3] = {{0, 0, 0, 0}, {0, 0, 0, 0}, {0, 0, 0, 0}};
+        static const int far_flag[3] = {0, KB_FAR_AUTO, KB_FAR};
+        for (int w = 0; w < 3; w++) {
             kdr_hits h = {NULL, NULL, NULL, NULL, hit[w]};
             for (size_t f = 0; f < n; f += 1024) /* the daemon's calls, smaller */
                 fn(s, &b, f, 1024, KDR_ANY,
-                   KB_FALLBACK | KB_SORT | KB_LIVE | (w ? KB_FAR_AUTO : 0), &h, &st[w]);
+                   KB_FALLBACK | KB_SORT | KB_LIVE | far_flag[w], &h, &st[w]);
         }
-        const uint64_t w0 = st[0].nodes_visited + st[0].tri_tests;
-        const uint64_t w1 = st[1].nodes_visited + st[1].tri_tests;
-        const int same = memcmp(hit[0], hit[1], n) == 0;
-        const int ok = same && (ao ? w1 == w0 : w1 < w0);
-        printf("far work: %s rays, work per ray %.1f without the far order, %.1f with "
-               "KB_FAR_AUTO, answers %s: %s\n",
-               ao ? "AO-like" : "shadow", (double)w0 / n, (double)w1 / n,
+        uint64_t wk[3];
+        for (int w = 0; w < 3; w++)
+            wk[w] = st[w].nodes_visited + st[w].tri_tests;
+        const int same = memcmp(hit[0], hit[1], n) == 0 && memcmp(hit[0], hit[2], n) == 0;
+        const int ok = same && (ao == 0   ? wk[1] < wk[0]
+                                : ao == 1 ? wk[1] == wk[2] && wk[1] < wk[0]
+                                          : wk[1] == wk[0] && wk[2] != wk[0]);
+        printf("far work: %s, work per ray %.1f without the far order, %.1f with "
+               "KB_FAR_AUTO, %.1f with KB_FAR, answers %s: %s\n",
+               what[ao], (double)wk[0] / n, (double)wk[1] / n, (double)wk[2] / n,
                same ? "equal" : "DIFFER", ok ? "ok" : "FAIL");
         if (!ok) {
-            fprintf(stderr, "FAIL far_work %s\n", ao ? "ao" : "shadow");
+            fprintf(stderr, "FAIL far_work %s\n", what[ao]);
             failures++;
         }
     }
-    free(org), free(dir), free(tmin), free(tmax), free(hit[0]), free(hit[1]);
+    free(org), free(dir), free(tmin), free(tmax), free(hit[0]), free(hit[1]), free(hit[2]);
     kdr_scene_free(s);
     free(tris);
 }
@@ -303,8 +357,8 @@ static kdr_scene *build(size_t ntris) {
 
 int main(void) {
     /* the large scene must reach the threshold, the small one stay below */
-    kdr_scene *big = build(200000), *small = build(20000);
-    if (!big || !small) return 1;
+    kdr_scene *big = build(200000), *small = build(20000), *mid = build(110000);
+    if (!big || !small || !mid) return 1;
     printf("scenes: big %llu bytes, small %llu bytes, threshold %zu\n",
            (unsigned long long)big->stats.bytes, (unsigned long long)small->stats.bytes,
            KD_STREAM_RUNS_MIN_BYTES);
@@ -320,6 +374,22 @@ int main(void) {
     check_route("small", small, "one origin, stride 3", KB_CHUNK, 0, 0);
     check_route("small", small, "runs of 16 (AO of 16 points)", 16, 0, 0);
     check_route("small", small, "an origin per ray", 1, 0, 1);
+    /* any hit, AO-like ends: runs go to the walk (far end first) from
+     * KD_FAR_RUNS_MIN_BYTES, closest-hit chunks from
+     * KD_STREAM_RUNS_MIN_BYTES */
+    printf("scene: mid %llu bytes, threshold %zu\n", (unsigned long long)mid->stats.bytes,
+           KD_FAR_RUNS_MIN_BYTES);
+    if (mid->stats.bytes < KD_FAR_RUNS_MIN_BYTES ||
+        mid->stats.bytes >= KD_STREAM_RUNS_MIN_BYTES ||
+        small->stats.bytes >= KD_FAR_RUNS_MIN_BYTES) {
+        fprintf(stderr, "FAIL: scene sizes do not bracket KD_FAR_RUNS_MIN_BYTES\n");
+        failures++;
+    }
+    check_route_any("mid", mid, "runs of 16, reach 0.2", 16, 0.2f, 1, 0);
+    check_route_any("mid", mid, "runs of 16, reach +inf", 16, INFINITY, 0, 0);
+    check_route_any("mid", mid, "one origin, stride 3", KB_CHUNK, 0.2f, 0, 0);
+    check_route_any("small", small, "runs of 16, reach 0.2", 16, 0.2f, 0, 0);
+    check_route_any("big", big, "runs of 16, reach 0.2", 16, 0.2f, 1, 1);
     /* the order must really permute these chunks (spread directions), or
      * the "no ray leaves its bundle" half would hold trivially */
     check_runs_fit(16, 0, 0, 16, 1);  /* 16 rays per point, 16 lanes */
@@ -331,8 +401,10 @@ int main(void) {
     check_runs_fit(KB_CHUNK, 1, 0, 16, 0); /* one origin, stride 0 */
     check_far_pick();
     check_far_work();
-    check_far_first("shadow rays, an origin per ray", 1, 0, END_LIGHT, 0, -1, 0, 1);
-    check_far_first("shadow rays, runs of 16 (16 points)", 16, 0, END_LIGHT, 0, -1, 0, 1);
+    check_far_first("shadow rays, an origin per ray", 1, 0, END_LIGHT, 0, -1, 0,
+                    KB_ENDS_CLUSTER);
+    check_far_first("shadow rays, runs of 16 (16 points)", 16, 0, END_LIGHT, 0, -1, 0,
+                    KB_ENDS_CLUSTER);
     /* one of the rays the rule samples (every eighth of 256); an unsampled
      * one is walked far end first from the root box's exit, which
      * test_bundle's ends-on-splits set checks */
@@ -342,11 +414,16 @@ int main(void) {
                     0);
     check_far_first("shadow rays of one origin, stride 0", KB_CHUNK, 1, END_LIGHT, 0, -1, 0,
                     0);
-    check_far_first("AO rays, runs of 16, reach 0.2", 16, 0, END_REACH, 0.2f, -1, 0, 0);
+    check_far_first("AO rays, runs of 16, reach 0.2", 16, 0, END_REACH, 0.2f, -1, 0,
+                    KB_ENDS_SPREAD);
     check_far_first("AO rays, an origin per ray, reach 0.05", 1, 0, END_REACH, 0.05f, -1, 0,
+                    KB_ENDS_SPREAD);
+    check_far_first("AO rays, one ray with tmax +inf", 16, 0, END_REACH, 0.2f, 64, 0, 0);
+    check_far_first("AO rays of one origin, stride 3", KB_CHUNK, 0, END_REACH, 0.2f, -1, 0,
                     0);
     kdr_scene_free(big);
     kdr_scene_free(small);
+    kdr_scene_free(mid);
     printf("%s: %d failures\n", failures ? "FAILED" : "passed", failures);
     return failures ? 1 : 0;
 }

@@ -110,7 +110,10 @@ static void make_cases(cases *c, const kdr_scene *s) {
     c->bodies[0] = bundle_body(10000, "closest", ""); /* 3 chunks */
     c->bodies[1] = bundle_body(9000, "any", ",\"encoding\":\"base64\"");
     c->bodies[2] = bundle_body(1, "closest", "");
-    c->bodies[3] = frustum_body(97, 61, "closest", ""); /* 13 x 8 tiles: 7 chunks */
+    /* 13 x 8 tiles: 7 chunks; base64 (frustum_body's encoding) of the
+     * core's arrays as they lie (kdr_proto_encode_hits_wire), misses
+     * included, against the normalising encoder */
+    c->bodies[3] = frustum_body(97, 61, "closest", "");
     c->bodies[4] = frustum_body(40, 30, "any", "");
     c->bodies[5] = shadow_body(150, 16, ""); /* 3 chunks */
     c->bodies[6] = shadow_body(1, 64, ",\"encoding\":\"base64\"");
@@ -252,6 +255,108 @@ static void test_inline(cases *c) {
     kdr_exec_get_stats(ex, &st);
     CHECK(st.running == 0 && st.queued == 0 && st.completed == NCASES + 1,
           "inline books");
+    kdr_exec_destroy(ex);
+}
+
+/* ---- answers in pieces (kdr_exec_query.pieces) ------------------------------------ */
+
+/* The pieces, one after another. */
+static kdr_buf join_pieces(const kdr_exec_pieces *p) {
+    kdr_buf b;
+    kdr_buf_init(&b);
+    for (size_t i = 0; i < p->n; i++)
+        CHECK(kdr_buf_append(&b, p->v[i].data, p->v[i].len) == 0, "append");
+    return b;
+}
+
+/* A large CBOR answer of hits comes in pieces, byte for byte the one-buffer
+ * answer (misses included: the frusta see past the scene), with the
+ * arrays where the core wrote them; its claim settles to the body and the
+ * blocks the pieces hold. A small one, a JSON one and a cone-shadow one
+ * come in one buffer. */
+static void test_pieces(const kdr_scene *s) {
+    enum { NP = 7 };
+    body b[NP];
+    kdr_exec_kind kinds[NP] = {KDR_EXEC_FRUSTUM, KDR_EXEC_FRUSTUM,    KDR_EXEC_BUNDLE,
+                               KDR_EXEC_BUNDLE,  KDR_EXEC_BUNDLE,     KDR_EXEC_FRUSTUM,
+                               KDR_EXEC_CONE_SHADOW};
+    const int want_pieces[NP] = {1, 1, 1, 1, 0, 0, 0};
+    b[0] = frustum_body(320, 240, "closest", "");
+    b[0].answer = KDR_MEDIA_CBOR;
+    b[1] = frustum_body(1024, 1024, "any", "");
+    b[1].answer = KDR_MEDIA_CBOR;
+    b[2] = bundle_body(
+        30000, "closest",
+        ",\"fields\":[\"mesh\",\"hit\",\"v\",\"normal\",\"t\",\"prim\",\"u\"]");
+    b[2].answer = KDR_MEDIA_CBOR;
+    b[3] = cbor_bundle_body(70000, "closest");
+    b[4] = cbor_bundle_body(65000, "closest"); /* 1040000 B of arrays: one buffer */
+    b[5] = frustum_body(320, 240, "closest", ""); /* base64: one buffer */
+    b[6] = cbor_shadow_body(3000);
+    kdr_exec_config cfg = {2, 8, 0, NULL, NULL};
+    kdr_exec *ex = kdr_exec_create(&cfg);
+    for (int i = 0; i < NP; i++) {
+        kdr_exec_query one = query_of(s, kinds[i], KDR_EXEC_FAST, &b[i]);
+        run_query(ex, &one);
+        CHECK(one.result.status == 200 && !one.result.pieces && one.result.body.len > 0,
+              "pieces case %d, one buffer: %d %s", i, one.result.status,
+              one.result.detail);
+        kdr_exec_claim cl = {0};
+        CHECK(kdr_exec_admit(ex, &cl, kdr_exec_body_charge(b[i].len)) == KDR_ADMIT_OK,
+              "admit");
+        kdr_exec_query q = query_of(s, kinds[i], KDR_EXEC_FAST, &b[i]);
+        q.pieces = 1;
+        q.claim = &cl;
+        run_query(ex, &q);
+        CHECK(q.result.status == 200, "pieces case %d: %d %s", i, q.result.status,
+              q.result.detail);
+        CHECK(!strcmp(q.result.content_type, one.result.content_type), "content type");
+        const kdr_exec_pieces *p = q.result.pieces;
+        CHECK(!!p == want_pieces[i], "case %d: pieces %d", i, !!p);
+        if (p) {
+            kdr_buf got = join_pieces(p);
+            CHECK(q.result.body.len == 0 && p->len == got.len && got.len == one.result.body.len &&
+                      !memcmp(got.data, one.result.body.data, got.len),
+                  "case %d: pieces differ from the one-buffer answer (%zu vs %zu bytes)", i,
+                  got.len, one.result.body.len);
+            kdr_buf_free(&got);
+            /* the arrays go out where they are: the biggest pieces are
+             * not in the head */
+            size_t arrays = 0;
+            for (size_t k = 0; k < p->n; k++)
+                if (p->v[k].len >= 4096) {
+                    arrays++;
+                    CHECK((const char *)p->v[k].data < p->head.data ||
+                              (const char *)p->v[k].data >= p->head.data + p->head.cap,
+                          "case %d: an array in the head", i);
+                }
+            CHECK(arrays >= 1, "case %d: no array piece", i);
+            if (i == 0) { /* pieces: head, t, head, prim, head, u, head, v */
+                const int32_t *prim = p->v[3].data;
+                size_t misses = 0, n = p->v[3].len / 4;
+                for (size_t k = 0; k < n; k++)
+                    misses += prim[k] == -1;
+                CHECK(p->n == 8 && n == 320 * 240 && misses > 0 && misses < n,
+                      "case 0: %zu pieces, %zu of %zu rays missed", p->n, misses, n);
+            }
+            CHECK(cl.bytes == b[i].len + p->held && p->held >= p->len - 200,
+                  "case %d: claim %zu, pieces hold %zu for %zu bytes", i, cl.bytes,
+                  p->held, p->len);
+        } else {
+            CHECK(q.result.body.len == one.result.body.len &&
+                      !memcmp(q.result.body.data, one.result.body.data,
+                              one.result.body.len),
+                  "case %d: one buffer differs", i);
+        }
+        kdr_exec_query_done(&q);
+        CHECK(!q.result.pieces, "query_done frees the pieces");
+        kdr_exec_release(ex, &cl);
+        kdr_exec_query_done(&one);
+        free(b[i].s);
+    }
+    kdr_exec_stats st;
+    kdr_exec_get_stats(ex, &st);
+    CHECK(st.bytes_used == 0 && st.slots_used == 0, "books back to zero");
     kdr_exec_destroy(ex);
 }
 
@@ -563,6 +668,7 @@ int main(void) {
     make_cases(&c, s);
     test_answers(&c);
     test_inline(&c);
+    test_pieces(s);
     test_admission();
     test_answer_charge(s);
     test_parse_charge(s);

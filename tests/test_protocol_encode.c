@@ -199,7 +199,8 @@ static void test_hits_response(size_t n, kdr_encoding enc) {
         u[i] = (float)(rng() % 100000) / 99991.0f;
         v[i] = -u[i];
         prim[i] = i % 5 == 3 ? -1 : (int32_t)(rng() % 2147483647u);
-        hit[i] = (uint8_t)(rng() & 1);
+        /* any nonzero byte is a hit (the core writes 1) */
+        hit[i] = rng() & 1 ? (uint8_t)(1 + rng() % 255) : 0;
     }
     kdr_hits h = {.t = t, .prim = prim, .u = u, .v = v, .hit = hit};
     kdr_buf b;
@@ -225,9 +226,36 @@ static void test_hits_response(size_t n, kdr_encoding enc) {
     doc = parse_buf(&b);
     CHECK(read_back(doc, "hit", 1, n, ib) == 0, "hit array");
     for (size_t i = 0; i < n; i++)
-        CHECK(ib[i] == hit[i], "hit[%zu]", i);
+        CHECK(ib[i] == (hit[i] != 0), "hit[%zu]", i);
     CHECK(!cJSON_GetObjectItemCaseSensitive(doc, "t"), "any has no t");
     cJSON_Delete(doc);
+    /* "hit" of a closest query: prim >= 0 */
+    b.len = 0;
+    CHECK(kdr_proto_encode_hits_fields(&h, n, KDR_CLOSEST, KDR_FIELD_HIT, enc, &b) == 0,
+          "encode closest hit");
+    doc = parse_buf(&b);
+    CHECK(read_back(doc, "hit", 1, n, ib) == 0, "closest hit array");
+    for (size_t i = 0; i < n; i++)
+        CHECK(ib[i] == (prim[i] >= 0), "closest hit[%zu]", i);
+    cJSON_Delete(doc);
+    /* arrays in wire form (misses as the core writes them): the wire
+     * encoder gives the normalising encoder's bytes */
+    for (size_t i = 0; i < n; i++) {
+        if (prim[i] < 0) t[i] = -1.0f, u[i] = 0.0f, v[i] = 0.0f;
+        hit[i] = hit[i] != 0;
+    }
+    kdr_buf w;
+    kdr_buf_init(&w);
+    for (int q = 0; q < 2; q++) {
+        const kdr_query query = q ? KDR_ANY : KDR_CLOSEST;
+        const unsigned fields = q ? KDR_FIELDS_ANY : KDR_FIELDS_CLOSEST | KDR_FIELD_HIT;
+        b.len = w.len = 0;
+        CHECK(kdr_proto_encode_hits_fields(&h, n, query, fields, enc, &b) == 0 &&
+                  kdr_proto_encode_hits_wire(&h, NULL, n, query, fields, enc, &w) == 0 &&
+                  b.len == w.len && !memcmp(b.data, w.data, b.len),
+              "wire encoder, query %d", q);
+    }
+    kdr_buf_free(&w);
     kdr_buf_free(&b);
     free(t), free(u), free(v), free(f), free(prim), free(ib), free(hit);
 }
