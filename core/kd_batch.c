@@ -386,6 +386,20 @@ int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
     return ew < KD_FAR_END_SPREAD * ow ? KB_ENDS_CLUSTER : KB_ENDS_SPREAD;
 }
 
+void kd_batch_bundles(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                      size_t count, kdr_query q, int flags, int max_width,
+                      kdr_hits *out, kdr_trav_stats *stats) {
+    if (!s->nodes)
+        for (size_t i = first; i < first + count; i++)
+            kd_batch_single(s, b, i, q, out, stats);
+    else if (max_width >= 16 && kd_cpu_has_avx512())
+        kd_bundle16_trace(s, b, first, count, q, flags, out, stats);
+    else if (max_width >= 8 && kdr_cpu_has_avx2())
+        kd_bundle8_trace(s, b, first, count, q, flags, out, stats);
+    else
+        kd_bundle4_trace(s, b, first, count, q, flags, out, stats);
+}
+
 static int batch_args_ok(const kdr_ray_batch *b, size_t first, size_t count,
                          kdr_query q, const kdr_hits *out) {
     if (!b || !out || !b->org || !b->dir)

@@ -3,8 +3,9 @@
  * kdr_shadow_trace_order and their forced-policy forms for tests): checks
  * the query, then sends its points down one of three paths. Below
  * CONE_WALK_FROM samples (or with walks forced off) no cone walks: the
- * samples of consecutive points go through one any-hit kdr_trace_batch a
- * chunk at a time (trace_unwalked). From there on, runs of up to
+ * samples of consecutive points go through the tree (any hit) a chunk at
+ * a time, in bundles or, at 1-2 samples on larger scenes, the interleaved
+ * walk far end first (trace_unwalked, trace_chunk). From there on, runs of up to
  * GROUP_POINTS consecutive points toward one light share one walk of their
  * group's cone (trace_grouped, kd_cone_group.c) and each point judges that
  * list (kd_pair_visibility in kd_cone.c). KDR_SHADOW_RAYS traces every
@@ -19,7 +20,8 @@
 
 #include "kd_cone.h"
 #include "kd_internal.h"
-#include "kd_stream.h" /* kd_cpu_has_avx512 */
+#include "kd_stream.h" /* kd_cpu_has_avx512, kd_stream_trace_far */
+#include "kd_traverse_bundle.h"
 
 #define SHADOW_MAX_SAMPLES 4096u
 
@@ -38,10 +40,35 @@ static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
     return first <= q->n && count <= q->n - first;
 }
 
+/* One chunk of unwalked samples (n per point and light), any hit. At 1-2
+ * samples on scenes of at least n x UNWALKED_STREAM_BYTES_PER_SAMPLE bytes
+ * the interleaved walk, far end first: a bundle there would hold the
+ * samples of 8-16 points a pixel apart, and the walk hides the larger
+ * tree's memory latency. Else bundles, without kdr_trace_batch's fallback
+ * to the interleaved walk: its tests (directions spread over 8 rays, the
+ * lanes' occupancy) were tuned on AO rays and send a wide light's 1-8
+ * samples there, where bundles trace them faster; on scenes of at least
+ * UNWALKED_NARROW_MIN_BYTES, 8 lanes at most up to
+ * UNWALKED_NARROW_MAX_SAMPLES samples (fewer points a bundle; kd_tune.h).
+ * Every route returns the single-ray walk's answers. */
+static void trace_chunk(const kdr_scene *scene, const kdr_ray_batch *b, size_t m,
+                        uint32_t n, uint8_t *hit, kdr_trav_stats *ts) {
+    kdr_hits out = {.hit = hit};
+    const uint64_t bytes = scene->stats.bytes;
+    if (scene->nodes && n <= UNWALKED_STREAM_MAX_SAMPLES &&
+        bytes >= (uint64_t)n * UNWALKED_STREAM_BYTES_PER_SAMPLE) {
+        kd_stream_trace_far(scene, b, NULL, 0, m, KDR_ANY, 0, &out, ts);
+        return;
+    }
+    const int narrow = n <= UNWALKED_NARROW_MAX_SAMPLES && bytes >= UNWALKED_NARROW_MIN_BYTES;
+    kd_batch_bundles(scene, b, 0, m, KDR_ANY, KB_SORT | KB_LIVE | KB_FAR_AUTO,
+                     narrow ? 8 : 16, &out, ts);
+}
+
 /* Points that do not walk their cones, a chunk at a time: the samples of
  * consecutive points (toward the same lights, from nearby surfaces: the
- * bundles stay coherent) go through the tree in one kdr_trace_batch, whose
- * set-up is then paid per chunk, not per point. */
+ * bundles stay coherent) go through the tree in one call (trace_chunk),
+ * whose set-up is then paid per chunk, not per point. */
 static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
                           size_t count, float *visibility, kd_shadow_ws *ws) {
     const uint32_t n = q->samples;
@@ -74,9 +101,8 @@ static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
             break;
         kdr_ray_batch b = {.n = m, .org = org, .org_stride = 3, .dir = dir,
                            .tmax = tmax, .tmax_stride = 1};
-        kdr_hits out = {.hit = hit};
         kdr_trav_stats ts = {0};
-        rc = kdr_trace_batch(scene, &b, 0, m, KDR_ANY, KDR_TRAV_AUTO, &out, &ts);
+        trace_chunk(scene, &b, m, n, hit, &ts);
         ws->st.rays_traced += m;
         ws->st.nodes_visited += ts.nodes_visited;
         for (size_t k = 0, pair = 0; rc == KDR_OK && k < m; k += n, pair++) {

@@ -79,6 +79,13 @@ void kd_bundle16_trace(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
                        size_t count, kdr_query q, int flags, kdr_hits *out,
                        kdr_trav_stats *stats);
 
+/* The batch driver of the widest bundles the CPU runs up to max_width
+ * lanes (16 with AVX-512, 8 with AVX2, else 4), with the caller's flags
+ * (kd_batch.c); a scene without a tree traces each ray alone. */
+void kd_batch_bundles(const kdr_scene *s, const kdr_ray_batch *b, size_t first,
+                      size_t count, kdr_query q, int flags, int max_width,
+                      kdr_hits *out, kdr_trav_stats *stats);
+
 /* Ray i of the batch, stride-0 fields shared; absent tmin/tmax mean 0 /
  * +inf (kd_batch.c). */
 void kd_batch_read(const kdr_ray_batch *b, size_t i, kdr_ray *r);

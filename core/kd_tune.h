@@ -229,8 +229,9 @@
 
 /* The cheap test (kd_cone.c, kd_walk_pays): below CONE_WALK_FROM samples per
  * point no whole-light cone walks; the samples of UNWALKED_CHUNK_RAYS / (S x
- * lights) consecutive points go through the tree in one kdr_trace_batch
- * (8-wide any-hit bundles), with no cone set-up. A walk (with its proofs)
+ * lights) consecutive points go through the tree in one call (any-hit
+ * bundles, or the interleaved walk: UNWALKED_STREAM_* below), with no
+ * cone set-up. A walk (with its proofs)
  * costs more than the 1-16 rays it may save even where it decides the
  * point, and over the chunk the batch's set-up is paid once. Measured with
  * kdray_bench_cone (default and 2CylinderEngine, small and large light,
@@ -252,6 +253,49 @@
 #define CONE_WIDE_SIN 0.1
 #define CONE_WALK_WIDE_FROM 128u
 #define UNWALKED_CHUNK_RAYS 1024u
+/* The route of those chunks (kd_cone_query.c, trace_chunk): at 1 to
+ * UNWALKED_STREAM_MAX_SAMPLES samples on scenes of at least samples x
+ * UNWALKED_STREAM_BYTES_PER_SAMPLE bytes the interleaved walk, far end
+ * first; else bundles without kdr_trace_batch's fallback to the
+ * interleaved walk (its tests, tuned on AO rays, sent a wide light's 1-2
+ * samples on every scene, and its 4-16 on scenes over 8 MiB, there).
+ * kdray_bench_cone, kd_cone against Embree, 17ed08b's binary and this
+ * one alternated twice (load 2.6-3.7; docs/TRAVERSAL.md, round "few
+ * samples"): 2 spp large light default 0.29 -> 0.45x, haus 0.40 -> 0.57x,
+ * 2CylinderEngine 0.41 -> 0.55x, engine3 0.44 -> 0.57x, engine9 0.50 ->
+ * 0.66x; 1 spp small light 2CylinderEngine 0.47 -> 0.64x; engine3 /
+ * engine9 large light 4 spp 0.44 / 0.48 -> 0.56 / 0.54x, 8 spp 0.44 /
+ * 0.47 -> 0.66 / 0.63x, 16 spp 0.41 / 0.44 -> 0.87 / 0.83x; no row lost
+ * more than 4%. Each route measured against the others in one build
+ * (interleaved far first / front to back / bundles with no fallback): on
+ * default (0.3 MB) bundles won at 1-2 spp (small light 0.50 / 0.53x
+ * against 0.42 / 0.34x far first); from haus (2 MB) up the far-first walk
+ * won at 1 spp (haus large light 0.61 against 0.53x), from
+ * 2CylinderEngine (6 MB) up at 2 spp (engine3 large light 0.59 against
+ * 0.45x; 2CylinderEngine a tie, 0.53-0.56 against 0.50-0.55x); at 4 spp
+ * bundles won but on engine3 / engine9's large light (a tie); front to
+ * back lost everywhere. */
+#define UNWALKED_STREAM_MAX_SAMPLES 2u
+#define UNWALKED_STREAM_BYTES_PER_SAMPLE ((uint64_t)3 << 19)
+/* ... and of the bundles: on scenes of at least UNWALKED_NARROW_MIN_BYTES,
+ * chunks of 3 to UNWALKED_NARROW_MAX_SAMPLES samples go to 8-lane bundles
+ * even with AVX-512 (one or two points a bundle instead of two to five).
+ * Measured in one build (8 lanes against 16, kdray_bench_cone --only haus
+ * --only engine3 --only engine9 [--only default --only engine]
+ * --ref-samples 0 --repeat 3, kd_cone against Embree, two runs each, load
+ * 4.3-5.8): 8 spp small / large light 2CylinderEngine 0.84 0.83 / 0.74
+ * 0.75x against 0.80 0.79 / 0.70 0.67x, engine3 0.84 0.82 / 0.78 0.77x
+ * against 0.81 0.79 / 0.69 0.66x, engine9 0.89 0.90 / 0.82 0.72x against
+ * 0.78 0.81 / 0.66 0.66x; 4 spp engine3 large 0.61 0.61 against 0.56
+ * 0.55x, engine9 small / large 0.70 0.67 / 0.67 0.66x against 0.64 0.63 /
+ * 0.58 0.58x, 2CylinderEngine within 3%; 3 spp engine3 / engine9 large
+ * 0.53-0.57 against 0.49-0.51x. It lost on haus (2 MB; 8 spp small 0.77
+ * 0.78 against 0.79 0.80x) and default (4 spp large 0.43 against 0.46
+ * 0.47x), and at 16 spp everywhere (engine9 0.69 / 0.65x against 0.88 /
+ * 0.86x, one point fills a 16-lane bundle); 4 lanes at 4 spp lost
+ * everywhere (default large 0.30 against 0.46x). */
+#define UNWALKED_NARROW_MAX_SAMPLES 8u
+#define UNWALKED_NARROW_MIN_BYTES ((uint64_t)4 << 20)
 /* Shared walks (kd_cone_query.c trace_grouped, kd_cone_group.c): up to
  * GROUP_POINTS consecutive points walk one cone toward a light when the
  * ball around their apexes is at most GROUP_MAX_SPREAD times the light's;

@@ -26,7 +26,11 @@
  *  - the cheap edge test (kd_tri_edges_miss) says MISSES only where the
  *    full proof does and no float ray of the cone hits the triangle;
  *  - sharing: points in free space under an empty sky are decided by one
- *    walk per group (fewer nodes than their own walks), and all lit.
+ *    walk per group (fewer nodes than their own walks), and all lit;
+ *  - unwalked routes: at 1, 2, 3 and 8 samples on a small and a large
+ *    scene (16- and 8-lane bundles, and the interleaved walk far end
+ *    first), every policy equals the reference mode and brute force
+ *    (test_unwalked_routes).
  */
 #include <math.h>
 #include <stdio.h>
@@ -640,13 +644,68 @@ static void test_split_runs(void) {
                          "the halves did not share walks");
 }
 
+/* Unwalked points (below CONE_WALK_FROM samples), every route of
+ * kd_cone_query.c's trace_chunk: on a small scene every chunk goes to the
+ * widest bundles; on one past 2 x UNWALKED_STREAM_BYTES_PER_SAMPLE and
+ * UNWALKED_NARROW_MIN_BYTES bytes the 1- and 2-sample chunks go to the
+ * interleaved walk far end first, the 3- and 8-sample ones to 8-lane
+ * bundles. Every policy and the reference mode agree bit for bit,
+ * and equal brute force on one pair in 31, toward a narrow and a wide light
+ * (whose samples diverge most) and both in one query, with 1e-4 offsets
+ * too. */
+static void test_unwalked_routes(void) {
+    for (int big = 0; big < 2; big++) {
+        tri_buf b = {0};
+        floor_grid(&b, big ? 230 : 24, 0.004f);
+        const float lo[3] = {-0.8f, 0.05f, -0.8f}, hi[3] = {0.8f, 0.6f, 0.8f};
+        soup(&b, 300, lo, hi, 0.12f);
+        const float sc[3] = {-0.3f, 0.35f, 0.2f};
+        sphere(&b, sc, 0.2f, 12, 24);
+        kdr_scene *s = build(&b);
+        kdr_tree_stats ts;
+        kdr_scene_tree_stats(s, &ts);
+        uint64_t need = 2 * UNWALKED_STREAM_BYTES_PER_SAMPLE;
+        need = need > UNWALKED_NARROW_MIN_BYTES ? need : UNWALKED_NARROW_MIN_BYTES;
+        CHECK(big ? ts.bytes >= need : ts.bytes < UNWALKED_STREAM_BYTES_PER_SAMPLE,
+              "unwalked routes: the %s scene takes %llu bytes", big ? "large" : "small",
+              (unsigned long long)ts.bytes);
+        points fp;
+        floor_points(s, 40, 0.95f, &fp);
+        const kdr_sphere_light lights[2] = {{{0.3f, 3.0f, 0.2f}, 0.1f},
+                                            {{-0.2f, 1.2f, 0.1f}, 0.5f}};
+        static const char *const lname[3] = {"narrow light", "wide light", "both lights"};
+        static const uint32_t spps[4] = {1, 2, 3, 8};
+        for (int l = 0; l < 3; l++) /* l == 2: both lights in one query */
+            for (int k = 0; k < 4; k++) {
+                const uint32_t spp = spps[k];
+                kdr_shadow_query q = {.n = fp.count, .points = fp.p, .normals = fp.n,
+                                      .lights = &lights[l == 2 ? 0 : l],
+                                      .nlights = l == 2 ? 2 : 1, .samples = spp,
+                                      .seed = 17, .offset = KDR_OFFSET_AUTO};
+                char label[96];
+                snprintf(label, sizeof label, "%s floor, %s, %u spp",
+                         big ? "large" : "small", lname[l], spp);
+                check_policies(label, s, &b, &q);
+                q.offset = KDR_OFFSET_DIAGONAL;
+                q.epsilon = 1e-4f;
+                snprintf(label, sizeof label, "%s floor, %s, %u spp, 1e-4",
+                         big ? "large" : "small", lname[l], spp);
+                check_policies(label, s, &b, &q);
+            }
+        free(fp.p), free(fp.n);
+        kdr_scene_free(s);
+        free(b.v);
+    }
+}
+
 int main(void) {
     test_containment();
     test_edges_miss();
     test_answers();
     test_sharing();
     test_split_runs();
-    test_clear(); /* last: the cases above were drawn before it existed */
+    test_clear(); /* the cases above were drawn before it existed */
+    test_unwalked_routes(); /* after test_clear, whose cases come first */
     if (failures) {
         fprintf(stderr, "test_cone_group: %d failure(s)\n", failures);
         return 1;
