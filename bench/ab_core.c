@@ -479,6 +479,11 @@ static int run_scene(const opts *o, const ladder_entry *e) {
         case SET_BAO1:
             ao_rays(&si, n, 1, rays), j.q = KDR_ANY;
             break;
+        case SET_BCAMLARGE:
+            light_of(&si, 1, &li);
+            j.n = camshadow_rays(&si, cores[0].intersect1, kd[0], n, &li, rays);
+            j.q = KDR_ANY;
+            break;
         case SET_SHADOW:
         case SET_BSHADOW:
             light_of(&si, 0, &li);

@@ -16,11 +16,11 @@ const char *const set_names[NSETS] = {"camera",  "random",  "ao",     "ao64",   
                                       "b8cam",   "frustum", "cone16", "cone64", "shadow",
                                       "camshadow",
                                       "brandom", "bao",     "baoc",   "bshadow", "bshadow16",
-                                      "b16cam",  "conecam", "b8ao8",   "bao64",  "bao1",
+                                      "b16cam",  "conecam", "b8ao8",   "bao64",  "bao1",   "bcamlarge",
                                       "all16",   "all",     "count",  "closest", "ball16",
                                       "ball",    "bcount"};
 const unsigned char set_embree[NSETS] = {1, 1, 1, 1, 0, 0, 0, 0, 0, 1, 1,
-                                         1, 1, 1, 1, 1, 0, 0, 0, 1, 1, 0, 0,
+                                         1, 1, 1, 1, 1, 0, 0, 0, 1, 1, 1, 0, 0,
                                          0, 0, 0, 0, 0};
 
 void scene_bounds(scene_in *s) {

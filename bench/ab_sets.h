@@ -81,6 +81,7 @@ enum {
     SET_B8AO8, /* b8ao through the 8-wide driver (KDR_TRAV_BUNDLE8), issue 11 */
     SET_BAO64, /* ao64 as bao: calls of AB_BATCH with per-ray origins */
     SET_BAO1,  /* AO any hit, one ray per point, as bao */
+    SET_BCAMLARGE, /* camshadow's points toward the large light, in calls of AB_BATCH */
     SET_ALL16, SET_ALL, SET_COUNT, SET_CLOSEST,
     SET_BALL16, SET_BALL, SET_BCOUNT, NSETS
 };

@@ -343,18 +343,18 @@ int kd_batch_scattered_any(const kdr_scene *s, const kdr_ray_batch *b, size_t fi
                            size_t count) {
     size_t runs_min = KD_STREAM_RUNS_MIN_BYTES;
     if (s->stats.bytes >= KD_FAR_RUNS_MIN_BYTES && s->stats.bytes < runs_min &&
-        kd_batch_far_first(b, NULL, first, count) == KB_ENDS_SPREAD)
+        kd_batch_far_first(s, b, NULL, first, count) == KB_ENDS_SPREAD)
         runs_min = KD_FAR_RUNS_MIN_BYTES;
     return scattered(s, b, first, count, runs_min);
 }
 
 #define FAR_SAMPLE 32
 
-int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
-                       size_t count) {
+int kd_batch_far_first(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                       size_t first, size_t count) {
     if (b->org_stride == 0 || !b->tmax || count == 0)
         return KB_ENDS_NONE;
-    float olo[3], ohi[3], elo[3], ehi[3];
+    float olo[3], ohi[3], elo[3], ehi[3], len2 = 0.0f;
     for (int k = 0; k < 3; k++)
         olo[k] = elo[k] = INFINITY, ohi[k] = ehi[k] = -INFINITY;
     /* FAR_SAMPLE rays spread over the chunk tell the boxes well enough
@@ -364,8 +364,10 @@ int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
         const size_t i = ids ? ids[j] : first + j;
         const float *o = b->org + 3 * i, *d = b->dir + 3 * i;
         const float tmax = b->tmax[b->tmax_stride * i];
+        float l2 = 0.0f;
         for (int k = 0; k < 3; k++) {
             const float e = o[k] + tmax * d[k];
+            l2 += (tmax * d[k]) * (tmax * d[k]);
             if (!(e - e == 0.0f)) /* no finite end (tmax = inf, NaN) */
                 return KB_ENDS_NONE;
             olo[k] = o[k] < olo[k] ? o[k] : olo[k];
@@ -373,6 +375,7 @@ int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
             elo[k] = e < elo[k] ? e : elo[k];
             ehi[k] = e > ehi[k] ? e : ehi[k];
         }
+        len2 = l2 > len2 ? l2 : len2;
     }
     float ow = 0.0f, ew = 0.0f;
     for (int k = 0; k < 3; k++) {
@@ -383,7 +386,12 @@ int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
      * path replay stays, as with stride 0 */
     if (ow == 0.0f)
         return KB_ENDS_NONE;
-    return ew < KD_FAR_END_SPREAD * ow ? KB_ENDS_CLUSTER : KB_ENDS_SPREAD;
+    if (ew < KD_FAR_END_SPREAD * ow)
+        return KB_ENDS_CLUSTER;
+    /* spread ends: far end first only for short rays (AO); long ones
+     * (toward a large light) keep the front-to-back walk */
+    const float lim = KD_FAR_SPREAD_MAX_LEN * s->diagonal;
+    return len2 <= lim * lim ? KB_ENDS_SPREAD : KB_ENDS_LONG;
 }
 
 void kd_batch_bundles(const kdr_scene *s, const kdr_ray_batch *b, size_t first,

@@ -148,17 +148,25 @@ int kd_batch_runs_fit(const kdr_ray_batch *b, const size_t *ids, size_t count, s
  *                    the light and shares its top path with the chunk's
  *                    other rays): far end first where the call's probe
  *                    measures it cheaper;
- *   KB_ENDS_SPREAD   own origins, every end finite, not clustered (AO
- *                    rays: ends around their origins): far end first in
- *                    the interleaved walk (KD_FAR_RUNS_MIN_BYTES);
+ *   KB_ENDS_SPREAD   own origins, every end finite, not clustered, and
+ *                    every sampled ray no longer than KD_FAR_SPREAD_MAX_LEN
+ *                    times the scene's diagonal (AO rays: short, ends
+ *                    around their origins): far end first in the
+ *                    interleaved walk, runs there from
+ *                    KD_FAR_RUNS_MIN_BYTES, leaves staged from
+ *                    KD_FAR_STAGE_MIN_BYTES;
+ *   KB_ENDS_LONG     the same with some sampled ray longer (shadow rays
+ *                    toward a large light): far end first in the
+ *                    interleaved walk, its usual routes and staging;
  *   KB_ENDS_NONE     one origin (stride 0, or one over the sample: its
  *                    path replay stays), no tmax array or some end not
  *                    finite: front to back. */
 #define KB_ENDS_NONE 0
 #define KB_ENDS_CLUSTER 1
 #define KB_ENDS_SPREAD 2
-int kd_batch_far_first(const kdr_ray_batch *b, const size_t *ids, size_t first,
-                       size_t count);
+#define KB_ENDS_LONG 3
+int kd_batch_far_first(const kdr_scene *s, const kdr_ray_batch *b, const size_t *ids,
+                       size_t first, size_t count);
 
 /* kd_batch_scattered for an any-hit call that offers the far order
  * (KB_FAR_AUTO): chunks whose ends spread (KB_ENDS_SPREAD) with runs of

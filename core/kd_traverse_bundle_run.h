@@ -254,11 +254,12 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
             /* clustered ends: the probe decides; spread ends (AO): far
              * end first (KD_FAR_RUNS_MIN_BYTES) */
             const size_t probe = alone - base < KB_CHUNK ? alone - base : KB_CHUNK;
-            const int ends = far_auto ? kd_batch_far_first(rb, NULL, base, probe)
+            const int ends = far_auto ? kd_batch_far_first(s, rb, NULL, base, probe)
                                       : KB_ENDS_NONE;
             const int order = far_all                    ? KB_ORDER_FAR
                               : ends == KB_ENDS_CLUSTER ? KB_ORDER_PROBE
                               : ends == KB_ENDS_SPREAD  ? KB_ORDER_FAR_SPREAD
+                              : ends == KB_ENDS_LONG    ? KB_ORDER_FAR
                                                         : KB_ORDER_NEAR;
             KD_WN(kb_alone)(s, rb, NULL, base, alone - base, q, order, &fp, out, stats);
             base = alone;
@@ -284,7 +285,7 @@ KD_FN void KD_WN(kb_run)(const kdr_scene *s, const kdr_ray_batch *rb, size_t fir
          * bundles keep their origin's path replay (KD_FAR_RUNS_MIN_BYTES) */
         const int order =
             far_all ? KB_ORDER_FAR
-            : far_auto && m > 0 && kd_batch_far_first(rb, ids, 0, (size_t)m) == KB_ENDS_CLUSTER
+            : far_auto && m > 0 && kd_batch_far_first(s, rb, ids, 0, (size_t)m) == KB_ENDS_CLUSTER
                 ? KB_ORDER_PROBE
                 : KB_ORDER_NEAR;
         if (m > 0 && KD_WN(kb_chunk)(s, rb, ids, m, q, flags, order, &fp, out, stats)) {

@@ -161,6 +161,20 @@
  * one point per call decides it (bao64 engine3 1.37 with it against 1.67
  * without). docs/TRAVERSAL.md, "Round: AO batches". */
 #define KD_FAR_RUNS_MIN_BYTES ((size_t)4 << 20)
+/* ...where every sampled ray is at most KD_FAR_SPREAD_MAX_LEN times the
+ * scene's diagonal long (AO rays reach 0.1 of it in the benchmarks).
+ * Longer rays whose ends spread (shadow rays of many points toward a large
+ * light: KB_ENDS_LONG) walk far end first in the interleaved walk too, but
+ * neither go there in runs from KD_FAR_RUNS_MIN_BYTES nor stage their
+ * leaves from KD_FAR_STAGE_MIN_BYTES: on 2CylinderEngine, one shadow ray per
+ * camera hit point toward bench/ab's large light (set bcamlarge) ran 1.28x
+ * faster unstaged with the same node steps and tests (bench/ab, 3 rounds,
+ * load 1.6-2.7; haus, engine3, engine9 0.98-1.03: haus is under 4 MiB, the
+ * other two stage from 16 MiB anyway); front to back instead lost on haus
+ * (0.845). Staging had also cost cone queries' large-light samples there
+ * (kdray_bench_cone, 2CylinderEngine large light 8 spp 0.66 -> 0.34x Embree
+ * before round conelow took them off kdr_trace_batch). */
+#define KD_FAR_SPREAD_MAX_LEN 0.25f
 /* Those far walks stage their leaves (KD_STREAM_STAGE) from this size on
  * (others from KD_STREAM_STAGE_MIN_BYTES): their ends scatter over the
  * scene, so each far descent misses where a shadow ray's shares the

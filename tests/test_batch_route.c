@@ -195,19 +195,20 @@ static void check_runs_fit(int run, int shared, size_t skip, size_t w, int want)
  * make_chunk's directions for `reach` (AO-like: ends spread as the
  * origins do); then one ray's tmax made +inf (no finite end), or the
  * tmax array dropped (every tmax +inf). */
-enum { END_LIGHT, END_REACH };
-static void check_far_first(const char *what, int run, int shared, int ends, float reach,
-                            int inf_at, int no_tmax, int want) {
+enum { END_LIGHT, END_REACH, END_BIG_LIGHT };
+static void check_far_first(const kdr_scene *s, const char *what, int run, int shared,
+                            int ends, float reach, int inf_at, int no_tmax, int want) {
     chunk *c = malloc(sizeof *c);
     make_chunk(c, run);
     if (shared) c->b.org_stride = 0;
     for (int i = 0; i < KB_CHUNK; i++) {
         const float *o = c->org + (shared ? 0 : 3 * i);
         float *d = c->dir + 3 * i;
-        if (ends == END_LIGHT) {
+        if (ends != END_REACH) {
             const float light[3] = {0.0f, 3.0f, 0.0f};
+            const float radius = ends == END_LIGHT ? 0.05f : 1.5f;
             for (int k = 0; k < 3; k++)
-                d[k] = light[k] + 0.05f * d[k] - o[k];
+                d[k] = light[k] + radius * d[k] - o[k];
             c->tmin[i] = 1e-4f, c->tmax[i] = 1.0f;
         } else {
             c->tmin[i] = 0.0f, c->tmax[i] = reach;
@@ -215,11 +216,11 @@ static void check_far_first(const char *what, int run, int shared, int ends, flo
     }
     if (inf_at >= 0) c->tmax[inf_at] = INFINITY;
     if (no_tmax) c->b.tmax = NULL;
-    const int got = kd_batch_far_first(&c->b, NULL, 0, KB_CHUNK);
+    const int got = kd_batch_far_first(s, &c->b, NULL, 0, KB_CHUNK);
     size_t ids[KB_CHUNK];
     for (int i = 0; i < KB_CHUNK; i++) /* rotated by 8: the same rays sampled */
         ids[i] = (size_t)((i + 8) % KB_CHUNK);
-    const int got_ids = kd_batch_far_first(&c->b, ids, 0, KB_CHUNK);
+    const int got_ids = kd_batch_far_first(s, &c->b, ids, 0, KB_CHUNK);
     const int ok = got == want && got_ids == want;
     printf("far end first: %-44s %d (want %d): %s\n", what, got, want, ok ? "ok" : "FAIL");
     if (!ok) {
@@ -268,7 +269,9 @@ static void check_far_pick(void) {
  * origin per ray go to the interleaved walk and must walk far end first
  * there: exactly the work of the driver with KB_FAR, not the front-to-back
  * work; in runs of 16 on this small scene (under KD_FAR_RUNS_MIN_BYTES)
- * they stay in bundles front to back: exactly the work without the flag. */
+ * they stay in bundles front to back: exactly the work without the flag.
+ * Longer AO-like rays (KB_ENDS_LONG: 3 units, half the diagonal) with an
+ * origin per ray walk far end first there too. */
 static void check_far_work(void) {
     const size_t nsoup = 20000, n = 4096;
     float *tris = malloc((nsoup + 2) * 9 * sizeof(float));
@@ -293,11 +296,12 @@ static void check_far_work(void) {
     const bundle_fn fn = kd_cpu_has_avx512() ? kd_bundle16_trace
                          : kdr_cpu_has_avx2() ? kd_bundle8_trace
                                               : kd_bundle4_trace;
-    static const char *const what[3] = {"shadow rays", "AO-like rays, an origin per ray",
-                                        "AO-like rays, runs of 16"};
-    for (int ao = 0; ao < 3; ao++) {
+    static const char *const what[4] = {"shadow rays", "AO-like rays, an origin per ray",
+                                        "AO-like rays, runs of 16",
+                                        "long AO-like rays (KB_ENDS_LONG), an origin per ray"};
+    for (int ao = 0; ao < 4; ao++) {
         for (size_t i = 0; i < n; i++) {
-            if (ao < 2 || i % 16 == 0)
+            if (ao != 2 || i % 16 == 0)
                 for (int k = 0; k < 3; k++)
                     org[3 * i + k] = 1.6f * rnd01() - 0.8f;
             else
@@ -305,13 +309,23 @@ static void check_far_work(void) {
             const float light[3] = {0.2f * rnd01(), 3.0f, 0.2f * rnd01()};
             for (int k = 0; k < 3; k++)
                 dir[3 * i + k] = ao ? 2.0f * rnd01() - 1.0f : light[k] - org[3 * i + k];
-            /* AO-like: upper hemisphere, reaching past the roof (ends
-             * spread over a box wider than the origins'), so most rays are
-             * blocked by the roof and the two orders' work differs */
-            if (ao)
+            /* AO-like: from the soup's upper part (y 0.2-1), upper
+             * hemisphere, 1.4 long (under KD_FAR_SPREAD_MAX_LEN of the
+             * diagonal, 6.2), so most reach the roof (ends spread over a
+             * box wider than the origins'), are blocked by it and the two
+             * orders' work differs */
+            if (ao) {
+                org[3 * i + 1] = 0.2f + 0.8f * rnd01();
+                if (ao == 2 && i % 16) org[3 * i + 1] = org[3 * (i - 1) + 1];
                 dir[3 * i + 1] = fabsf(dir[3 * i + 1]) + 0.5f;
+                float len = 0.0f;
+                for (int k = 0; k < 3; k++)
+                    len += dir[3 * i + k] * dir[3 * i + k];
+                for (int k = 0; k < 3; k++)
+                    dir[3 * i + k] /= sqrtf(len);
+            }
             tmin[i] = 1e-4f;
-            tmax[i] = ao ? 3.0f : 1.0f;
+            tmax[i] = ao == 3 ? 3.0f : ao ? 1.4f : 1.0f;
         }
         const kdr_ray_batch b = {n, org, 3, dir, tmin, 1, tmax, 1};
         /* without the far order, KB_FAR_AUTO, KB_FAR */
@@ -328,8 +342,8 @@ static void check_far_work(void) {
             wk[w] = st[w].nodes_visited + st[w].tri_tests;
         const int same = memcmp(hit[0], hit[1], n) == 0 && memcmp(hit[0], hit[2], n) == 0;
         const int ok = same && (ao == 0   ? wk[1] < wk[0]
-                                : ao == 1 ? wk[1] == wk[2] && wk[1] < wk[0]
-                                          : wk[1] == wk[0] && wk[2] != wk[0]);
+                                : ao == 2 ? wk[1] == wk[0] && wk[2] != wk[0]
+                                          : wk[1] == wk[2] && wk[1] < wk[0]);
         printf("far work: %s, work per ray %.1f without the far order, %.1f with "
                "KB_FAR_AUTO, %.1f with KB_FAR, answers %s: %s\n",
                what[ao], (double)wk[0] / n, (double)wk[1] / n, (double)wk[2] / n,
@@ -401,26 +415,34 @@ int main(void) {
     check_runs_fit(KB_CHUNK, 1, 0, 16, 0); /* one origin, stride 0 */
     check_far_pick();
     check_far_work();
-    check_far_first("shadow rays, an origin per ray", 1, 0, END_LIGHT, 0, -1, 0,
+    check_far_first(mid, "shadow rays, an origin per ray", 1, 0, END_LIGHT, 0, -1, 0,
                     KB_ENDS_CLUSTER);
-    check_far_first("shadow rays, runs of 16 (16 points)", 16, 0, END_LIGHT, 0, -1, 0,
+    check_far_first(mid, "shadow rays, runs of 16 (16 points)", 16, 0, END_LIGHT, 0, -1, 0,
                     KB_ENDS_CLUSTER);
     /* one of the rays the rule samples (every eighth of 256); an unsampled
      * one is walked far end first from the root box's exit, which
      * test_bundle's ends-on-splits set checks */
-    check_far_first("shadow rays, one ray with tmax +inf", 16, 0, END_LIGHT, 0, 64, 0, 0);
-    check_far_first("shadow rays, no tmax array (all +inf)", 16, 0, END_LIGHT, 0, -1, 1, 0);
-    check_far_first("shadow rays of one origin, stride 3", KB_CHUNK, 0, END_LIGHT, 0, -1, 0,
+    check_far_first(mid, "shadow rays, one ray with tmax +inf", 16, 0, END_LIGHT, 0, 64, 0, 0);
+    check_far_first(mid, "shadow rays, no tmax array (all +inf)", 16, 0, END_LIGHT, 0, -1, 1, 0);
+    check_far_first(mid, "shadow rays of one origin, stride 3", KB_CHUNK, 0, END_LIGHT, 0, -1, 0,
                     0);
-    check_far_first("shadow rays of one origin, stride 0", KB_CHUNK, 1, END_LIGHT, 0, -1, 0,
+    check_far_first(mid, "shadow rays of one origin, stride 0", KB_CHUNK, 1, END_LIGHT, 0, -1, 0,
                     0);
-    check_far_first("AO rays, runs of 16, reach 0.2", 16, 0, END_REACH, 0.2f, -1, 0,
+    check_far_first(mid, "AO rays, runs of 16, reach 0.2", 16, 0, END_REACH, 0.2f, -1, 0,
                     KB_ENDS_SPREAD);
-    check_far_first("AO rays, an origin per ray, reach 0.05", 1, 0, END_REACH, 0.05f, -1, 0,
+    check_far_first(mid, "AO rays, an origin per ray, reach 0.05", 1, 0, END_REACH, 0.05f, -1, 0,
                     KB_ENDS_SPREAD);
-    check_far_first("AO rays, one ray with tmax +inf", 16, 0, END_REACH, 0.2f, 64, 0, 0);
-    check_far_first("AO rays of one origin, stride 3", KB_CHUNK, 0, END_REACH, 0.2f, -1, 0,
+    check_far_first(mid, "AO rays, one ray with tmax +inf", 16, 0, END_REACH, 0.2f, 64, 0, 0);
+    check_far_first(mid, "AO rays of one origin, stride 3", KB_CHUNK, 0, END_REACH, 0.2f, -1, 0,
                     0);
+    /* spread ends of long rays (the soup's diagonal is 2 sqrt 3):
+     * KB_ENDS_LONG (KD_FAR_SPREAD_MAX_LEN) */
+    check_far_first(mid, "long rays, runs of 16, reach 1.5", 16, 0, END_REACH, 1.5f, -1, 0,
+                    KB_ENDS_LONG);
+    check_far_first(mid, "AO rays, reach 0.8 (0.23 diagonal)", 16, 0, END_REACH, 0.8f, -1, 0,
+                    KB_ENDS_SPREAD);
+    check_far_first(mid, "shadow rays toward a large light", 1, 0, END_BIG_LIGHT, 0, -1, 0,
+                    KB_ENDS_LONG);
     kdr_scene_free(big);
     kdr_scene_free(small);
     kdr_scene_free(mid);
