@@ -157,6 +157,33 @@ void cone_query(const scene_in *s, size_t npts, int large, uint32_t spp,
                             .epsilon = 1e-4f};
 }
 
+/* The camera's hit at pixel (x, y): the point in p, the geometric normal
+ * (unnormalised) turned toward the viewer in n; 0 where the ray misses. */
+static int camera_hit(const scene_in *s, ab_intersect1_fn intersect1, const kdr_scene *kd,
+                      const kdr_camera *cam, uint32_t x, uint32_t y, float p[3],
+                      float n[3]) {
+    kdr_ray r;
+    kdr_hit h;
+    kdr_camera_ray(cam, x, y, &r);
+    if (!intersect1(kd, &r, &h, NULL))
+        return 0;
+    const float *t = s->tris + 9 * (size_t)h.prim;
+    float e1[3], e2[3], dot = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        p[k] = r.org[k] + h.t * r.dir[k];
+        e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
+    }
+    n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    for (int k = 0; k < 3; k++)
+        dot += n[k] * r.dir[k];
+    if (dot > 0.0f)
+        for (int k = 0; k < 3; k++)
+            n[k] = -n[k];
+    return 1;
+}
+
 void conecam_query(const scene_in *s, ab_intersect1_fn intersect1, const kdr_scene *kd,
                    size_t max, float *pts, kdr_sphere_light *li, kdr_shadow_query *q) {
     kdr_camera cam;
@@ -165,27 +192,9 @@ void conecam_query(const scene_in *s, ab_intersect1_fn intersect1, const kdr_sce
     float *nrm = pts + 3 * max;
     size_t m = 0;
     for (uint32_t y = 0; y < cam.height; y++)
-        for (uint32_t x = 0; x < cam.width; x++) {
-            kdr_ray r;
-            kdr_hit h;
-            kdr_camera_ray(&cam, x, y, &r);
-            if (!intersect1(kd, &r, &h, NULL))
-                continue;
-            const float *t = s->tris + 9 * (size_t)h.prim;
-            float e1[3], e2[3], n[3], dot = 0.0f;
-            for (int k = 0; k < 3; k++) {
-                pts[3 * m + k] = r.org[k] + h.t * r.dir[k];
-                e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
-            }
-            n[0] = e1[1] * e2[2] - e1[2] * e2[1];
-            n[1] = e1[2] * e2[0] - e1[0] * e2[2];
-            n[2] = e1[0] * e2[1] - e1[1] * e2[0];
-            for (int k = 0; k < 3; k++)
-                dot += n[k] * r.dir[k];
-            for (int k = 0; k < 3; k++)
-                nrm[3 * m + k] = dot > 0.0f ? -n[k] : n[k];
-            m++;
-        }
+        for (uint32_t x = 0; x < cam.width; x++)
+            if (camera_hit(s, intersect1, kd, &cam, x, y, pts + 3 * m, nrm + 3 * m))
+                m++;
     memmove(pts + 3 * m, nrm, 3 * m * sizeof(float));
     *q = (kdr_shadow_query){.n = m, .points = pts, .normals = pts + 3 * m,
                             .lights = li, .nlights = 1, .samples = 64,
@@ -202,23 +211,12 @@ size_t camshadow_rays(const scene_in *s, ab_intersect1_fn intersect1, const kdr_
     size_t m = 0;
     for (uint32_t y = 0; y < cam.height; y++)
         for (uint32_t x = 0; x < cam.width; x++) {
-            kdr_ray c;
-            kdr_hit h;
-            kdr_camera_ray(&cam, x, y, &c);
-            if (!intersect1(kd, &c, &h, NULL))
+            float p[3], n[3], d[3], len = 0.0f;
+            if (!camera_hit(s, intersect1, kd, &cam, x, y, p, n))
                 continue;
-            const float *t = s->tris + 9 * (size_t)h.prim;
-            float e1[3], e2[3], n[3], p[3], d[3], dot = 0.0f, len = 0.0f;
-            for (int k = 0; k < 3; k++) {
-                p[k] = c.org[k] + h.t * c.dir[k];
-                e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
-            }
-            n[0] = e1[1] * e2[2] - e1[2] * e2[1];
-            n[1] = e1[2] * e2[0] - e1[0] * e2[2];
-            n[2] = e1[0] * e2[1] - e1[1] * e2[0];
             for (int k = 0; k < 3; k++)
-                dot += n[k] * c.dir[k], len += n[k] * n[k];
-            const float off = (dot > 0.0f ? -1e-4f : 1e-4f) * s->diag / sqrtf(len);
+                len += n[k] * n[k];
+            const float off = 1e-4f * s->diag / sqrtf(len);
             stress_rng_dir(&r, d);
             const float u = stress_rng_float(&r);
             for (int k = 0; k < 3; k++) {
