@@ -172,12 +172,14 @@
 /* kdr_occluded1 (one ray, any hit) walks a ray far end first
  * (kd_occluded1_far's order) when its tmax is finite, front to back
  * otherwise (a ray without an end has no far cell to start from).
- * bench/ab main ., 65536 rays, 3 rounds, load 3.9-6.6, default / haus /
- * 2CylinderEngine / engine3 / engine9: ao 1.18 / 1.41 / 1.28 / 1.40 /
- * 1.30, ao64 1.12 / 1.32 / 1.15 / 1.26 / 1.07, shadow (random surface
- * points) 1.24 / 4.01 / 3.35 / 3.55 / 2.97, camshadow (camera hit points)
- * 0.96 / 1.14 / 0.93 / 1.03 / 1.21. No per-ray rule on the root-clipped
- * segment kept the shadow gains and avoided camshadow's loss: far first
+ * bench/ab main ., 65536 rays, 3 rounds, load 3.7-5.1, default / haus /
+ * 2CylinderEngine / engine3 / engine9: ao 1.22 / 1.45 / 1.23 / 1.42 /
+ * 1.30, ao64 1.18 / 1.37 / 1.22 / 1.25 / 1.07, shadow (random surface
+ * points) 1.30 / 4.18 / 3.47 / 3.79 / 3.27, camshadow (camera hit points)
+ * 0.99 / 1.12 / 1.02 / 1.23 / 1.33 (5 rounds on 2CylinderEngine: 0.967,
+ * its far walk takes 3 % more node steps). No per-ray rule on the
+ * root-clipped segment kept the shadow gains and avoided camshadow's
+ * loss: far first
  * only when the end lies inside the root box or the segment is under 0.2
  * of its diagonal gave default / 2CylinderEngine shadow 0.98 / 2.39 and
  * camshadow 0.96 / 0.94. docs/TRAVERSAL.md, "Round: AO single rays". */
