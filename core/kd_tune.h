@@ -179,10 +179,10 @@
  * 0.99 / 1.12 / 1.02 / 1.23 / 1.33 (5 rounds on 2CylinderEngine: 0.967,
  * its far walk takes 3 % more node steps). No per-ray rule on the
  * root-clipped segment kept the shadow gains and avoided camshadow's
- * loss: far first
- * only when the end lies inside the root box or the segment is under 0.2
- * of its diagonal gave default / 2CylinderEngine shadow 0.98 / 2.39 and
- * camshadow 0.96 / 0.94. docs/TRAVERSAL.md, "Round: AO single rays". */
+ * loss: far first only when the end lies inside the root box or the
+ * segment is under 0.2 of its diagonal gave default / 2CylinderEngine
+ * shadow 0.98 / 2.39 and camshadow 0.96 / 0.94. docs/TRAVERSAL.md,
+ * "Round: AO single rays". */
 #define KD_FAR1_FINITE 1
 
 /* ---- cone shadows (kd_cone.c, kd_cone_cells.c) ------------------------------
