@@ -15,6 +15,13 @@
  * rays that start on surfaces (AO, shadows) spend most of their time in
  * leaves of clustered small triangles, so leaves of 3+ references are tested
  * 4 (SSE2) or 8 (AVX2) triangles at a time, bit-identical to kd_tri.h.
+ *
+ * kdr_occluded1 walks a ray with a finite tmax back to front (far child
+ * first, kd_occluded1_far's order; KD_FAR1_FINITE): AO and shadow rays
+ * from surfaces mostly meet their blockers nearer their end than the
+ * crowded leaves around their origin. The answer does not depend on the
+ * order; kd_occluded1_fwd keeps the front-to-back walk whose steps
+ * kd_entry_occluded1 and the interleaved walk take.
  */
 #include "kd_entry.h"
 #include "kd_walk.h"
@@ -106,8 +113,15 @@ static inline int walk_from(const kdr_scene *s, const kdr_ray *r, const int any,
     }
 }
 
+/* Whether kdr_occluded1 walks r far end first (KD_FAR1_FINITE, core/
+ * kd_tune.h): when its interval has an end to start from. */
+static inline int far1_pick(const kdr_ray *r) {
+    return KD_FAR1_FINITE && r->tmax < INFINITY;
+}
+
 /* The walk shared by both queries; any != 0 stops at the first hit, rev
- * != 0 walks back to front (any hit only). */
+ * != 0 walks back to front (any hit only), rev < 0 (any hit) as
+ * far1_pick says. */
 static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
                        const int rev, kd_walk_out *o) {
     float inv[3], ss[3], tn, tf;
@@ -115,7 +129,9 @@ static inline int walk(const kdr_scene *s, const kdr_ray *r, const int any,
     if (!s || !s->nodes || !kd_walk_setup(s, r, inv, ss, neg, &tn, &tf))
         return 0;
     kd_todo stack[KD_MAX_DEPTH];
-    return walk_from(s, r, any, rev, s->nodes, tn, tf, inv, ss, neg, stack, 0, o);
+    if (rev < 0 && far1_pick(r))
+        return walk_from(s, r, 1, 1, s->nodes, tn, tf, inv, ss, neg, stack, 0, o);
+    return walk_from(s, r, any, rev > 0, s->nodes, tn, tf, inv, ss, neg, stack, 0, o);
 }
 
 /* The same from the ray's entry on the path of its origin (kd_entry.h). */
@@ -157,6 +173,14 @@ int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
 
 int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
                   kdr_trav_stats *stats) {
+    kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
+    const int found = ray ? walk(scene, ray, 1, -1, &o) : 0;
+    add_stats(stats, &o);
+    return found;
+}
+
+int kd_occluded1_fwd(const kdr_scene *scene, const kdr_ray *ray,
+                     kdr_trav_stats *stats) {
     kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
     const int found = ray ? walk(scene, ray, 1, 0, &o) : 0;
     add_stats(stats, &o);

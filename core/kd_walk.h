@@ -231,4 +231,11 @@ static inline int kd_walk_setup(const kdr_scene *s, const kdr_ray *r, float inv[
 int kd_occluded1_far(const kdr_scene *scene, const kdr_ray *ray,
                      kdr_trav_stats *stats);
 
+/* kdr_occluded1's answer from the front-to-back walk (the cells in the
+ * ray's order from its start), whatever kdr_occluded1's own choice of
+ * order: the walk whose steps kd_entry_occluded1 and the interleaved
+ * walk's front-to-back forms take. */
+int kd_occluded1_fwd(const kdr_scene *scene, const kdr_ray *ray,
+                     kdr_trav_stats *stats);
+
 #endif /* KD_WALK_H */

@@ -141,7 +141,8 @@ typedef enum kdr_query {
  * with tmax < tmin, or a NaN anywhere, misses. */
 int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
                    kdr_trav_stats *stats);
-/* Any hit; returns 1 if some triangle is hit in [tmin, tmax]. */
+/* Any hit; returns 1 if some triangle is hit in [tmin, tmax]. (A ray with
+ * a finite tmax is walked from its far end: only stats show it.) */
 int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
                   kdr_trav_stats *stats);
 

@@ -32,6 +32,10 @@
  * adds changes the work even where it changes no answer); the sets
  * include rays whose end lies on a split plane and shadow rays toward a
  * small light (which kdr_trace_batch itself walks far end first).
+ * kdr_occluded1 itself walks far end first exactly where tmax is finite
+ * (KD_FAR1_FINITE): its work on each ray must be kd_occluded1_far's there
+ * and the forward walk's (kd_occluded1_fwd, the reference of the work
+ * sums above) elsewhere, on rays where the two orders differ.
  */
 #include <math.h>
 #include <stdio.h>
@@ -42,6 +46,7 @@
 #include "kd_stream.h"
 #include "kd_traverse.h"
 #include "kd_traverse_bundle.h"
+#include "kd_tune.h"
 #include "kd_walk.h"
 #include "kdray.h"
 #include "ladder.h"
@@ -82,6 +87,33 @@ static kdr_ray batch_ray_at(const kdr_ray_batch *b, size_t i) {
     return r;
 }
 
+/* Rays whose two orders take different work, by the order kdr_occluded1
+ * must take (KD_FAR1_FINITE: far end first exactly when tmax is finite):
+ * main requires some of each, so that the order check below can fail. */
+static size_t order_decisive[2];
+
+/* kdr_occluded1's work on r must be the far walk's where tmax is finite and
+ * the forward walk's elsewhere (a ray whose orders take the same work
+ * cannot tell them apart and is not counted). */
+static void check_order(const kdr_scene *s, const kdr_ray *r, size_t i,
+                        const kdr_trav_stats *fwd, const kdr_trav_stats *far) {
+    kdr_trav_stats got = {0};
+    kdr_occluded1(s, r, &got);
+    const int want_far = KD_FAR1_FINITE && r->tmax < INFINITY;
+    const kdr_trav_stats *w = want_far ? far : fwd;
+    if (got.nodes_visited != w->nodes_visited || got.tri_tests != w->tri_tests) {
+        fprintf(stderr,
+                "FAIL ray %zu (tmax %a): kdr_occluded1 took %llu nodes / %llu tests, "
+                "the %s walk %llu / %llu\n",
+                i, r->tmax, (unsigned long long)got.nodes_visited,
+                (unsigned long long)got.tri_tests, want_far ? "far" : "forward",
+                (unsigned long long)w->nodes_visited, (unsigned long long)w->tri_tests);
+        failures++;
+    }
+    order_decisive[want_far] += fwd->nodes_visited != far->nodes_visited ||
+                                fwd->tri_tests != far->tri_tests;
+}
+
 static results reference(const kdr_scene *s, const kdr_ray_batch *b) {
     results ref = res_alloc(b->n);
     for (size_t i = 0; i < b->n; i++) {
@@ -89,11 +121,22 @@ static results reference(const kdr_scene *s, const kdr_ray_batch *b) {
         kdr_hit h;
         kdr_intersect1(s, &r, &h, &ref.st[KDR_CLOSEST]);
         ref.t[i] = h.t, ref.u[i] = h.u, ref.v[i] = h.v, ref.prim[i] = h.prim;
-        ref.hit[i] = (uint8_t)kdr_occluded1(s, &r, &ref.st[KDR_ANY]);
-        if (kd_occluded1_far(s, &r, &ref.far) != ref.hit[i]) {
-            fprintf(stderr, "FAIL ray %zu: kd_occluded1_far differs from kdr_occluded1\n", i);
+        kdr_trav_stats fwd = {0}, far = {0};
+        ref.hit[i] = (uint8_t)kd_occluded1_fwd(s, &r, &fwd);
+        if (kdr_occluded1(s, &r, NULL) != ref.hit[i]) {
+            fprintf(stderr, "FAIL ray %zu: kdr_occluded1 differs from the forward walk\n", i);
             failures++;
         }
+        if (kd_occluded1_far(s, &r, &far) != ref.hit[i]) {
+            fprintf(stderr, "FAIL ray %zu: kd_occluded1_far differs from the forward walk\n", i);
+            failures++;
+        }
+        check_order(s, &r, i, &fwd, &far);
+        ref.st[KDR_ANY].rays += fwd.rays, ref.far.rays += far.rays;
+        ref.st[KDR_ANY].nodes_visited += fwd.nodes_visited;
+        ref.st[KDR_ANY].tri_tests += fwd.tri_tests;
+        ref.far.nodes_visited += far.nodes_visited;
+        ref.far.tri_tests += far.tri_tests;
     }
     return ref;
 }
@@ -493,6 +536,14 @@ int main(int argc, char **argv) {
     }
     for (size_t k = 0; k < sizeof scenes / sizeof scenes[0]; k++)
         free(scenes[k].tris);
+    /* kdr_occluded1's order was checked on rays where it shows */
+    printf("kdr_occluded1's order: %zu rays with tmax finite (far end first), %zu "
+           "without (front to back) where the two orders differ\n",
+           order_decisive[1], order_decisive[0]);
+    if (!order_decisive[0] || !order_decisive[1]) {
+        fprintf(stderr, "FAIL: no ray shows kdr_occluded1's order\n");
+        failures++;
+    }
     printf("%s: %d mismatches\n", failures ? "FAILED" : "passed", failures);
     return failures ? 1 : 0;
 }

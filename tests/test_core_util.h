@@ -80,14 +80,15 @@ static inline int compare_ray(const kdr_scene *s, const kdr_ray *r) {
     int bf = brute_intersect(s->tris, s->ntris, r, &bh);
     int ka = kdr_occluded1(s, r, NULL);
     int kr = kd_occluded1_far(s, r, NULL);
-    int ok = kf == bf && ka == bf && kr == bf && same_hit(&kh, &bh);
+    int kw = kd_occluded1_fwd(s, r, NULL);
+    int ok = kf == bf && ka == bf && kr == bf && kw == bf && same_hit(&kh, &bh);
     if (!ok && failures < CHECK_PRINT_MAX)
         fprintf(stderr,
                 "mismatch: org %a %a %a dir %a %a %a [%a, %a]\n"
-                "  kd    %d prim %d t %a u %a v %a (any %d, far end first %d)\n"
+                "  kd    %d prim %d t %a u %a v %a (any %d, far end first %d, front to back %d)\n"
                 "  brute %d prim %d t %a u %a v %a\n",
                 r->org[0], r->org[1], r->org[2], r->dir[0], r->dir[1],
-                r->dir[2], r->tmin, r->tmax, kf, kh.prim, kh.t, kh.u, kh.v, ka, kr,
+                r->dir[2], r->tmin, r->tmax, kf, kh.prim, kh.t, kh.u, kh.v, ka, kr, kw,
                 bf, bh.prim, bh.t, bh.u, bh.v);
     return ok;
 }

@@ -2,7 +2,9 @@
  * test_entry.c — entry points for rays that share an origin
  * (core/kd_entry.h) against the single walk, ray by ray, bit for bit.
  *
- * For every ray: kd_entry_occluded1 must equal kdr_occluded1 and
+ * For every ray: kd_entry_occluded1 must equal kd_occluded1_fwd (the
+ * front-to-back single walk; kdr_occluded1 walks finite rays far end
+ * first) and
  * kd_entry_intersect1 must equal kdr_intersect1 (t, u, v, prim bits), with
  * the same work (nodes entered, triangle tests: the replayed levels count
  * as the nodes the single walk steps through, so a walk that starts one
@@ -58,7 +60,7 @@ static void check_ray(const char *scene, const char *set, size_t i, const kdr_sc
                       const kd_entry_path *p, const kdr_ray *r) {
     rays_checked++;
     kdr_trav_stats a = {0}, b = {0};
-    const int o1 = kdr_occluded1(s, r, &a);
+    const int o1 = kd_occluded1_fwd(s, r, &a);
     const int o2 = kd_entry_occluded1(s, p, r, &b);
     if (o1 != o2) fail(scene, set, i, "occluded differs");
     if (a.nodes_visited != b.nodes_visited || a.tri_tests != b.tri_tests)
@@ -142,7 +144,7 @@ static void check_batch(const char *scene, const char *set, const kdr_scene *s,
             }
             for (size_t i = 0; i < n; i++) {
                 if (!q) {
-                    if (hit[i] != (uint8_t)kdr_occluded1(s, &rays[i], &ref))
+                    if (hit[i] != (uint8_t)kd_occluded1_fwd(s, &rays[i], &ref))
                         fail(scene, set, i, way ? "stream any hit" : "batch any hit");
                     continue;
                 }
