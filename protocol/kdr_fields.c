@@ -8,7 +8,9 @@
  */
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "kdr_proto_internal.h"
 
@@ -152,8 +154,25 @@ static int json_element(const cJSON *c, const char *name, size_t i, unsigned fla
     return 0;
 }
 
+/* 1 when every v[i] is finite. A float is not finite exactly when its
+ * exponent bits are all ones; adding one to the exponent field then carries
+ * into the sign bit, so one OR over the sums says whether any is: a loop
+ * the compiler vectorises, where the element-wise loop below with its early
+ * exits is not (kdray_bench_e2e on haus, 1M rays in a 24 MiB CBOR body:
+ * the parse step 11.7-12.4 ms -> 2.6-2.9 ms). */
+static int all_finite(const float *v, size_t count) {
+    uint32_t acc = 0;
+    for (size_t i = 0; i < count; i++) {
+        uint32_t b;
+        memcpy(&b, &v[i], sizeof b);
+        acc |= (b & 0x7f800000u) + 0x00800000u;
+    }
+    return !(acc & 0x80000000u);
+}
+
 static int check_decoded(const float *v, size_t count, const char *name, unsigned flags,
                          kdr_proto_error *err) {
+    if (all_finite(v, count)) return 0;
     for (size_t i = 0; i < count; i++) {
         if (isfinite(v[i])) continue;
         if (isnan(v[i]))

@@ -6,6 +6,8 @@
  * member (and the CBOR offset), never a crash; unknown and duplicate
  * members are read and ignored as in JSON. A plain C program.
  */
+#include <float.h>
+
 #include "cbor_body.h"
 
 /* ---- malformed bodies ---------------------------------------------------------------- */
@@ -137,6 +139,31 @@ static void test_malformed(void) {
         c_text(&b, "directions");
         c_floats(&b, bad, 6);
         expect(0, &b, 400, "directions[4]: not a number");
+    }
+    RESET();
+    {
+        /* the finite check runs four or more floats at a time: the largest
+         * finite values and subnormals pass, a non-finite one in the
+         * vector part or in the scalar tail is found and named */
+        float big[33];
+        for (int i = 0; i < 33; i++)
+            big[i] = i % 3 == 2 ? -FLT_MAX : i % 2 ? FLT_MAX : 1e-40f;
+        for (int k = 0; k < 3; k++) {
+            if (k == 1) big[32] = INFINITY;
+            if (k == 2) {
+                big[32] = FLT_MAX;
+                big[17] = -INFINITY;
+            }
+            RESET();
+            c_head(&b, cbor_encode_map_start, 2);
+            c_text(&b, "origins");
+            c_typed(&b, three, 3);
+            c_text(&b, "directions");
+            c_typed(&b, big, 33);
+            expect(0, &b, k ? 400 : 0,
+                   k == 0 ? "" : k == 1 ? "directions[32]: not a finite number"
+                                        : "directions[17]: not a finite number");
+        }
     }
     RESET();
     c_head(&b, cbor_encode_map_start, 2);
