@@ -388,8 +388,8 @@ int kd_batch_far_first(const kdr_scene *s, const kdr_ray_batch *b, const size_t 
         return KB_ENDS_NONE;
     if (ew < KD_FAR_END_SPREAD * ow)
         return KB_ENDS_CLUSTER;
-    /* spread ends: far end first only for short rays (AO); long ones
-     * (toward a large light) keep the front-to-back walk */
+    /* spread ends: short rays (AO) are KB_ENDS_SPREAD, longer ones (toward
+     * a large light) KB_ENDS_LONG: far end first unstaged */
     const float lim = KD_FAR_SPREAD_MAX_LEN * s->diagonal;
     return len2 <= lim * lim ? KB_ENDS_SPREAD : KB_ENDS_LONG;
 }
@@ -430,29 +430,14 @@ int kdr_trace_batch(const kdr_scene *scene, const kdr_ray_batch *batch,
         return KDR_EINVAL;
     if (mode < KDR_TRAV_AUTO || mode > KDR_TRAV_BUNDLE8)
         return KDR_EINVAL;
-    /* AUTO: 16-wide bundles with AVX-512 (docs/TRAVERSAL.md, Bundles) */
-    const int wide16 = mode == KDR_TRAV_AUTO && kd_cpu_has_avx512();
-    if (mode == KDR_TRAV_AUTO || mode == KDR_TRAV_BUNDLE8)
-        mode = kdr_cpu_has_avx2() ? KDR_TRAV_BUNDLE8 : KDR_TRAV_BUNDLE4;
-    if (!scene->nodes)
-        mode = KDR_TRAV_SINGLE; /* nothing to bundle over */
-    if (wide16 && mode != KDR_TRAV_SINGLE) {
-        kd_bundle16_trace(scene, batch, first, count, query,
-                          KB_FALLBACK | KB_SORT | KB_LIVE | KB_FAR_AUTO, out, stats);
-        return KDR_OK;
-    }
-    switch (mode) {
-    case KDR_TRAV_BUNDLE8:
-        kd_bundle8_trace(scene, batch, first, count, query,
-                         KB_FALLBACK | KB_SORT | KB_LIVE | KB_FAR_AUTO, out, stats);
-        break;
-    case KDR_TRAV_BUNDLE4:
-        kd_bundle4_trace(scene, batch, first, count, query,
-                         KB_FALLBACK | KB_SORT | KB_LIVE | KB_FAR_AUTO, out, stats);
-        break;
-    default:
+    if (mode == KDR_TRAV_SINGLE) {
         for (size_t i = first; i < first + count; i++)
             kd_batch_single(scene, batch, i, query, out, stats);
+        return KDR_OK;
     }
+    /* AUTO: 16-wide bundles with AVX-512 (docs/TRAVERSAL.md, Bundles) */
+    const int width = mode == KDR_TRAV_AUTO ? 16 : mode == KDR_TRAV_BUNDLE8 ? 8 : 4;
+    kd_batch_bundles(scene, batch, first, count, query,
+                     KB_FALLBACK | KB_SORT | KB_LIVE | KB_FAR_AUTO, width, out, stats);
     return KDR_OK;
 }

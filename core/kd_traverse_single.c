@@ -171,28 +171,26 @@ int kdr_intersect1(const kdr_scene *scene, const kdr_ray *ray, kdr_hit *hit,
     return found;
 }
 
-int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray,
-                  kdr_trav_stats *stats) {
+/* An any-hit walk in walk()'s order (0 front to back, 1 far end first, -1
+ * the rule of KD_FAR1_FINITE). */
+static int occluded(const kdr_scene *scene, const kdr_ray *ray, int order,
+                    kdr_trav_stats *stats) {
     kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
-    const int found = ray ? walk(scene, ray, 1, -1, &o) : 0;
+    const int found = ray ? walk(scene, ray, 1, order, &o) : 0;
     add_stats(stats, &o);
     return found;
 }
 
-int kd_occluded1_fwd(const kdr_scene *scene, const kdr_ray *ray,
-                     kdr_trav_stats *stats) {
-    kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
-    const int found = ray ? walk(scene, ray, 1, 0, &o) : 0;
-    add_stats(stats, &o);
-    return found;
+int kdr_occluded1(const kdr_scene *scene, const kdr_ray *ray, kdr_trav_stats *stats) {
+    return occluded(scene, ray, -1, stats);
 }
 
-int kd_occluded1_far(const kdr_scene *scene, const kdr_ray *ray,
-                     kdr_trav_stats *stats) {
-    kd_walk_out o = {ray ? ray->tmax : 0.0f, 0.0f, 0.0f, -1, 0, 0};
-    const int found = ray ? walk(scene, ray, 1, 1, &o) : 0;
-    add_stats(stats, &o);
-    return found;
+int kd_occluded1_fwd(const kdr_scene *scene, const kdr_ray *ray, kdr_trav_stats *stats) {
+    return occluded(scene, ray, 0, stats);
+}
+
+int kd_occluded1_far(const kdr_scene *scene, const kdr_ray *ray, kdr_trav_stats *stats) {
+    return occluded(scene, ray, 1, stats);
 }
 
 int kd_entry_occluded1(const kdr_scene *s, const kd_entry_path *p, const kdr_ray *r,

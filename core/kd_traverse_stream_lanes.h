@@ -411,25 +411,21 @@ KD_FN void KD_WN(ks_turn)(KD_WN(ks_src) * c, KD_WN(ks_lanes) * w) {
     const unsigned push = go_near & go_far;
     const VF far_tn = V(max)(t_lo, tn), near_tf = V(min)(t_hi, tf);
     const unsigned moved = go_near | go_far;
-    if (KS_ANY && c->far) { /* the same intervals, the far child first */
-        if (push) {
-            const VI slot = IV(add)(IV(sll)(w->sp, KS_LOG2W), IV(iota)());
-            IV(scatter)(&w->stk_node[0][0], push, slot, nearc);
-            V(scatter)(&w->stk_tn[0][0], push, slot, tn);
-            V(scatter)(&w->stk_tf[0][0], push, slot, near_tf);
-            w->sp = IV(add_in)(push, w->sp, one);
-        }
+    /* far end first (any hit): the same intervals, the far child entered
+     * and the near one stacked */
+    const int far_first = KS_ANY && c->far;
+    if (push) {
+        const VI slot = IV(add)(IV(sll)(w->sp, KS_LOG2W), IV(iota)());
+        IV(scatter)(&w->stk_node[0][0], push, slot, far_first ? nearc : farc);
+        V(scatter)(&w->stk_tn[0][0], push, slot, far_first ? tn : far_tn);
+        V(scatter)(&w->stk_tf[0][0], push, slot, far_first ? near_tf : tf);
+        w->sp = IV(add_in)(push, w->sp, one);
+    }
+    if (far_first) {
         w->node = IV(selm)(moved, IV(selm)(go_far, farc, nearc), node);
         w->tn = V(selm)(go_far, far_tn, tn);
         w->tf = V(selm)(go_near & ~go_far, near_tf, tf);
     } else {
-        if (push) {
-            const VI slot = IV(add)(IV(sll)(w->sp, KS_LOG2W), IV(iota)());
-            IV(scatter)(&w->stk_node[0][0], push, slot, farc);
-            V(scatter)(&w->stk_tn[0][0], push, slot, far_tn);
-            V(scatter)(&w->stk_tf[0][0], push, slot, tf);
-            w->sp = IV(add_in)(push, w->sp, one);
-        }
         w->node = IV(selm)(moved, IV(selm)(go_near, nearc, farc), node);
         w->tn = V(selm)(go_far & ~go_near, far_tn, tn);
         w->tf = V(selm)(go_near, near_tf, tf);
