@@ -114,9 +114,10 @@ typedef struct cp_best {
  * the exact distance would skip it too. */
 static inline float cell_d2(f4 p, f4 lo, f4 hi) {
     const f4 e = f4_max(f4_max(f4_sub(lo, p), f4_sub(p, hi)), f4_set1(0.0f));
-    _Alignas(16) float sq[4];
-    f4_store(sq, f4_mul(e, e));
-    const float d2 = (sq[0] + sq[1]) + sq[2];
+    const f4 sq = f4_mul(e, e);
+    /* (x + y) + z in registers (a store and three loads made the push
+     * wait for store forwarding) */
+    const float d2 = f4_sum3(sq);
     return d2 < INFINITY ? d2 : 0.0f;
 }
 
@@ -127,12 +128,16 @@ static inline f4 axis_mask(int axis) {
 }
 
 /* A cell is searched while its distance (a lower bound of it) is at most
- * the best plus the slack. */
-static int worth(float cell, double best_d2, double slack) {
-    const double c = (double)cell * (1.0 - 0x1p-20) - 0x1p-126;
-    if (c <= best_d2) return 1;
+ * the best plus the slack: limit() turns the best into the bound a cell's
+ * scaled distance is compared with (recomputed only when the best changes,
+ * so a cell's test is one multiply and one compare). */
+static double limit(double best_d2, double slack) {
     const double r = sqrt(best_d2) + slack;
-    return c <= r * r;
+    return r * r > best_d2 ? r * r : best_d2;
+}
+
+static inline int worth(float cell, double lim) {
+    return (double)cell * (1.0 - 0x1p-20) - 0x1p-126 <= lim;
 }
 
 /* Squared distance from p to the bounding box of tri, in float, without
@@ -275,7 +280,12 @@ KD_AVX2 static void test_refs4(const kdr_scene *s, const int32_t *prim, int n,
 static inline float cull_bound(double d2) {
     const double t = d2 * (1.0 + 0x1p-16);
     float f = (float)t;
-    if ((double)f < t) f = nextafterf(f, INFINITY);
+    if ((double)f < t) { /* the next float up: t is positive and finite here */
+        uint32_t w;
+        memcpy(&w, &f, 4);
+        w++;
+        memcpy(&f, &w, 4);
+    }
     return f;
 }
 
@@ -292,6 +302,8 @@ test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count, const float 
     const f8 zero = f8_set1(0.0f), inf = f8_set1(INFINITY);
     int32_t pend[12];
     int np = 0;
+    double bound_of = b->d2;
+    f8 bound = f8_set1(cull_bound(bound_of));
     for (uint32_t i = 0; i < count; i += 8) {
         const uint32_t m = count - i < 8 ? count - i : 8;
         const float *rows[8];
@@ -307,8 +319,9 @@ test_leaf8(const kdr_scene *s, const uint32_t *ref, uint32_t count, const float 
             const f8 e = f8_max(f8_max(f8_sub(lo, pk), f8_sub(pk, hi)), zero);
             d2 = f8_add(d2, f8_mul(e, e));
         }
-        /* culled: farther than the bound and finite (+inf on overflow) */
-        const f8 bound = f8_set1(cull_bound(b->d2));
+        /* culled: farther than the bound and finite (+inf on overflow); the
+         * bound follows the best as the exact tests lower it */
+        if (b->d2 != bound_of) bound = f8_set1(cull_bound(bound_of = b->d2));
         unsigned keep = ~(unsigned)f8_bits(f8_and(f8_gt(d2, bound), f8_lt(d2, inf))) &
                         ((1u << m) - 1);
         while (keep) {
@@ -366,6 +379,7 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
     stack[sp].hi = f4_xyz0(s->root.max[0], s->root.max[1], s->root.max[2]);
     stack[sp].d2 = cell_d2(p4, stack[sp].lo, stack[sp].hi);
     sp++;
+    double lim = limit(b->d2, slack);
     while (sp > 0) {
         int sel = sp - 1;
         if (nearest && sp >= CP_NEAREST_MAX) nearest = 0;
@@ -374,7 +388,7 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
                 sel = stack[i].d2 < stack[sel].d2 ? i : sel;
         cp_todo t = stack[sel];
         stack[sel] = stack[--sp];
-        if (!worth(t.d2, b->d2, slack)) {
+        if (!worth(t.d2, lim)) {
             if (nearest) break;
             continue;
         }
@@ -399,7 +413,7 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
                 far->lo = p_above ? t.lo : f4_max(t.lo, lo_b);
                 far->hi = p_above ? f4_min(t.hi, hi_b) : t.hi;
                 far->d2 = cell_d2(p4, far->lo, far->hi);
-                sp += worth(far->d2, b->d2, slack);
+                sp += worth(far->d2, lim);
             }
             if (near_empty) {
                 n = NULL;
@@ -413,7 +427,9 @@ static void search(const kdr_scene *s, const float p[3], double slack, cp_best *
         }
         if (n) {
             b->nodes++;
+            const double before = b->d2;
             test_leaf(s, n, p, avx2, b);
+            if (b->d2 != before) lim = limit(b->d2, slack);
         }
     }
 }

@@ -110,6 +110,11 @@ static inline float f4_hmin(f4 a) {
     const f4 b = _mm_min_ps(a, _mm_movehl_ps(a, a));
     return _mm_cvtss_f32(_mm_min_ss(b, _mm_shuffle_ps(b, b, 1)));
 }
+/* (x + y) + z of lanes 0..2, in that order (the scalar sum's rounding). */
+static inline float f4_sum3(f4 a) {
+    const f4 xy = _mm_add_ss(a, _mm_shuffle_ps(a, a, 1));
+    return _mm_cvtss_f32(_mm_add_ss(xy, _mm_movehl_ps(a, a)));
+}
 /* Lane 3 replaced by x (lanes 0..2 of a ray's 3-vectors, loaded as 4). */
 static inline f4 f4_lane3(f4 a, float x) {
     const f4 m = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
