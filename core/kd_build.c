@@ -76,7 +76,7 @@ static int reserve_refs(builder *b, size_t more) {
 /* A new leaf of count references; returns where they go, NULL on error. */
 static uint32_t *push_leaf(builder *b, size_t count) {
     size_t idx;
-    int err = count >= KD_MAX_TRIS ? KDR_ERANGE : reserve_refs(b, count);
+    int err = count >= KD_LEAF_MAX_REFS ? KDR_ERANGE : reserve_refs(b, count);
     if (err == KDR_OK)
         err = push_node(b, &idx);
     if (err != KDR_OK) {
@@ -85,7 +85,7 @@ static uint32_t *push_leaf(builder *b, size_t count) {
     }
     kd_frag *f = b->frag;
     f->nodes[idx].u.first = (uint32_t)f->nrefs;
-    f->nodes[idx].bits = ((uint32_t)count << 2) | KD_LEAF;
+    f->nodes[idx].bits = ((uint32_t)count << 4) | KD_LEAF; /* flat: kd_layout */
     f->nrefs += count;
     return f->refs + f->nrefs - count;
 }
@@ -99,7 +99,7 @@ static void push_link(builder *b, uint32_t id) {
         return;
     }
     b->frag->nodes[idx].u.first = KD_LINK;
-    b->frag->nodes[idx].bits = (id << 2) | KD_LEAF;
+    b->frag->nodes[idx].bits = (id << 4) | KD_LEAF;
     b->frag->links++;
 }
 

@@ -32,7 +32,7 @@ _Static_assert(sizeof(struct kdr_scene) == KD_SCENE_STRUCT_SIZE,
                "KD_SCENE_STRUCT_SIZE in kd_internal.h");
 
 /* Bump whenever the image bytes or the meaning of any node bit changes. */
-#define KD_IMAGE_FORMAT 2u
+#define KD_IMAGE_FORMAT 3u
 #define KD_IMAGE_ENDIAN 0x01020304u
 #define KD_IMAGE_HEAD 64u
 #define KD_IMAGE_DATA 256u
@@ -251,6 +251,9 @@ static const char *check_tree(const kdr_scene *s) {
                 if (kd_tri_degenerate(s->tris + 9 * (size_t)prim))
                     return "leaf names a zero-area triangle";
             }
+            /* a wrong flat flag would let walks skip triangles they must test */
+            if (kd_leaf_flat(n) != kd_layout_flat(s, n))
+                return "flat-leaf flag disagrees with the leaf's triangles";
             leaves++;
             empty += count == 0;
             refs_seen += count;

@@ -14,8 +14,11 @@
  *             *_empty flags a child that is a leaf without references, so
  *             a walk can skip it without loading it.
  *   leaf:     u.first = index of its first reference in scene->refs,
- *             bits = (count << 2) | 3; refs[first .. first+count) are
- *             triangle numbers (prims).
+ *             bits = (count << 4) | (flat << 2) | 3; refs[first ..
+ *             first+count) are triangle numbers (prims); flat (set by
+ *             kd_layout()) is 1 + k when every vertex of every referenced
+ *             triangle has the same coordinate on axis k (a leaf of an
+ *             axis-aligned floor or wall), else 0 (kd_leaf_behind).
  * The build (kd_build.c) writes interior bits as (above_child << 2) | axis;
  * kd_layout() rewrites them once the tree is complete.
  * A triangle lying exactly in a split plane goes to one side only; a
@@ -47,7 +50,12 @@ static inline int kd_axis(const kd_node *n) { return (int)(n->bits & 3u); }
 static inline uint32_t kd_above(const kd_node *n) { return n->bits >> 4; }
 static inline int kd_below_empty(const kd_node *n) { return (int)(n->bits >> 2) & 1; }
 static inline int kd_above_empty(const kd_node *n) { return (int)(n->bits >> 3) & 1; }
-static inline uint32_t kd_count(const kd_node *n) { return n->bits >> 2; }
+static inline uint32_t kd_count(const kd_node *n) { return n->bits >> 4; }
+/* 1 + the axis on which leaf n is flat, or 0 (kd_layout_flat). */
+static inline int kd_leaf_flat(const kd_node *n) { return (int)(n->bits >> 2) & 3; }
+
+/* A leaf holds fewer references than this (its count has 28 bits). */
+#define KD_LEAF_MAX_REFS ((size_t)1 << 28)
 
 /* Interior nodes keep 28 bits for the above child's index. */
 #define KD_LAYOUT_MAX_NODES ((size_t)1 << 28)
@@ -113,6 +121,34 @@ int kd_layout(kdr_scene *s);
 /* The part of kd_layout() that is derived from the finished tree and not
  * stored in it (root_mag, prefetch_leaves); kd_image.c calls it too. */
 void kd_layout_derive(kdr_scene *s);
+/* The flat field of leaf n's bits as kd_layout() computes it from its
+ * triangles (1 + the first axis on which every vertex of every referenced
+ * triangle has one coordinate, 0 when there is none or no reference);
+ * kd_image.c checks a stored tree against it. */
+int kd_layout_flat(const kdr_scene *s, const kd_node *n);
+
+/*
+ * Whether every triangle of flat leaf n lies behind a ray's origin along
+ * the ray's dominant axis kz, so that the watertight test (kd_tri.h) can
+ * find none of them at t >= 0: the leaf's plane is flat on axis kz
+ * (kd_leaf_flat), and az = sz * (c - org[kz]), computed as the test
+ * computes each vertex's scaled z (c is every vertex's coordinate there:
+ * the first reference's first vertex), is at most -2^-120. Then every
+ * vertex has that az, T = U az + V bz + W cz has the sign of -det with
+ * |T| >= |det| / 3 * 2^-120 (U, V, W share a sign; the largest is at
+ * least det / 3; a product that underflows sends t to kd_tri_t_exact,
+ * whose double T keeps the sign), so t = T / det <= -2^-122: below any
+ * tmin >= 0. Callers skip the leaf's tests when tmin >= 0; the answer and
+ * the order of everything else are unchanged, so every traversal kind may
+ * use it or not and still return the single walk's bits.
+ */
+static inline int kd_leaf_behind(const kdr_scene *s, const kd_node *n, int kz,
+                                 float org_kz, float sz) {
+    if (kd_leaf_flat(n) != kz + 1)
+        return 0;
+    const float c = s->tris[9 * (size_t)s->refs[n->u.first] + (size_t)kz];
+    return sz * (c - org_kz) <= -0x1p-120f;
+}
 
 /*
  * Termination bound: a subtree entered at distance t_near can be skipped

@@ -6,7 +6,12 @@
  * then decides at the parent that an empty child needs no visit: a ray
  * crossing empty space cut off by the SAH's empty bonus costs no node step,
  * no stack entry and no leaf exit (bench/ab: see docs/TRAVERSAL.md).
- * The pass changes no triangle, split or leaf, so every answer is the same.
+ * It also marks leaves whose triangles all lie in one axis-aligned plane
+ * (a floor, a wall: kd_layout_flat), so that walks can skip such a leaf
+ * for rays that start in front of its plane and move away from it along
+ * their dominant axis (kd_leaf_behind in kd_internal.h).
+ * The pass changes no triangle, split or reference, so every answer is the
+ * same.
  */
 #include "kd_internal.h"
 
@@ -27,6 +32,25 @@ void kd_layout_derive(kdr_scene *s) {
     s->prefetch_leaves = bytes >= KD_PREFETCH_MIN_BYTES;
 }
 
+int kd_layout_flat(const kdr_scene *s, const kd_node *n) {
+    const uint32_t count = kd_count(n);
+    if (!kd_is_leaf(n) || count == 0)
+        return 0;
+    const uint32_t *ref = s->refs + n->u.first;
+    const float *first = s->tris + 9 * (size_t)ref[0];
+    for (int k = 0; k < 3; k++) {
+        const float c = first[k];
+        int flat = 1;
+        for (uint32_t r = 0; r < count && flat; r++) {
+            const float *t = s->tris + 9 * (size_t)ref[r];
+            flat = t[k] == c && t[3 + k] == c && t[6 + k] == c;
+        }
+        if (flat)
+            return k + 1;
+    }
+    return 0;
+}
+
 int kd_layout(kdr_scene *s) {
     if (!s->nodes)
         return KDR_OK;
@@ -42,6 +66,12 @@ int kd_layout(kdr_scene *s) {
         const uint32_t eb = (uint32_t)empty_leaf(&s->nodes[i + 1]);
         const uint32_t ea = (uint32_t)empty_leaf(&s->nodes[above]);
         n->bits = above << 4 | ea << 3 | eb << 2 | axis;
+    }
+    /* the flat field changes no count, so the flags above stay right */
+    for (size_t i = 0; i < s->nnodes; i++) {
+        kd_node *n = &s->nodes[i];
+        if (kd_is_leaf(n))
+            n->bits = (n->bits & ~(3u << 2)) | (uint32_t)kd_layout_flat(s, n) << 2;
     }
     return KDR_OK;
 }

@@ -250,6 +250,7 @@ typedef struct KD_WN(kb_state) {
     float sorg[3]; /* the origin, when every lane has the same one */
     int shared;
     VF live;   /* lanes still searching (any-hit lanes leave on a hit) */
+    VF tmin_ok; /* lanes with tmin >= 0 (kd_leaf_behind's condition) */
     VF lane_steps, tri_tests; /* per-lane counters (V(count)) */
     VF limit;  /* kd_term_bound(best_t) on live lanes, -inf elsewhere */
     int any;
@@ -286,6 +287,23 @@ KD_FN void KD_WN(kb_leaf)(const kdr_scene *s, const kd_node *n, KD_WN(kb_state) 
                     VF act) {
     const uint32_t *refs = s->refs + n->u.first;
     const uint32_t cnt = kd_count(n);
+    const int flat = kd_leaf_flat(n);
+    if (flat) { /* kd_leaf_behind per lane: lanes with tmin >= 0 whose
+                   dominant axis is the plane's and whose origin is in
+                   front of it, moving away, have nothing to find here */
+        const VF c = V(set1)(s->tris[9 * (size_t)refs[0] + (size_t)(flat - 1)]);
+        const VF on_axis = flat == 1   ? st->tp.kz0
+                           : flat == 2 ? st->tp.kz1
+                                       : V(andnot)(V(or)(st->tp.kz0, st->tp.kz1),
+                                                   V(seti)(-1));
+        const VF behind = V(le)(V(mul)(st->tp.sz, V(sub)(c, st->tp.oz)),
+                                V(set1)(-0x1p-120f));
+        act = V(andnot)(V(and)(V(and)(on_axis, behind), st->tmin_ok), act);
+        if (!V(bits)(act)) {
+            KD_WN(kb_update_limit)(st);
+            return;
+        }
+    }
     /* request every triangle of the leaf at once: the tests then find
      * their rows arriving in parallel instead of one miss after another */
     if (s->prefetch_leaves)
@@ -719,6 +737,7 @@ KD_FN void KD_WN(kb_trace)(const kdr_scene *s, KD_WN(kb_bundle) *b, int any, int
     st.live = V(bitmask)(b->lanes);
     st.lane_steps = st.tri_tests = V(seti)(0);
     st.any = any;
+    st.tmin_ok = V(le)(V(set1)(0.0f), st.tmin);
     st.far = any && far;
     KD_WN(kb_update_limit)(&st);
     if (st.far) /* from the root: the origin's path leads to the near end */

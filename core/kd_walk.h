@@ -139,6 +139,9 @@ static inline int kd_walk_leaf(const kdr_scene *s, const kd_node *n,
                                const kd_ray_pre *pre, const kd_ntri_pre4 *pre4,
                                float tmin, const int any, const int avx2,
                                kd_walk_out *o) {
+    /* a floor or wall behind the origin (kd_leaf_behind): nothing to find */
+    if (tmin >= 0.0f && kd_leaf_behind(s, n, pre->kz, pre->org[pre->kz], pre->sz))
+        return 0;
     const uint32_t *ref = s->refs + n->u.first;
     const uint32_t count = kd_count(n);
     o->tests += count;
@@ -171,6 +174,9 @@ static inline int kd_walk_leaf(const kdr_scene *s, const kd_node *n,
 KD_AVX2 static inline __attribute__((always_inline)) int
 kd_walk_leaf_w8(const kdr_scene *s, const kd_node *n, const kd_ntri_pre8 *pre8,
                 float tmin, const int any, kd_walk_out *o) {
+    if (tmin >= 0.0f &&
+        kd_leaf_behind(s, n, pre8->kz, f8_first(pre8->oz), f8_first(pre8->sz)))
+        return 0; /* as kd_walk_leaf */
     const uint32_t count = kd_count(n);
     o->tests += count;
     return kd_walk_groups8(s, s->refs + n->u.first, count, pre8, tmin, any, o);

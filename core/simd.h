@@ -180,6 +180,7 @@ KD_AVX2 static inline f8 f8_andnot(f8 m, f8 a) { return _mm256_andnot_ps(m, a); 
 KD_AVX2 static inline f8 f8_xor(f8 a, f8 b) { return _mm256_xor_ps(a, b); }
 KD_AVX2 static inline f8 f8_sel(f8 m, f8 a, f8 b) { return _mm256_blendv_ps(b, a, m); }
 KD_AVX2 static inline int f8_bits(f8 m) { return _mm256_movemask_ps(m); }
+KD_AVX2 static inline float f8_first(f8 a) { return _mm256_cvtss_f32(a); }
 KD_AVX2 static inline f8 f8_signmask(f8 a) {
     return _mm256_castsi256_ps(_mm256_srai_epi32(_mm256_castps_si256(a), 31));
 }

@@ -77,6 +77,18 @@ static size_t check_node(const kdr_scene *s, uint32_t idx, kdr_bounds box,
                 seen[p] = 1;
             }
         }
+        /* kd_layout's flat flag, which kd_leaf_behind trusts: 1 + the
+         * first axis on which every vertex of the leaf has one value */
+        int flat = 0;
+        for (int k = 0; k < 3 && !flat && kd_count(n) > 0; k++) {
+            const float c = s->tris[9 * (size_t)s->refs[n->u.first] + k];
+            int all = 1;
+            for (uint32_t i = 0; i < kd_count(n); i++)
+                for (int v = 0; v < 3; v++)
+                    all &= s->tris[9 * (size_t)s->refs[n->u.first + i] + 3 * v + k] == c;
+            flat = all ? k + 1 : 0;
+        }
+        EXPECT(kd_leaf_flat(n) == flat);
         return 1;
     }
     const int k = kd_axis(n);
@@ -482,6 +494,80 @@ static void test_flat_scene(void) {
     free(sp.t);
 }
 
+/* Rays that start on, just above and just below an axis-aligned floor
+ * (y = 0) and wall (x = 0) built of grid triangles, with a few boxes on
+ * the floor, in every direction (steep, grazing, along the planes) and
+ * with tmin 0, -0.0, > 0 and < 0: walks skip a flat leaf whose plane lies
+ * behind the origin along the ray's dominant axis (kd_leaf_behind), which
+ * must never change an answer. Rays straight up from just above the floor
+ * must find the floor's leaves skipped (no triangle test), and the same
+ * rays with tmin < 0 must still hit the floor behind them. */
+static void test_floor_starts(void) {
+    soup sp = {0};
+    for (int i = 0; i < 8; i++)
+        for (int k = 0; k < 8; k++) {
+            const float x0 = (float)i * 0.25f, z0 = (float)k * 0.25f, e = 0.25f;
+            const float f1[9] = {x0, 0, z0, x0 + e, 0, z0, x0, 0, z0 + e};
+            const float f2[9] = {x0 + e, 0, z0, x0 + e, 0, z0 + e, x0, 0, z0 + e};
+            soup_add(&sp, f1);
+            soup_add(&sp, f2);
+            const float w1[9] = {0, x0, z0, 0, x0 + e, z0, 0, x0, z0 + e};
+            const float w2[9] = {0, x0 + e, z0, 0, x0 + e, z0 + e, 0, x0, z0 + e};
+            soup_add(&sp, w1);
+            soup_add(&sp, w2);
+        }
+    soup_cube(&sp, 0.6f, 0.0f, 0.6f);
+    soup_cube(&sp, 1.2f, 0.3f, 0.9f);
+    kdr_scene *s = build_or_die(&sp);
+    size_t flat_leaves = 0;
+    for (size_t i = 0; i < s->nnodes; i++)
+        flat_leaves += kd_is_leaf(&s->nodes[i]) && kd_leaf_flat(&s->nodes[i]) != 0;
+    EXPECT(flat_leaves > 0);
+    static const float lift[] = {0.0f, 0x1p-24f, 0x1p-20f, 1e-6f, 1e-3f, -0x1p-24f, -1e-6f};
+    static const float tmins[] = {0.0f, -0.0f, 1e-7f, -1.0f};
+    size_t bad = 0;
+    for (int i = 0; i < 6000; i++) {
+        kdr_ray r;
+        const int wall = i % 3 == 2; /* start on the wall (x = 0) */
+        const float a = rng_f(0.01f, 1.99f), b = rng_f(0.01f, 1.99f);
+        const float h = lift[rng_u32() % (sizeof lift / sizeof *lift)];
+        r.org[0] = wall ? h : a;
+        r.org[1] = wall ? a : h;
+        r.org[2] = b;
+        for (int k = 0; k < 3; k++)
+            r.dir[k] = ray_dir_comp();
+        switch (rng_u32() % 4) {
+        case 0: /* steep: the plane's axis dominates */
+            r.dir[wall ? 0 : 1] = rng_f(1.0f, 2.0f) * (rng_u32() % 4 ? 1.0f : -1.0f);
+            break;
+        case 1: /* grazing */
+            r.dir[wall ? 0 : 1] = rng_f(-1e-3f, 1e-3f);
+            break;
+        }
+        if (r.dir[0] == 0 && r.dir[1] == 0 && r.dir[2] == 0)
+            r.dir[1] = 1.0f;
+        r.tmin = tmins[rng_u32() % (sizeof tmins / sizeof *tmins)];
+        r.tmax = rng_u32() % 2 ? INFINITY : rng_f(0.0f, 3.0f);
+        bad += !compare_ray(s, &r);
+    }
+    if (bad)
+        fprintf(stderr, "floor starts: %zu mismatches\n", bad);
+    EXPECT(bad == 0);
+    /* straight up from 2^-20 above the floor, away from the wall and the
+     * boxes: the only leaves on the way hold the floor, which is behind */
+    kdr_ray up = {{1.8f, 0x1p-20f, 0.1f}, {0.0f, 1.0f, 0.0f}, 0.0f, INFINITY};
+    kdr_trav_stats st = {0};
+    EXPECT(kdr_occluded1(s, &up, &st) == 0);
+    kdr_hit h;
+    EXPECT(kdr_intersect1(s, &up, &h, &st) == 0);
+    EXPECT(st.tri_tests == 0);
+    up.tmin = -1.0f; /* the floor 2^-20 behind the origin now counts */
+    EXPECT(kdr_occluded1(s, &up, NULL) == 1);
+    EXPECT(kdr_intersect1(s, &up, &h, NULL) == 1 && h.t < 0.0f);
+    kdr_scene_free(s);
+    free(sp.t);
+}
+
 static void expect_miss(const kdr_scene *s, const kdr_ray *r) {
     kdr_hit h;
     EXPECT(kdr_intersect1(s, r, &h, NULL) == 0);
@@ -628,6 +714,7 @@ int main(void) {
         test_extreme_rays();
         test_underflow_t();
         test_flat_scene();
+        test_floor_starts();
     }
     if (failures)
         fprintf(stderr, "test_core: %d failures\n", failures);

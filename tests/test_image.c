@@ -268,6 +268,7 @@ static void forged_structure(const float *tris, size_t n, const kdr_build_opts *
         else if (!kd_is_leaf(&s->nodes[i]) && !interior)
             interior = i + 1; /* +1: 0 means none */
     EXPECT(interior == 1);     /* the root */
+    EXPECT(kd_leaf_flat(&s->nodes[leaf]) == 0);
     struct {
         const char *what;
         size_t off;
@@ -280,7 +281,11 @@ static void forged_structure(const float *tris, size_t n, const kdr_build_opts *
         {"ref past the triangles", refs_off, (uint32_t)s->ntris},
         {"NaN coordinate", tris_off, 0x7fc00000u},
         {"leaf count grown", nodes_off + 8 * leaf + 4,
-         s->nodes[leaf].bits + (1000u << 2)},
+         s->nodes[leaf].bits + (1000u << 4)},
+        /* random triangles: no leaf is flat, and a flag would let walks
+         * skip the leaf's triangles (kd_leaf_behind) */
+        {"flat flag on a leaf that is not flat", nodes_off + 8 * leaf + 4,
+         (s->nodes[leaf].bits & ~(3u << 2)) | (2u << 2)},
         {"axis 3 on an interior node turns it into a leaf", nodes_off + 4,
          s->nodes[0].bits | 3u},
     };
