@@ -8,7 +8,9 @@
  * walk far end first (trace_unwalked, trace_chunk). From there on, runs of up to
  * GROUP_POINTS consecutive points toward one light share one walk of their
  * group's cone (trace_grouped, kd_cone_group.c) and each point judges that
- * list (kd_pair_visibility in kd_cone.c). KDR_SHADOW_RAYS traces every
+ * list (kd_pair_visibility in kd_cone.c); a (point, light) pair whose walk
+ * cannot pay (kd_walk_pays: a wide light below CONE_WALK_WIDE_FROM
+ * samples) joins the same chunks as unwalked points instead. KDR_SHADOW_RAYS traces every
  * sample alone, point by point.
  *
  * kdr_shadow_trace_order takes the points as a list of indices: the j-th
@@ -65,58 +67,98 @@ static void trace_chunk(const kdr_scene *scene, const kdr_ray_batch *b, size_t m
                      narrow ? 8 : 16, &out, ts);
 }
 
-/* Points that do not walk their cones, a chunk at a time: the samples of
- * consecutive points (toward the same lights, from nearby surfaces: the
- * bundles stay coherent) go through the tree in one call (trace_chunk),
- * whose set-up is then paid per chunk, not per point. */
+/* (point, light) pairs whose samples go through the tree without a cone
+ * walk, gathered a chunk at a time: the samples of pairs added one after
+ * the other (consecutive points toward the same lights, from nearby
+ * surfaces: the bundles stay coherent) go through the tree in one call
+ * (trace_chunk), whose set-up is then paid per chunk, not per pair. */
+typedef struct unwalked {
+    uint32_t n;      /* samples per pair */
+    size_t cap;      /* rays per chunk: a whole number of pairs */
+    size_t m, pairs; /* rays and pairs pending */
+    float *org, *dir, *tmax;
+    uint8_t *hit;
+    size_t *slot; /* the visibility index of each pending pair */
+} unwalked;
+
+static int unwalked_init(unwalked *u, uint32_t n) {
+    size_t per_chunk = UNWALKED_CHUNK_RAYS / n;
+    per_chunk = per_chunk ? per_chunk : 1;
+    *u = (unwalked){.n = n, .cap = per_chunk * n};
+    u->org = malloc(3 * u->cap * sizeof *u->org);
+    u->dir = malloc(3 * u->cap * sizeof *u->dir);
+    u->tmax = malloc(u->cap * sizeof *u->tmax);
+    u->hit = malloc(u->cap);
+    u->slot = malloc(per_chunk * sizeof *u->slot);
+    return u->org && u->dir && u->tmax && u->hit && u->slot ? KDR_OK : KDR_ENOMEM;
+}
+
+static void unwalked_free(unwalked *u) {
+    free(u->org);
+    free(u->dir);
+    free(u->tmax);
+    free(u->hit);
+    free(u->slot);
+}
+
+/* Traces the pending pairs and writes their visibilities. */
+static void unwalked_flush(const kdr_scene *scene, unwalked *u, float *visibility,
+                           kd_shadow_ws *ws) {
+    if (u->m == 0)
+        return;
+    kdr_ray_batch b = {.n = u->m, .org = u->org, .org_stride = 3, .dir = u->dir,
+                       .tmax = u->tmax, .tmax_stride = 1};
+    kdr_trav_stats ts = {0};
+    trace_chunk(scene, &b, u->m, u->n, u->hit, &ts);
+    ws->st.rays_traced += u->m;
+    ws->st.nodes_visited += ts.nodes_visited;
+    for (size_t pair = 0; pair < u->pairs; pair++) {
+        uint32_t lit = 0;
+        for (uint32_t s = 0; s < u->n; s++)
+            lit += u->hit[pair * u->n + s] ? 0u : 1u;
+        visibility[u->slot[pair]] = (float)lit / (float)u->n;
+    }
+    u->m = u->pairs = 0;
+}
+
+/* Adds the samples of the pair of frame f, whose visibility goes to
+ * visibility[slot]; traces the chunk first when it is full. */
+static void unwalked_add(const kdr_scene *scene, unwalked *u, const kd_shadow_frame *f,
+                         size_t slot, float *visibility, kd_shadow_ws *ws) {
+    if (u->m + u->n > u->cap)
+        unwalked_flush(scene, u, visibility, ws);
+    const uint32_t n = u->n;
+    float *org = u->org + 3 * u->m, *dir = u->dir + 3 * u->m, *tmax = u->tmax + u->m;
+    for (uint32_t s = 0; s < n; s++) {
+        kdr_ray r;
+        kd_shadow_frame_ray(f, s, n, &r);
+        for (int k = 0; k < 3; k++) {
+            org[3 * s + k] = r.org[k];
+            dir[3 * s + k] = r.dir[k];
+        }
+        tmax[s] = r.tmax; /* tmin is 0 for every sample */
+    }
+    u->m += n;
+    u->slot[u->pairs++] = slot;
+}
+
+/* Points that do not walk their cones (below CONE_WALK_FROM samples, or
+ * walks forced off), a chunk at a time. */
 static int trace_unwalked(const kdr_scene *scene, const kdr_shadow_query *q,
                           size_t count, float *visibility, kd_shadow_ws *ws) {
-    const uint32_t n = q->samples;
-    const size_t per_point = (size_t)n * q->nlights;
-    size_t step = UNWALKED_CHUNK_RAYS / per_point;
-    step = step ? step : 1;
-    const size_t cap = step * per_point;
-    float *org = malloc(3 * cap * sizeof *org), *dir = malloc(3 * cap * sizeof *dir);
-    float *tmax = malloc(cap * sizeof *tmax);
-    uint8_t *hit = malloc(cap);
-    int rc = org && dir && tmax && hit ? KDR_OK : KDR_ENOMEM;
-    for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += step) {
-        const size_t j1 = count - j0 < step ? count : j0 + step;
-        size_t m = 0;
-        for (size_t j = j0; rc == KDR_OK && j < j1; j++)
-            for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
-                kd_shadow_frame f;
-                rc = kd_shadow_frame_init(scene, q, point_at(ws, j), l, &f);
-                for (uint32_t s = 0; rc == KDR_OK && s < n; s++, m++) {
-                    kdr_ray r;
-                    kd_shadow_frame_ray(&f, s, n, &r);
-                    for (int k = 0; k < 3; k++) {
-                        org[3 * m + k] = r.org[k];
-                        dir[3 * m + k] = r.dir[k];
-                    }
-                    tmax[m] = r.tmax; /* tmin is 0 for every sample */
-                }
-            }
-        if (rc != KDR_OK)
-            break;
-        kdr_ray_batch b = {.n = m, .org = org, .org_stride = 3, .dir = dir,
-                           .tmax = tmax, .tmax_stride = 1};
-        kdr_trav_stats ts = {0};
-        trace_chunk(scene, &b, m, n, hit, &ts);
-        ws->st.rays_traced += m;
-        ws->st.nodes_visited += ts.nodes_visited;
-        for (size_t k = 0, pair = 0; rc == KDR_OK && k < m; k += n, pair++) {
-            uint32_t lit = 0;
-            for (uint32_t s = 0; s < n; s++)
-                lit += hit[k + s] ? 0u : 1u;
-            const size_t i = point_at(ws, j0 + pair / q->nlights);
-            visibility[i * q->nlights + pair % q->nlights] = (float)lit / (float)n;
+    unwalked u;
+    int rc = unwalked_init(&u, q->samples);
+    for (size_t j = 0; rc == KDR_OK && j < count; j++)
+        for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
+            kd_shadow_frame f;
+            const size_t i = point_at(ws, j);
+            rc = kd_shadow_frame_init(scene, q, i, l, &f);
+            if (rc == KDR_OK)
+                unwalked_add(scene, &u, &f, i * q->nlights + l, visibility, ws);
         }
-    }
-    free(org);
-    free(dir);
-    free(tmax);
-    free(hit);
+    if (rc == KDR_OK)
+        unwalked_flush(scene, &u, visibility, ws);
+    unwalked_free(&u);
     return rc;
 }
 
@@ -250,18 +292,33 @@ static int trace_grouped(const kdr_scene *scene, const kdr_shadow_query *q, size
                          float *visibility, kd_shadow_ws *ws) {
     kd_shadow_frame fr[GROUP_POINTS];
     size_t sel[GROUP_POINTS];
-    int rc = KDR_OK;
+    /* pairs whose walk does not pay (a wide light below
+     * CONE_WALK_WIDE_FROM samples) are traced as the unwalked points are,
+     * a chunk of pairs per call, not one call per pair; none when every
+     * walk is forced */
+    unwalked u = {0};
+    int rc = ws->policy == KD_WALK_AUTO ? unwalked_init(&u, q->samples) : KDR_OK;
     for (size_t j0 = 0; rc == KDR_OK && j0 < count; j0 += GROUP_POINTS) {
         const size_t n = count - j0 < GROUP_POINTS ? count - j0 : GROUP_POINTS;
         for (size_t l = 0; rc == KDR_OK && l < q->nlights; l++) {
+            size_t m = 0;
             for (size_t j = 0; rc == KDR_OK && j < n; j++) {
                 rc = kd_shadow_frame_init(scene, q, point_at(ws, j0 + j), l, &fr[j]);
-                sel[j] = j;
+                if (rc != KDR_OK)
+                    break;
+                if (u.cap && !kd_walk_pays(q->samples, fr[j].sin_a, ws->policy))
+                    unwalked_add(scene, &u, &fr[j], point_at(ws, j0 + j) * q->nlights + l,
+                                 visibility, ws);
+                else
+                    sel[m++] = j;
             }
-            if (rc == KDR_OK)
-                rc = trace_run(scene, q, j0, l, fr, sel, n, GROUP_SPLITS, visibility, ws);
+            if (rc == KDR_OK && m > 0)
+                rc = trace_run(scene, q, j0, l, fr, sel, m, GROUP_SPLITS, visibility, ws);
         }
     }
+    if (rc == KDR_OK && u.cap)
+        unwalked_flush(scene, &u, visibility, ws);
+    unwalked_free(&u);
     return rc;
 }
 
