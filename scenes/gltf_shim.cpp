@@ -31,6 +31,7 @@
 #include <string>
 #include <vector>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "gltf_schema.h"
@@ -480,6 +481,34 @@ std::string json_text(const std::vector<unsigned char> &b) {
     return std::string(b.begin() + 20, b.begin() + 20 + len);
 }
 
+/* tinygltf's reader of external buffers (a .gltf's "uri" naming a file),
+ * bounded as read_file is: only a regular file, at most kMaxFileBytes.
+ * tinygltf's own takes the size from seeking to the end, which for a
+ * directory ("uri": "." or "") is LONG_MAX, and then allocates that much
+ * (std::bad_alloc; under AddressSanitizer an abort, found by the glTF
+ * fuzzer). Errors go to *err, which tinygltf puts in its message. */
+bool read_external(std::vector<unsigned char> *out, std::string *err,
+                   const std::string &path, void *) {
+    auto refuse = [&](const std::string &why) {
+        if (err) *err += "external file " + path + ": " + why + "\n";
+        return false;
+    };
+    struct stat st;
+    if (stat(path.c_str(), &st) != 0) return refuse(strerror(errno));
+    if (!S_ISREG(st.st_mode)) return refuse("not a regular file");
+    if (st.st_size <= 0) return refuse("empty");
+    if ((unsigned long long)st.st_size > kMaxFileBytes)
+        return refuse("larger than " + std::to_string(kMaxFileBytes) + " bytes");
+    FILE *f = fopen(path.c_str(), "rb");
+    if (!f) return refuse(strerror(errno));
+    out->resize((size_t)st.st_size);
+    const size_t got = fread(out->data(), 1, out->size(), f);
+    const int bad = ferror(f);
+    fclose(f);
+    if (bad || got != out->size()) return refuse("short read");
+    return true;
+}
+
 /* A no-op image loader: tinygltf 2.7 refuses images without one, and
  * queries never look at textures. */
 bool skip_image(tinygltf::Image *, const int, std::string *, std::string *, int, int,
@@ -504,6 +533,9 @@ void parse(const char *path, tinygltf::Model &m) {
         fail("%s", err_json);
     tinygltf::TinyGLTF loader;
     loader.SetImageLoader(skip_image, nullptr);
+    loader.SetFsCallbacks(tinygltf::FsCallbacks{tinygltf::FileExists, tinygltf::ExpandFilePath,
+                                                read_external, tinygltf::WriteWholeFile,
+                                                nullptr});
     std::string err, warn, dir = base_dir(path);
     bool ok = is_glb(bytes) ? loader.LoadBinaryFromMemory(&m, &err, &warn, bytes.data(),
                                                           (unsigned)bytes.size(), dir)

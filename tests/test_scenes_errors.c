@@ -187,6 +187,31 @@ static void test_errors_limits(void) {
     }
 }
 
+/* A buffer whose "uri" names a directory (the fuzzer's find: tinygltf's
+ * own reader took LONG_MAX for its size and allocated that) or a missing
+ * file fails with the reason, not an allocation. */
+static void test_errors_external(void) {
+    static const char *const uris[][2] = {{".", "not a regular file"},
+                                          {"", "'uri' is missing"},
+                                          {"missing.bin", "File not found"}};
+    for (size_t i = 0; i < sizeof uris / sizeof *uris; i++) {
+        char path[256], json[1024];
+        snprintf(path, sizeof path, "%s/ext%zu.gltf", tmpdir, i);
+        const int n = snprintf(
+            json, sizeof json,
+            "{\"asset\":{\"version\":\"2.0\"},"
+            "\"buffers\":[{\"uri\":\"%s\",\"byteLength\":36}],"
+            "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],"
+            "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,"
+            "\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]}],"
+            "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+            "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}]}",
+            uris[i][0]);
+        write_bytes(path, json, (size_t)n);
+        LOAD_FAILS(path, uris[i][1]);
+    }
+}
+
 /* Every proper prefix of a .glb fails cleanly; so does garbage. */
 static void test_truncation_garbage(void) {
     model m = {0};
@@ -270,6 +295,7 @@ int main(void) {
     test_errors_geometry();
     test_errors_views();
     test_errors_limits();
+    test_errors_external();
     test_truncation_garbage();
     test_mutations();
     remove_tmpdir();
