@@ -85,7 +85,7 @@ static uint32_t *push_leaf(builder *b, size_t count) {
     }
     kd_frag *f = b->frag;
     f->nodes[idx].u.first = (uint32_t)f->nrefs;
-    f->nodes[idx].bits = ((uint32_t)count << 4) | KD_LEAF; /* flat: kd_layout */
+    f->nodes[idx].bits = ((uint32_t)count << 4) | KD_LEAF; /* flat: set_flat */
     f->nrefs += count;
     return f->refs + f->nrefs - count;
 }
@@ -136,6 +136,13 @@ static int split_pays(size_t n, const kd_split *s, const builder *b, int *bad) {
 static void build_exact(builder *b, const kdr_bounds *box, const ev_list *ev,
                         int depth, int bad);
 
+/* The flat field (kd_internal.h) of the leaf push_leaf just wrote, its
+ * references filled in: the fragment's last node. */
+static void set_flat(builder *b) {
+    kd_node *n = &b->frag->nodes[b->frag->nnodes - 1];
+    n->bits |= (uint32_t)kd_flat_of(b->tris, b->frag->refs + n->u.first, kd_count(n)) << 2;
+}
+
 static void make_leaf(builder *b, const ev_list *ev) {
     uint32_t *r = push_leaf(b, ev->ntri);
     if (!r)
@@ -143,6 +150,7 @@ static void make_leaf(builder *b, const ev_list *ev) {
     for (size_t i = 0; i < ev->n[0]; i++)
         if (ev_type(ev->e[0][i]) != EV_END)
             *r++ = ev_tri(ev->e[0][i]);
+    set_flat(b);
 }
 
 /* Hands the above child's lists (copied out of this worker's scratch) to
@@ -304,6 +312,8 @@ static void build_binned(builder *b, const kdr_bounds *box, kd_prims *p,
     uint32_t *r = push_leaf(b, p->n);
     for (size_t i = 0; r && i < p->n; i++)
         r[i] = p->p[i].tri;
+    if (r)
+        set_flat(b);
     free(p->p);
     p->p = NULL;
 }

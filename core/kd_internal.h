@@ -16,7 +16,7 @@
  *   leaf:     u.first = index of its first reference in scene->refs,
  *             bits = (count << 4) | (flat << 2) | 3; refs[first ..
  *             first+count) are triangle numbers (prims); flat (set by
- *             kd_layout()) is 1 + k when every vertex of every referenced
+ *             the build: kd_flat_of) is 1 + k when every vertex of every referenced
  *             triangle has the same coordinate on axis k (a leaf of an
  *             axis-aligned floor or wall), else 0 (kd_leaf_behind).
  * The build (kd_build.c) writes interior bits as (above_child << 2) | axis;
@@ -121,10 +121,13 @@ int kd_layout(kdr_scene *s);
 /* The part of kd_layout() that is derived from the finished tree and not
  * stored in it (root_mag, prefetch_leaves); kd_image.c calls it too. */
 void kd_layout_derive(kdr_scene *s);
-/* The flat field of leaf n's bits as kd_layout() computes it from its
- * triangles (1 + the first axis on which every vertex of every referenced
- * triangle has one coordinate, 0 when there is none or no reference);
- * kd_image.c checks a stored tree against it. */
+/* The flat field of a leaf with references ref[0..count) into tris: 1 +
+ * the first axis on which every vertex of every referenced triangle has
+ * one coordinate, 0 when there is none or no reference. The build sets it
+ * as it writes each leaf (kd_build.c); kd_layout_flat recomputes it for a
+ * leaf of a finished scene (0 for an interior node), which kd_image.c
+ * checks a stored tree against. */
+int kd_flat_of(const float *tris, const uint32_t *ref, uint32_t count);
 int kd_layout_flat(const kdr_scene *s, const kd_node *n);
 
 /*

@@ -6,8 +6,9 @@
  * then decides at the parent that an empty child needs no visit: a ray
  * crossing empty space cut off by the SAH's empty bonus costs no node step,
  * no stack entry and no leaf exit (bench/ab: see docs/TRAVERSAL.md).
- * It also marks leaves whose triangles all lie in one axis-aligned plane
- * (a floor, a wall: kd_layout_flat), so that walks can skip such a leaf
+ * Leaves whose triangles all lie in one axis-aligned plane (a floor, a
+ * wall) carry a flat field, which the build sets as it writes each leaf
+ * (kd_flat_of, on the build's threads) so that walks can skip such a leaf
  * for rays that start in front of its plane and move away from it along
  * their dominant axis (kd_leaf_behind in kd_internal.h).
  * The pass changes no triangle, split or reference, so every answer is the
@@ -32,23 +33,25 @@ void kd_layout_derive(kdr_scene *s) {
     s->prefetch_leaves = bytes >= KD_PREFETCH_MIN_BYTES;
 }
 
-int kd_layout_flat(const kdr_scene *s, const kd_node *n) {
-    const uint32_t count = kd_count(n);
-    if (!kd_is_leaf(n) || count == 0)
+int kd_flat_of(const float *tris, const uint32_t *ref, uint32_t count) {
+    if (count == 0)
         return 0;
-    const uint32_t *ref = s->refs + n->u.first;
-    const float *first = s->tris + 9 * (size_t)ref[0];
+    const float *first = tris + 9 * (size_t)ref[0];
     for (int k = 0; k < 3; k++) {
         const float c = first[k];
         int flat = 1;
         for (uint32_t r = 0; r < count && flat; r++) {
-            const float *t = s->tris + 9 * (size_t)ref[r];
+            const float *t = tris + 9 * (size_t)ref[r];
             flat = t[k] == c && t[3 + k] == c && t[6 + k] == c;
         }
         if (flat)
             return k + 1;
     }
     return 0;
+}
+
+int kd_layout_flat(const kdr_scene *s, const kd_node *n) {
+    return kd_is_leaf(n) ? kd_flat_of(s->tris, s->refs + n->u.first, kd_count(n)) : 0;
 }
 
 int kd_layout(kdr_scene *s) {
@@ -66,12 +69,6 @@ int kd_layout(kdr_scene *s) {
         const uint32_t eb = (uint32_t)empty_leaf(&s->nodes[i + 1]);
         const uint32_t ea = (uint32_t)empty_leaf(&s->nodes[above]);
         n->bits = above << 4 | ea << 3 | eb << 2 | axis;
-    }
-    /* the flat field changes no count, so the flags above stay right */
-    for (size_t i = 0; i < s->nnodes; i++) {
-        kd_node *n = &s->nodes[i];
-        if (kd_is_leaf(n))
-            n->bits = (n->bits & ~(3u << 2)) | (uint32_t)kd_layout_flat(s, n) << 2;
     }
     return KDR_OK;
 }
