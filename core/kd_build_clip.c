@@ -85,30 +85,6 @@ static int clip_to_box(const float *tri, const kdr_bounds *box, cvert out[16]) {
     return n;
 }
 
-/* Bounds of a clipped polygon, computed coordinates rounded outward, cut
- * to box; 0 when empty. */
-static int poly_bounds(const cvert *v, int n, const kdr_bounds *box,
-                       kdr_bounds *out) {
-    if (n == 0)
-        return 0;
-    for (int k = 0; k < 3; k++) {
-        float lo = INFINITY, hi = -INFINITY;
-        for (int i = 0; i < n; i++) {
-            const float f = (float)v[i].p[k];
-            const int ex = (v[i].exact >> k) & 1u;
-            const float flo = ex ? f : step_down(f);
-            const float fhi = ex ? f : -step_down(-f);
-            lo = flo < lo ? flo : lo;
-            hi = fhi > hi ? fhi : hi;
-        }
-        out->min[k] = lo > box->min[k] ? lo : box->min[k];
-        out->max[k] = hi < box->max[k] ? hi : box->max[k];
-        if (out->min[k] > out->max[k])
-            return 0;
-    }
-    return 1;
-}
-
 /* Fallback when double clipping loses a sliver: the triangle's bounds cut
  * to the box (still conservative). */
 static int tri_bounds_in_box(const float *tri, const kdr_bounds *box,
@@ -124,25 +100,56 @@ static int tri_bounds_in_box(const float *tri, const kdr_bounds *box,
     return 1;
 }
 
-/* clip_plane for both sides at once: out[0] keeps p[k] <= c, out[1] keeps
- * p[k] >= c, each in the order clip_plane gives. A crossing edge's point
- * is computed once: with the sign flipped, da, db and da - db only change
- * sign (IEEE negation and subtraction are exact under it), so t and the
- * point are the same bits for either side. */
-static void clip_plane_both(const cvert *in, int n, cvert *out[2], int m[2], int k,
-                            float c) {
-    m[0] = m[1] = 0;
+/* The float bounds a clipped vertex adds: a computed coordinate rounded
+ * one float outward, an input one as it is. */
+static inline void vert_bounds(const cvert *v, float lo[3], float hi[3]) {
+    for (int j = 0; j < 3; j++) {
+        const float f = (float)v->p[j];
+        const int ex = (v->exact >> j) & 1u;
+        lo[j] = ex ? f : step_down(f);
+        hi[j] = ex ? f : -step_down(-f);
+    }
+}
+
+/* The plane p[k] = c splits the polygon in[0..n): the bounds of the part
+ * with p[k] <= c go to lo[0], hi[0], of the part with p[k] >= c to lo[1],
+ * hi[1] (INFINITY / -INFINITY where a part is empty). The same vertices
+ * and crossing points (the same arithmetic, edge a-b in polygon order) as
+ * clipping to each side (Sutherland-Hodgman) and bounding the two polygons,
+ * without writing them: their bounds are a min and max over their
+ * vertices, in any order. With the sign flipped, da, db and da - db only
+ * change sign (IEEE negation and subtraction are exact under it), so t and
+ * a crossing point are the same bits for either side. */
+static void clip_bounds_both(const cvert *in, int n, int k, float c, float lo[2][3],
+                             float hi[2][3]) {
+    for (int s = 0; s < 2; s++)
+        for (int j = 0; j < 3; j++) {
+            lo[s][j] = INFINITY;
+            hi[s][j] = -INFINITY;
+        }
     for (int i = 0; i < n; i++) {
         const cvert *a = &in[i], *b = &in[i + 1 < n ? i + 1 : 0];
         const double da = a->p[k] - c, db = b->p[k] - c;
-        if (da <= 0.0)
-            out[0][m[0]++] = *a;
-        if (da >= 0.0)
-            out[1][m[1]++] = *a;
+        float vlo[3], vhi[3];
+        vert_bounds(a, vlo, vhi);
+        const int in0 = da <= 0.0, in1 = da >= 0.0;
+        for (int j = 0; j < 3; j++) {
+            const float l0 = in0 ? vlo[j] : INFINITY, h0 = in0 ? vhi[j] : -INFINITY;
+            const float l1 = in1 ? vlo[j] : INFINITY, h1 = in1 ? vhi[j] : -INFINITY;
+            lo[0][j] = l0 < lo[0][j] ? l0 : lo[0][j];
+            hi[0][j] = h0 > hi[0][j] ? h0 : hi[0][j];
+            lo[1][j] = l1 < lo[1][j] ? l1 : lo[1][j];
+            hi[1][j] = h1 > hi[1][j] ? h1 : hi[1][j];
+        }
         if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0)) {
-            cvert *v = &out[0][m[0]++];
-            cross_point(a, b, da / (da - db), k, c, v);
-            out[1][m[1]++] = *v;
+            cvert v;
+            cross_point(a, b, da / (da - db), k, c, &v);
+            vert_bounds(&v, vlo, vhi);
+            for (int s = 0; s < 2; s++)
+                for (int j = 0; j < 3; j++) {
+                    lo[s][j] = vlo[j] < lo[s][j] ? vlo[j] : lo[s][j];
+                    hi[s][j] = vhi[j] > hi[s][j] ? vhi[j] : hi[s][j];
+                }
         }
     }
 }
@@ -150,19 +157,22 @@ static void clip_plane_both(const cvert *in, int n, cvert *out[2], int m[2], int
 /* The bounds of the parts of tri inside cbox[0] and cbox[1], the halves of
  * box split at pos on axis; bit s of the result is set when side s keeps
  * something. The triangle is clipped to the node's box once, then that
- * polygon to either side of the plane. */
+ * polygon is split by the plane (clip_bounds_both). */
 unsigned kd_clip_tri(const float *tri, const kdr_bounds *box, int axis, float pos,
                      const kdr_bounds cbox[2], kdr_bounds bb[2]) {
-    cvert poly[16], half[2][16];
-    cvert *out[2] = {half[0], half[1]};
-    int m[2] = {0, 0};
+    cvert poly[16];
+    float lo[2][3], hi[2][3];
     const int n = clip_to_box(tri, box, poly);
-    if (n)
-        clip_plane_both(poly, n, out, m, axis, pos);
+    clip_bounds_both(poly, n, axis, pos, lo, hi);
     unsigned sides = 0;
     for (int side = 0; side < 2; side++) {
-        if (poly_bounds(half[side], m[side], &cbox[side], &bb[side]) ||
-            tri_bounds_in_box(tri, &cbox[side], &bb[side]))
+        int ok = 1;
+        for (int k = 0; k < 3; k++) {
+            bb[side].min[k] = lo[side][k] > cbox[side].min[k] ? lo[side][k] : cbox[side].min[k];
+            bb[side].max[k] = hi[side][k] < cbox[side].max[k] ? hi[side][k] : cbox[side].max[k];
+            ok &= bb[side].min[k] <= bb[side].max[k];
+        }
+        if (ok || tri_bounds_in_box(tri, &cbox[side], &bb[side]))
             sides |= 1u << side;
     }
     return sides;
