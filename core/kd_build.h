@@ -189,6 +189,11 @@ void kd_sort_events(kd_event *a, size_t n, int avx512);
  * of smaller keys, counted 8 keys per compare. */
 #define RANK_MAX 32
 void kd_rank_sort_avx512(kd_event *a, size_t n);
+/* Copies each event of in[0..n) to w[0] if its triangle's side has
+ * SIDE_LEFT, to w[1] if SIDE_RIGHT, in order, and advances them (writes at
+ * most n slots from each; kd_build_events.c's partition, 8 at a time). */
+void kd_partition_avx512(const kd_event *in, size_t n, const uint8_t *side,
+                         kd_event *w[2]);
 /* Splits the node's event lists into its children's, ch[0] below and ch[1]
  * above the plane, on top of the worker's stack (b->stack), or in a block
  * of their own (*own, to free) when the stack is full. The caller pops

@@ -182,3 +182,43 @@ KD_AVX512 void kd_rank_sort_avx512(kd_event *a, size_t n) {
         a[__builtin_popcount(below)] = tmp[i];
     }
 }
+
+/* ---- a split's partition of a list into the children's ----------------------- */
+
+/* kd_build_events.c's partition, 8 events per step: the 8 triangles' side
+ * bytes (read one by one: a gather was not wanted for 8 bytes) are packed
+ * into one word, widened to 8 lanes, and each child's events of the step
+ * are compressed to the front of a vector stored whole at its pointer,
+ * which then advances by their number. A whole store writes at most 8
+ * slots from a pointer that is at most i events past its start, so
+ * nothing is written beyond n slots from where a list began (the scalar
+ * loop's bound); the last n % 8 events go one by one. */
+KD_AVX512 void kd_partition_avx512(const kd_event *in, size_t n, const uint8_t *side,
+                                   kd_event *w[2]) {
+    kd_event *w0 = w[0], *w1 = w[1];
+    const __m512i left = _mm512_set1_epi64(SIDE_LEFT), right = _mm512_set1_epi64(SIDE_RIGHT);
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+        uint64_t packed = 0;
+        for (unsigned j = 0; j < 8; j++)
+            packed |= (uint64_t)side[ev_tri(in[i + j])] << (8 * j);
+        const __m512i e = _mm512_loadu_si512(in + i);
+        const __m512i sd = _mm512_cvtepu8_epi64(_mm_cvtsi64_si128((long long)packed));
+        const __mmask8 m0 = _mm512_test_epi64_mask(sd, left);
+        const __mmask8 m1 = _mm512_test_epi64_mask(sd, right);
+        _mm512_storeu_si512(w0, _mm512_maskz_compress_epi64(m0, e));
+        _mm512_storeu_si512(w1, _mm512_maskz_compress_epi64(m1, e));
+        w0 += __builtin_popcount(m0);
+        w1 += __builtin_popcount(m1);
+    }
+    for (; i < n; i++) {
+        const kd_event e = in[i];
+        const unsigned sd = side[ev_tri(e)];
+        *w0 = e;
+        *w1 = e;
+        w0 += sd & 1u;
+        w1 += sd >> 1;
+    }
+    w[0] = w0;
+    w[1] = w1;
+}

@@ -355,7 +355,10 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
                                             : ch[side].e[k];
             w[side] = old[side];
         }
-        partition(ev->e[k], ev->n[k], b->side, w);
+        if (b->avx512)
+            kd_partition_avx512(ev->e[k], ev->n[k], b->side, w);
+        else
+            partition(ev->e[k], ev->n[k], b->side, w);
         for (int side = 0; side < 2; side++) {
             const size_t na = nadd[3 * side + k];
             const size_t no = (size_t)(w[side] - old[side]);

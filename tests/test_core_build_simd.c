@@ -171,9 +171,43 @@ static void sort_cases(int avx512) {
     }
 }
 
+/* kd_partition_avx512 against the rule: each event to the left list when
+ * its triangle's side has SIDE_LEFT, to the right one when SIDE_RIGHT, in
+ * order; nothing written beyond n slots from either list's start. */
+static void partition_cases(void) {
+    enum { N = 200, GUARD = 16 };
+    static kd_event in[N], out[2][N + GUARD], want[2][N];
+    static uint8_t side[N];
+    const kd_event canary = 0x5a5a5a5a5a5a5a5aull;
+    for (size_t n = 0; n <= N; n++) {
+        size_t nw[2] = {0, 0};
+        for (size_t i = 0; i < n; i++) {
+            side[i] = (uint8_t)(rng_u32() % 3); /* SIDE_BOTH, _LEFT, _RIGHT */
+            in[i] = ev_make(rng_f(-2.0f, 2.0f), rng_u32() % 3, (uint32_t)(rng_u32() % n));
+        }
+        for (size_t i = 0; i < n; i++)
+            for (int s = 0; s < 2; s++)
+                if (side[ev_tri(in[i])] & (1u << s))
+                    want[s][nw[s]++] = in[i];
+        for (int s = 0; s < 2; s++)
+            for (size_t i = 0; i < N + GUARD; i++)
+                out[s][i] = canary;
+        kd_event *w[2] = {out[0], out[1]};
+        kd_partition_avx512(in, n, side, w);
+        for (int s = 0; s < 2; s++) {
+            EXPECT((size_t)(w[s] - out[s]) == nw[s]);
+            EXPECT(memcmp(out[s], want[s], nw[s] * sizeof(kd_event)) == 0);
+            for (size_t i = n; i < N + GUARD; i++)
+                EXPECT(out[s][i] == canary);
+        }
+    }
+}
+
 int main(void) {
     const int avx512 = kd_cpu_has_avx512();
     sort_cases(avx512);
+    if (avx512)
+        partition_cases();
     for (int i = 0; i < 2; i++)
         arrays[i] = malloc(4 * (2 * MAXN + KD_GROUP_PAD) * sizeof(uint32_t));
     static const int spreads[] = {1, 3, 16, 200, 100000};
