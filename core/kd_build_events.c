@@ -74,43 +74,56 @@ static int grow(const builder *b, void **p, size_t *cap, size_t need, size_t ele
     return *p ? KDR_OK : KDR_ENOMEM;
 }
 
+static size_t count_below(const kd_event *a, size_t n, kd_event x);
+
 /* Marks each triangle of the node LEFT, RIGHT or BOTH and gathers the BOTH
  * ones in b->both; returns their count, or (size_t)-1 without memory.
  * One pass over the split axis suffices: a triangle's start event comes
- * before its end event. Without branches on the event: start, end and
- * planar events interleave at random, so a switch on the type mispredicted
- * about once an event; each event computes all three outcomes and keeps
- * one (b->side is zeroed once, so the value read for a start event is
- * defined even though it is not used). */
+ * before its end event. The list is sorted by key, so it is three runs:
+ * below the plane (a start marks BOTH, an end or planar event LEFT), in
+ * it (start RIGHT, end LEFT, planar by planar_left) and above it (start
+ * and planar RIGHT; an end leaves the mark and its triangle is a
+ * straddler when the mark is still BOTH). Each run has its own loop, and
+ * inside a run no branch on the event: start, end and planar events
+ * interleave at random (a switch on the type mispredicted about once an
+ * event). The marks, the straddlers' order and the counts are those of
+ * one loop that computes all three outcomes per event (until this
+ * round). */
 static size_t classify(builder *b, const ev_list *ev, const kd_split *s,
                        size_t *nleft) {
     if (grow(b, (void **)&b->both, &b->both_cap, ev->ntri + 1, sizeof *b->both))
         return (size_t)-1;
-    const kd_event *e = ev->e[s->axis];
+    const kd_event *const e = ev->e[s->axis];
+    const size_t n = ev->n[s->axis];
     const uint32_t split_key = float_key(s->pos + 0.0f);
-    const int planar_left = s->planar_left != 0;
-    uint8_t *side = b->side;
-    uint32_t *both = b->both;
+    const size_t in_from = count_below(e, n, (kd_event)split_key << 32);
+    const size_t above_from =
+        split_key == UINT32_MAX ? n : count_below(e, n, (kd_event)(split_key + 1u) << 32);
+    const uint8_t planar_side = s->planar_left ? SIDE_LEFT : SIDE_RIGHT;
+    uint8_t *const side = b->side;
+    uint32_t *const both = b->both;
     size_t nboth = 0, nl = 0;
-    for (size_t i = 0; i < ev->n[s->axis]; i++) {
-        const uint32_t key = ev_key(e[i]), tri = ev_tri(e[i]);
+    for (size_t i = 0; i < in_from; i++) {
+        const unsigned notstart = ev_type(e[i]) != EV_START;
+        side[ev_tri(e[i])] = (uint8_t)(SIDE_LEFT & -notstart);
+        nl += notstart;
+    }
+    for (size_t i = in_from; i < above_from; i++) {
         const unsigned type = ev_type(e[i]);
-        const uint8_t old = side[tri];
-        const int le = key <= split_key;
-        const uint8_t v_start = key >= split_key ? SIDE_RIGHT : SIDE_BOTH;
-        const uint8_t v_end = le ? SIDE_LEFT : old;
-        const uint8_t v_planar =
-            (key < split_key || (key == split_key && planar_left)) ? SIDE_LEFT
-                                                                   : SIDE_RIGHT;
-        /* masks, not ?: -- the compiler turned the select into branches */
         const uint8_t m_start = (uint8_t)-(type == EV_START);
         const uint8_t m_end = (uint8_t)-(type == EV_END);
-        side[tri] = (uint8_t)((v_start & m_start) | (v_end & m_end) |
-                              (v_planar & (uint8_t)~(m_start | m_end)));
+        const uint8_t v = (uint8_t)((SIDE_RIGHT & m_start) | (SIDE_LEFT & m_end) |
+                                    (planar_side & (uint8_t)~(m_start | m_end)));
+        side[ev_tri(e[i])] = v;
+        nl += v == SIDE_LEFT;
+    }
+    for (size_t i = above_from; i < n; i++) {
+        const uint32_t tri = ev_tri(e[i]);
+        const uint8_t old = side[tri];
+        const unsigned end = ev_type(e[i]) == EV_END;
+        side[tri] = (uint8_t)((old & -end) | (SIDE_RIGHT & (uint8_t)~-end));
         both[nboth] = tri;
-        nboth += (type == EV_END) & !le & (old == SIDE_BOTH);
-        /* a triangle's side is final at its end or planar event */
-        nl += ((type == EV_END) & le) | ((type == EV_PLANAR) & (v_planar == SIDE_LEFT));
+        nboth += end & (old == SIDE_BOTH);
     }
     *nleft = nl;
     return nboth;
