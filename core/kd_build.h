@@ -217,6 +217,10 @@ void kd_stack_reserve(builder *b, size_t events);
  * something (conservative: never drops a touched side). */
 unsigned kd_clip_tri(const float *tri, const kdr_bounds *box, int axis, float pos,
                      const kdr_bounds cbox[2], kdr_bounds bb[2]);
+/* kd_clip_tri with a vertex per AVX vector (AVX-512 CPUs only): the same
+ * sides and bounds bit for bit (test_core_build_simd compares them). */
+unsigned kd_clip_tri_avx512(const float *tri, const kdr_bounds *box, int axis, float pos,
+                            const kdr_bounds cbox[2], kdr_bounds bb[2]);
 
 /* Clips the nboth straddlers in b->both to both child boxes; their new
  * events go to add[0..2] (left) and add[3..5] (right), sorted. */

@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "kd_build.h"
+#include "simd.h"
 
 #define KD_CLIP_AHEAD 8 /* straddlers prefetched ahead of the one clipped */
 
@@ -178,6 +179,126 @@ unsigned kd_clip_tri(const float *tri, const kdr_bounds *box, int axis, float po
     return sides;
 }
 
+/* ---- the same clipping, a vertex per AVX vector (AVX-512 CPUs) ---------- */
+
+/* kd_clip_tri's arithmetic with a vertex's three doubles in lanes 0-2 of
+ * one vector (lane 3 zero) and its exact bits beside it: the crossing point
+ * a + t * (b - a) is the same three IEEE operations per lane as
+ * cross_point's (no FMA: -ffp-contract=off), coordinate k is set to c, and
+ * a lane is exact when a's and b's are equal and both exact. The rounding
+ * to float bounds is step_down's on 4 lanes. Same bounds bit for bit. */
+typedef struct vpoly {
+    __m256d p[16];
+    unsigned ex[16];
+} vpoly;
+
+KD_AVX512 static int vclip_plane(const vpoly *in, int n, vpoly *out, int k, float c,
+                                 double sign) {
+    int m = 0;
+    const __m256d cv = _mm256_set1_pd((double)c);
+    for (int i = 0; i < n; i++) {
+        const int j = i + 1 < n ? i + 1 : 0;
+        const double *pa = (const double *)&in->p[i], *pb = (const double *)&in->p[j];
+        const double da = sign * (pa[k] - c), db = sign * (pb[k] - c);
+        if (da >= 0.0) {
+            out->p[m] = in->p[i];
+            out->ex[m++] = in->ex[i];
+        }
+        if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0)) {
+            const __m256d a = in->p[i], b = in->p[j];
+            const __m256d t = _mm256_set1_pd(da / (da - db));
+            const __m256d v = _mm256_add_pd(a, _mm256_mul_pd(t, _mm256_sub_pd(b, a)));
+            const unsigned eq = _mm256_cmp_pd_mask(a, b, _CMP_EQ_OQ);
+            out->p[m] = _mm256_mask_blend_pd((__mmask8)(1u << k), v, cv);
+            out->ex[m++] = (1u << k) | (in->ex[i] & in->ex[j] & eq & 7u & ~(1u << k));
+        }
+    }
+    return m;
+}
+
+/* Lower and upper float bounds of a vertex (lanes 0-2): exact lanes as they
+ * are, others one float outward (step_down and -step_down(-f)). */
+KD_AVX512 static inline void vvert_bounds(__m256d p, unsigned ex, __m128 *lo, __m128 *hi) {
+    const __m128 f = _mm256_cvtpd_ps(p);
+    const __m128i u = _mm_castps_si128(f), one = _mm_set1_epi32(1);
+    const __mmask8 gt = _mm_cmp_ps_mask(f, _mm_setzero_ps(), _CMP_GT_OQ);
+    const __mmask8 z = _mm_cmp_ps_mask(f, _mm_setzero_ps(), _CMP_EQ_OQ);
+    const __m128i plus = _mm_add_epi32(u, one), minus = _mm_sub_epi32(u, one);
+    __m128i down = _mm_mask_blend_epi32(gt, plus, minus);
+    __m128i up = _mm_mask_blend_epi32(gt, minus, plus);
+    down = _mm_mask_blend_epi32(z, down, _mm_set1_epi32((int)0x80000001u));
+    up = _mm_mask_blend_epi32(z, up, one);
+    *lo = _mm_castsi128_ps(_mm_mask_blend_epi32((__mmask8)ex, down, u));
+    *hi = _mm_castsi128_ps(_mm_mask_blend_epi32((__mmask8)ex, up, u));
+}
+
+KD_AVX512 unsigned kd_clip_tri_avx512(const float *tri, const kdr_bounds *box, int axis,
+                                     float pos, const kdr_bounds cbox[2], kdr_bounds bb[2]) {
+    vpoly buf[2];
+    int n = 3, cur = 0;
+    for (int i = 0; i < 3; i++) {
+        buf[0].p[i] = _mm256_set_pd(0.0, tri[3 * i + 2], tri[3 * i + 1], tri[3 * i]);
+        buf[0].ex[i] = 7u;
+    }
+    for (int k = 0; k < 3 && n > 0; k++) {
+        if (min3(tri[k], tri[3 + k], tri[6 + k]) < box->min[k]) {
+            n = vclip_plane(&buf[cur], n, &buf[cur ^ 1], k, box->min[k], 1.0);
+            cur ^= 1;
+        }
+        if (n > 0 && max3(tri[k], tri[3 + k], tri[6 + k]) > box->max[k]) {
+            n = vclip_plane(&buf[cur], n, &buf[cur ^ 1], k, box->max[k], -1.0);
+            cur ^= 1;
+        }
+    }
+    const vpoly *in = &buf[cur];
+    __m128 lo0 = _mm_set1_ps(INFINITY), hi0 = _mm_set1_ps(-INFINITY);
+    __m128 lo1 = lo0, hi1 = hi0;
+    for (int i = 0; i < n; i++) {
+        const int j = i + 1 < n ? i + 1 : 0;
+        const double *pa = (const double *)&in->p[i], *pb = (const double *)&in->p[j];
+        const double da = pa[axis] - pos, db = pb[axis] - pos;
+        __m128 vlo, vhi;
+        vvert_bounds(in->p[i], in->ex[i], &vlo, &vhi);
+        const __mmask8 m0 = da <= 0.0 ? 0xf : 0, m1 = da >= 0.0 ? 0xf : 0;
+        lo0 = _mm_mask_blend_ps(m0 & _mm_cmp_ps_mask(vlo, lo0, _CMP_LT_OQ), lo0, vlo);
+        hi0 = _mm_mask_blend_ps(m0 & _mm_cmp_ps_mask(vhi, hi0, _CMP_GT_OQ), hi0, vhi);
+        lo1 = _mm_mask_blend_ps(m1 & _mm_cmp_ps_mask(vlo, lo1, _CMP_LT_OQ), lo1, vlo);
+        hi1 = _mm_mask_blend_ps(m1 & _mm_cmp_ps_mask(vhi, hi1, _CMP_GT_OQ), hi1, vhi);
+        if ((da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0)) {
+            const __m256d a = in->p[i], b = in->p[j];
+            const __m256d t = _mm256_set1_pd(da / (da - db));
+            const __m256d v = _mm256_add_pd(a, _mm256_mul_pd(t, _mm256_sub_pd(b, a)));
+            const unsigned eq = _mm256_cmp_pd_mask(a, b, _CMP_EQ_OQ);
+            const __m256d vk =
+                _mm256_mask_blend_pd((__mmask8)(1u << axis), v, _mm256_set1_pd((double)pos));
+            const unsigned ex =
+                (1u << axis) | (in->ex[i] & in->ex[j] & eq & 7u & ~(1u << axis));
+            vvert_bounds(vk, ex, &vlo, &vhi);
+            lo0 = _mm_mask_blend_ps(_mm_cmp_ps_mask(vlo, lo0, _CMP_LT_OQ), lo0, vlo);
+            hi0 = _mm_mask_blend_ps(_mm_cmp_ps_mask(vhi, hi0, _CMP_GT_OQ), hi0, vhi);
+            lo1 = _mm_mask_blend_ps(_mm_cmp_ps_mask(vlo, lo1, _CMP_LT_OQ), lo1, vlo);
+            hi1 = _mm_mask_blend_ps(_mm_cmp_ps_mask(vhi, hi1, _CMP_GT_OQ), hi1, vhi);
+        }
+    }
+    float lo[2][4], hi[2][4];
+    _mm_storeu_ps(lo[0], lo0);
+    _mm_storeu_ps(hi[0], hi0);
+    _mm_storeu_ps(lo[1], lo1);
+    _mm_storeu_ps(hi[1], hi1);
+    unsigned sides = 0;
+    for (int side = 0; side < 2; side++) {
+        int ok = 1;
+        for (int k = 0; k < 3; k++) {
+            bb[side].min[k] = lo[side][k] > cbox[side].min[k] ? lo[side][k] : cbox[side].min[k];
+            bb[side].max[k] = hi[side][k] < cbox[side].max[k] ? hi[side][k] : cbox[side].max[k];
+            ok &= bb[side].min[k] <= bb[side].max[k];
+        }
+        if (ok || tri_bounds_in_box(tri, &cbox[side], &bb[side]))
+            sides |= 1u << side;
+    }
+    return sides;
+}
+
 /* Clips the straddlers to both child boxes; their new events go to
  * add[0..2] (left) and add[3..5] (right), sorted. */
 void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
@@ -194,7 +315,9 @@ void kd_clip_both(builder *b, size_t nboth, const kdr_bounds *box,
         }
         const float *tri = b->tris + 9 * (size_t)b->both[i];
         kdr_bounds bb[2];
-        const unsigned sides = kd_clip_tri(tri, box, s->axis, s->pos, cbox, bb);
+        const unsigned sides =
+            b->avx512 ? kd_clip_tri_avx512(tri, box, s->axis, s->pos, cbox, bb)
+                      : kd_clip_tri(tri, box, s->axis, s->pos, cbox, bb);
         for (int side = 0; side < 2; side++) {
             if (sides & (1u << side)) {
                 ev_add(add + 3 * side, nadd + 3 * side, &bb[side], b->both[i]);

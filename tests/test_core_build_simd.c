@@ -203,8 +203,47 @@ static void partition_cases(void) {
     }
 }
 
+/* kd_clip_tri_avx512 against kd_clip_tri: random triangles around random
+ * boxes, coordinates often on a coarse grid (vertices in the plane or on
+ * the box, equal coordinates, zeros, slivers), every axis. */
+static float grid_or_free(float lo, float hi) {
+    const float f = rng_f(lo, hi);
+    return rng_u32() % 2 ? (float)(int)(f * 4.0f) * 0.25f : f;
+}
+
+static void clip_cases(void) {
+    for (int c = 0; c < 20000; c++) {
+        kdr_bounds box, cbox[2], bb[2][2];
+        float tri[9];
+        for (int k = 0; k < 3; k++) {
+            box.min[k] = grid_or_free(-2.0f, 0.0f);
+            box.max[k] = grid_or_free(0.0f, 2.0f);
+            if (box.max[k] <= box.min[k])
+                box.max[k] = box.min[k] + 0.5f;
+        }
+        for (int i = 0; i < 9; i++)
+            tri[i] = grid_or_free(-3.0f, 3.0f);
+        if (c % 7 == 0) /* a sliver */
+            for (int k = 0; k < 3; k++)
+                tri[6 + k] = tri[k] + rng_f(-1e-6f, 1e-6f);
+        const int axis = (int)(rng_u32() % 3);
+        float pos = grid_or_free(box.min[axis], box.max[axis]);
+        pos = pos < box.min[axis] ? box.min[axis] : pos > box.max[axis] ? box.max[axis] : pos;
+        cbox[0] = cbox[1] = box;
+        cbox[0].max[axis] = cbox[1].min[axis] = pos;
+        const unsigned s0 = kd_clip_tri(tri, &box, axis, pos, cbox, bb[0]);
+        const unsigned s1 = kd_clip_tri_avx512(tri, &box, axis, pos, cbox, bb[1]);
+        EXPECT(s0 == s1);
+        for (int side = 0; side < 2; side++)
+            if (s0 == s1 && (s0 >> side) & 1u)
+                EXPECT(memcmp(&bb[0][side], &bb[1][side], sizeof(kdr_bounds)) == 0);
+    }
+}
+
 int main(void) {
     const int avx512 = kd_cpu_has_avx512();
+    if (avx512)
+        clip_cases();
     sort_cases(avx512);
     if (avx512)
         partition_cases();
