@@ -22,21 +22,37 @@
 #include "kd_build.h"
 #include "simd.h"
 
-/* Lanes 0..15 of the keys and types of e[0..16) (two 8-event halves),
- * masked to the first n lanes. */
-KD_AVX512 static inline void load16(const kd_event *e, size_t n, __m512i *key,
-                                    __m512i *type) {
+/* Events e[0..16) masked to the first n, as two 8-event halves. */
+KD_AVX512 static inline void load16_raw(const kd_event *e, size_t n, __m512i *a,
+                                        __m512i *b) {
     const __mmask8 m0 = (__mmask8)(n >= 8 ? 0xff : (1u << n) - 1);
     const __mmask8 m1 = (__mmask8)(n >= 16 ? 0xff : n > 8 ? (1u << (n - 8)) - 1 : 0);
-    const __m512i a = _mm512_maskz_loadu_epi64(m0, e);
-    const __m512i b = _mm512_maskz_loadu_epi64(m1, e + 8);
-    const __m256i ka = _mm512_cvtepi64_epi32(_mm512_srli_epi64(a, 32));
-    const __m256i kb = _mm512_cvtepi64_epi32(_mm512_srli_epi64(b, 32));
-    const __m256i ta = _mm512_cvtepi64_epi32(_mm512_srli_epi64(a, 30));
-    const __m256i tb = _mm512_cvtepi64_epi32(_mm512_srli_epi64(b, 30));
-    *key = _mm512_inserti64x4(_mm512_castsi256_si512(ka), kb, 1);
-    *type = _mm512_and_si512(_mm512_inserti64x4(_mm512_castsi256_si512(ta), tb, 1),
-                             _mm512_set1_epi32(3));
+    *a = _mm512_maskz_loadu_epi64(m0, e);
+    *b = _mm512_maskz_loadu_epi64(m1, e + 8);
+}
+
+/* Lanes 0..15 of the keys (the events' high dwords, one two-source
+ * permute) and types (bits 30-31 of the low dwords) of e[0..16), masked to
+ * the first n lanes (zero beyond). */
+KD_AVX512 static inline void load16(const kd_event *e, size_t n, __m512i *key,
+                                    __m512i *type) {
+    const __m512i hi = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25,
+                                         27, 29, 31);
+    const __m512i lo = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24,
+                                         26, 28, 30);
+    __m512i a, b;
+    load16_raw(e, n, &a, &b);
+    *key = _mm512_permutex2var_epi32(a, hi, b);
+    *type = _mm512_srli_epi32(_mm512_permutex2var_epi32(a, lo, b), 30);
+}
+
+/* The keys alone. */
+KD_AVX512 static inline __m512i load16_key(const kd_event *e, size_t n) {
+    const __m512i hi = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25,
+                                         27, 29, 31);
+    __m512i a, b;
+    load16_raw(e, n, &a, &b);
+    return _mm512_permutex2var_epi32(a, hi, b);
 }
 
 /* Inclusive prefix sum over the 16 lanes. */
@@ -57,10 +73,10 @@ KD_AVX512 size_t kd_group_events_avx512(const kd_event *e, size_t n,
                                            14, 15, 16);
     for (size_t i = 0; i < n; i += 16) {
         const size_t left = n - i;
-        __m512i key, type, nkey, ntype;
+        __m512i key, type;
         load16(e + i, left, &key, &type);
         /* the next event's key; the list's last event ends its group */
-        load16(e + i + 1, left - 1, &nkey, &ntype);
+        const __m512i nkey = load16_key(e + i + 1, left - 1);
         const __mmask16 valid = (__mmask16)(left >= 16 ? 0xffff : (1u << left) - 1);
         const __mmask16 tail = (__mmask16)(left > 16 ? 0 : 1u << (left - 1));
         const __mmask16 last =
