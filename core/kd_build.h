@@ -189,6 +189,9 @@ void kd_sort_events(kd_event *a, size_t n, int avx512);
  * of smaller keys, counted 8 keys per compare. */
 #define RANK_MAX 32
 void kd_rank_sort_avx512(kd_event *a, size_t n);
+/* kd_sort_events on AVX-512 CPUs: quicksort steps partitioned by compress
+ * for lists of at most 1024 events, then kd_rank_sort_avx512. */
+void kd_sort_events_avx512(kd_event *a, size_t n);
 /* Copies each event of in[0..n) to w[0] if its triangle's side has
  * SIDE_LEFT, to w[1] if SIDE_RIGHT, in order, and advances them (writes at
  * most n slots from each; kd_build_events.c's partition, 8 at a time). */

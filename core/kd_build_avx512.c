@@ -18,6 +18,7 @@
  */
 #include <immintrin.h>
 #include <math.h>
+#include <string.h>
 
 #include "kd_build.h"
 #include "simd.h"
@@ -237,4 +238,59 @@ KD_AVX512 void kd_partition_avx512(const kd_event *in, size_t n, const uint8_t *
     }
     w[0] = w0;
     w[1] = w1;
+}
+
+/* ---- the straddlers' new events: quicksort by compress ---------------------- */
+
+/* kd_sort_events' quicksort step on AVX-512 CPUs for lists of up to
+ * QS_MAX events: the same median-of-three pivot, but the partition is
+ * without branches on the data: 8 keys per compare, those below the pivot
+ * compressed to one scratch list, the others to another (each stored as a
+ * whole vector, advanced by the count), then copied back, the lower ones
+ * first. Keys are unique and the pivot is the median of three distinct
+ * keys, so both parts are non-empty and smaller than the list. A sort's
+ * result is unique, so the order is the scalar quicksort's. Longer lists
+ * (only near the root) take kd_sort_events' scalar steps. */
+#define QS_MAX 1024
+
+KD_AVX512 static void qsort_compress(kd_event *a, size_t n, kd_event *lo, kd_event *hi) {
+    while (n > RANK_MAX && n <= QS_MAX) {
+        const kd_event x = a[0], y = a[n / 2], z = a[n - 1];
+        const kd_event p =
+            x < y ? (y < z ? y : (x < z ? z : x)) : (x < z ? x : (y < z ? z : y));
+        const __m512i vp = _mm512_set1_epi64((long long)p);
+        size_t nl = 0, nh = 0;
+        for (size_t i = 0; i < n; i += 8) {
+            const size_t left = n - i;
+            const __mmask8 valid = (__mmask8)(left >= 8 ? 0xff : (1u << left) - 1);
+            const __m512i v = _mm512_maskz_loadu_epi64(valid, a + i);
+            const __mmask8 below = _mm512_mask_cmplt_epu64_mask(valid, v, vp);
+            const __mmask8 above = (__mmask8)(valid & ~below);
+            _mm512_storeu_si512(lo + nl, _mm512_maskz_compress_epi64(below, v));
+            _mm512_storeu_si512(hi + nh, _mm512_maskz_compress_epi64(above, v));
+            nl += (size_t)__builtin_popcount(below);
+            nh += (size_t)__builtin_popcount(above);
+        }
+        memcpy(a, lo, nl * sizeof *a);
+        memcpy(a + nl, hi, nh * sizeof *a);
+        /* the smaller part by recursion, the larger one by the loop */
+        if (nl <= nh) {
+            qsort_compress(a, nl, lo, hi);
+            a += nl;
+            n = nh;
+        } else {
+            qsort_compress(a + nl, nh, lo, hi);
+            n = nl;
+        }
+    }
+    if (n > QS_MAX)
+        kd_sort_events(a, n, 1);
+    else
+        kd_rank_sort_avx512(a, n);
+}
+
+/* (the two scratch lists are the caller's: one pair for the whole sort) */
+KD_AVX512 void kd_sort_events_avx512(kd_event *a, size_t n) {
+    kd_event lo[QS_MAX + 8], hi[QS_MAX + 8];
+    qsort_compress(a, n, lo, hi);
 }

@@ -217,6 +217,10 @@ static void rank_sort(kd_event *a, size_t n) {
  * twin, which counts the smaller keys 8 per compare). */
 void kd_sort_events(kd_event *a, size_t n, int avx512) {
     while (n > RANK_MAX) {
+        if (avx512 && n <= 1024) {
+            kd_sort_events_avx512(a, n);
+            return;
+        }
         kd_event x = a[0], y = a[n / 2], z = a[n - 1];
         kd_event p = x < y ? (y < z ? y : (x < z ? z : x)) : (x < z ? x : (y < z ? z : y));
         size_t i = 0, j = n - 1;

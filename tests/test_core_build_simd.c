@@ -154,8 +154,8 @@ static void one_case(size_t ntri, int spread, int avx512) {
 }
 
 static void sort_cases(int avx512) {
-    static kd_event a[300], b[300], c[300];
-    for (size_t n = 0; n <= 300; n++) {
+    static kd_event a[3000], b[3000], c[3000];
+    for (size_t n = 0; n <= 3000; n += n < 300 ? 1 : 97) {
         for (size_t i = 0; i < n; i++) /* unique: the index in the low bits */
             a[i] = ev_make(rng_f(-2.0f, 2.0f) * (float)(rng_u32() % 3), rng_u32() % 3,
                            (uint32_t)i);
