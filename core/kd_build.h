@@ -192,9 +192,28 @@ void kd_rank_sort_avx512(kd_event *a, size_t n);
 /* kd_sort_events on AVX-512 CPUs: quicksort steps partitioned by compress
  * for lists of at most 1024 events, then kd_rank_sort_avx512. */
 void kd_sort_events_avx512(kd_event *a, size_t n);
-/* Copies each event of in[0..n) to w[0] if its triangle's side has
- * SIDE_LEFT, to w[1] if SIDE_RIGHT, in order, and advances them (writes at
- * most n slots from each; kd_build_events.c's partition, 8 at a time). */
+/* Copies each event of in[0..n) to w[0] and/or w[1] as its triangle's side
+ * says, in order, and advances them. Without branches: SIDE_LEFT is bit 0
+ * and SIDE_RIGHT bit 1 (with sd == SIDE_LEFT and sd == SIDE_RIGHT gcc 12
+ * saw that only one can hold and branched); every event is written to both
+ * and each pointer advances by its bit (the slot after a list's last
+ * event may be written, but never beyond n slots from where it began).
+ * kd_build_events.c's split and the tail of kd_partition_avx512. */
+static inline void kd_partition(const kd_event *in, size_t n, const uint8_t *side,
+                                kd_event *w[2]) {
+    kd_event *w0 = w[0], *w1 = w[1];
+    for (size_t i = 0; i < n; i++) {
+        const kd_event e = in[i];
+        const unsigned sd = side[ev_tri(e)];
+        *w0 = e;
+        *w1 = e;
+        w0 += sd & 1u;
+        w1 += sd >> 1;
+    }
+    w[0] = w0;
+    w[1] = w1;
+}
+/* kd_partition 8 events at a time (AVX-512), the same result. */
 void kd_partition_avx512(const kd_event *in, size_t n, const uint8_t *side,
                          kd_event *w[2]);
 /* Splits the node's event lists into its children's, ch[0] below and ch[1]

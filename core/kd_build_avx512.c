@@ -202,14 +202,14 @@ KD_AVX512 void kd_rank_sort_avx512(kd_event *a, size_t n) {
 
 /* ---- a split's partition of a list into the children's ----------------------- */
 
-/* kd_build_events.c's partition, 8 events per step: the 8 triangles' side
+/* kd_partition (kd_build.h), 8 events per step: the 8 triangles' side
  * bytes (read one by one: a gather was not wanted for 8 bytes) are packed
  * into one word, widened to 8 lanes, and each child's events of the step
  * are compressed to the front of a vector stored whole at its pointer,
  * which then advances by their number. A whole store writes at most 8
  * slots from a pointer that is at most i events past its start, so
  * nothing is written beyond n slots from where a list began (the scalar
- * loop's bound); the last n % 8 events go one by one. */
+ * loop's bound); the last n % 8 go through kd_partition itself. */
 KD_AVX512 void kd_partition_avx512(const kd_event *in, size_t n, const uint8_t *side,
                                    kd_event *w[2]) {
     kd_event *w0 = w[0], *w1 = w[1];
@@ -228,16 +228,9 @@ KD_AVX512 void kd_partition_avx512(const kd_event *in, size_t n, const uint8_t *
         w0 += __builtin_popcount(m0);
         w1 += __builtin_popcount(m1);
     }
-    for (; i < n; i++) {
-        const kd_event e = in[i];
-        const unsigned sd = side[ev_tri(e)];
-        *w0 = e;
-        *w1 = e;
-        w0 += sd & 1u;
-        w1 += sd >> 1;
-    }
     w[0] = w0;
     w[1] = w1;
+    kd_partition(in + i, n - i, side, w);
 }
 
 /* ---- the straddlers' new events: quicksort by compress ---------------------- */

@@ -245,27 +245,6 @@ void kd_sort_events(kd_event *a, size_t n, int avx512) {
         rank_sort(a, n);
 }
 
-/* Copies each event of in[0..n) to w[0] and/or w[1] as its triangle's side
- * says, in order, and advances them. Without branches: SIDE_LEFT is bit 0
- * and SIDE_RIGHT bit 1 (with sd == SIDE_LEFT and sd == SIDE_RIGHT gcc 12
- * saw that only one can hold and branched); every event is written to both
- * and each pointer advances by its bit (the slot after a list's last
- * event may be written, but never beyond n slots from where it began). */
-static void partition(const kd_event *in, size_t n, const uint8_t *side,
-                      kd_event *w[2]) {
-    kd_event *w0 = w[0], *w1 = w[1];
-    for (size_t i = 0; i < n; i++) {
-        const kd_event e = in[i];
-        const unsigned sd = side[ev_tri(e)];
-        *w0 = e;
-        *w1 = e;
-        w0 += sd & 1u;
-        w1 += sd >> 1;
-    }
-    w[0] = w0;
-    w[1] = w1;
-}
-
 /* Room for need events on top of the worker's stack. The stack is one
  * block per worker, reused by every node and task it builds: the lists of
  * the nodes on the current path are all it holds (a subtree only writes
@@ -375,7 +354,7 @@ int kd_split_events(builder *b, const ev_list *ev, const kd_split *s,
         if (b->avx512)
             kd_partition_avx512(ev->e[k], ev->n[k], b->side, w);
         else
-            partition(ev->e[k], ev->n[k], b->side, w);
+            kd_partition(ev->e[k], ev->n[k], b->side, w);
         for (int side = 0; side < 2; side++) {
             const size_t na = nadd[3 * side + k];
             const size_t no = (size_t)(w[side] - old[side]);
