@@ -469,13 +469,17 @@ static void shadow_run(void *ctx) {
                 j->failed = 1;
                 continue;
             }
+            kdr_ray rays[64];
             for (uint32_t s = 0; s < q->samples; s++) {
-                kdr_ray ray;
-                kd_shadow_frame_ray(&f, s, q->samples, &ray);
+                /* the sampler's batch form, as kdray's own paths use it */
+                if (s % 64 == 0)
+                    kd_shadow_frame_rays(&f, NULL, s, q->samples - s < 64 ? q->samples - s : 64,
+                                         q->samples, rays);
+                const kdr_ray *ray = &rays[s % 64];
                 if (j->api.width <= 1)
-                    single_put(j->buf, used, KDR_ANY, &ray);
+                    single_put(j->buf, used, KDR_ANY, ray);
                 else
-                    packet_put(j->buf, j->api.width, (int)used, KDR_ANY, &ray);
+                    packet_put(j->buf, j->api.width, (int)used, KDR_ANY, ray);
                 j->owner[used++] = o;
                 if (used == cap) {
                     shadow_flush(j, &c, used);

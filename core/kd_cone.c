@@ -274,10 +274,9 @@ static int ws_reserve(kd_shadow_ws *ws, uint32_t nsamples) {
 }
 
 static void make_samples(const kd_shadow_frame *f, uint32_t n, kd_shadow_ws *ws) {
-    for (uint32_t s = 0; s < n; s++) {
-        kd_shadow_frame_ray(f, s, n, &ws->rays[s]);
+    kd_shadow_frame_rays(f, NULL, 0, n, n, ws->rays);
+    for (uint32_t s = 0; s < n; s++)
         ws->idx[s] = s;
-    }
 }
 
 /* A cone too busy to decide (its walk went over budget): the samples are

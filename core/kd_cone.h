@@ -15,6 +15,9 @@
 #include "kd_internal.h"
 #include "kdray.h"
 
+/* The contract's largest samples per point and light (kdray.h). */
+#define KD_SHADOW_MAX_SAMPLES 4096
+
 typedef struct kd_shadow_frame {
     float apex[3];      /* the point, moved along the normal when given */
     double axis[3];     /* unit vector from apex toward the light centre */
@@ -27,6 +30,7 @@ typedef struct kd_shadow_frame {
     float along;        /* > 0: each ray's origin moves this far along it */
     uint64_t key;       /* hash of (seed, point, light) */
     double phi_shift;   /* per-pair rotation of the azimuth lattice */
+    double cos_shift, sin_shift; /* of 2 pi phi_shift */
     double oc[3];       /* center - apex, as each sample's reach uses it */
     double near_c;      /* (dist - radius)(dist + radius), likewise */
 } kd_shadow_frame;
@@ -36,12 +40,18 @@ typedef struct kd_shadow_frame {
 int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
                          size_t i, size_t l, kd_shadow_frame *f);
 
-/* Sample s of nsamples of the frame (direction unit length, tmin 0).
+/* Sample s of nsamples of the frame (direction unit length up to
+ * rounding, tmin 0).
  * Its direction makes the angle theta with the axis, 1 - cos(theta) =
  * u * one_minus_cos with u in [s, s+1) / nsamples (stratum s), and the
  * azimuth 2 pi kd_shadow_frame_phase(f, s) around it from b1 toward b2. */
 void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
                          uint32_t nsamples, kdr_ray *out);
+/* The samples idx[0..count) of nsamples (idx NULL: s0, s0 + 1, ...) into
+ * out[0..count): kd_shadow_frame_ray's rays bit for bit, four at a time
+ * in double lanes where AVX2 runs. */
+void kd_shadow_frame_rays(const kd_shadow_frame *f, const uint32_t *idx, uint32_t s0,
+                          uint32_t count, uint32_t nsamples, kdr_ray *out);
 /* The azimuth of sample s in turns, in [0, 1): the very value the ray is
  * built from, so a region of (stratum, phase) holds exactly the samples
  * whose parameters lie in it. */

@@ -197,10 +197,9 @@ static uint32_t trace_list(kd_cells *c, kd_cone_pair *pr, const cell *ce,
     for (uint32_t g = ce->i0; g < ce->i1; g += width) {
         const int m = (int)(ce->i1 - g < width ? ce->i1 - g : width);
         const kdr_ray *lanes[16];
-        for (int j = 0; j < m; j++) {
-            kd_shadow_frame_ray(pr->f, c->idx[g + j], pr->n, &c->rays[j]);
+        kd_shadow_frame_rays(pr->f, c->idx + g, 0, (uint32_t)m, pr->n, c->rays);
+        for (int j = 0; j < m; j++)
             lanes[j] = &c->rays[j];
-        }
         const int blocked =
             np ? kd_cone_packet_blocked(pr->scene, lanes, m, prims, np, &pr->last, (int)width)
                : 0;

@@ -25,7 +25,7 @@
 #include "kd_stream.h" /* kd_cpu_has_avx512, kd_stream_trace_far */
 #include "kd_traverse_bundle.h"
 
-#define SHADOW_MAX_SAMPLES 4096u
+
 
 /* The index of the j-th point traced: its samples' seed and its answers'
  * slots (kdr_shadow_trace_order passes points in its own order). */
@@ -37,7 +37,7 @@ static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
                        size_t first, size_t count, const float *visibility) {
     if (!scene || !q || !visibility || !q->points || !q->lights)
         return 0;
-    if (q->nlights < 1 || q->samples < 1 || q->samples > SHADOW_MAX_SAMPLES)
+    if (q->nlights < 1 || q->samples < 1 || q->samples > KD_SHADOW_MAX_SAMPLES)
         return 0;
     return first <= q->n && count <= q->n - first;
 }
@@ -129,14 +129,18 @@ static void unwalked_add(const kdr_scene *scene, unwalked *u, const kd_shadow_fr
         unwalked_flush(scene, u, visibility, ws);
     const uint32_t n = u->n;
     float *org = u->org + 3 * u->m, *dir = u->dir + 3 * u->m, *tmax = u->tmax + u->m;
-    for (uint32_t s = 0; s < n; s++) {
-        kdr_ray r;
-        kd_shadow_frame_ray(f, s, n, &r);
-        for (int k = 0; k < 3; k++) {
-            org[3 * s + k] = r.org[k];
-            dir[3 * s + k] = r.dir[k];
+    kdr_ray r[64];
+    for (uint32_t s0 = 0; s0 < n; s0 += 64) {
+        const uint32_t m = n - s0 < 64 ? n - s0 : 64;
+        kd_shadow_frame_rays(f, NULL, s0, m, n, r);
+        for (uint32_t j = 0; j < m; j++) {
+            const uint32_t s = s0 + j;
+            for (int k = 0; k < 3; k++) {
+                org[3 * s + k] = r[j].org[k];
+                dir[3 * s + k] = r[j].dir[k];
+            }
+            tmax[s] = r[j].tmax; /* tmin is 0 for every sample */
         }
-        tmax[s] = r.tmax; /* tmin is 0 for every sample */
     }
     u->m += n;
     u->slot[u->pairs++] = slot;

@@ -26,9 +26,11 @@
  * moves the same distance along the ray itself.
  */
 #include <math.h>
+#include <pthread.h>
 
 #include "kd_cone.h"
 #include "kd_internal.h"
+#include "simd.h"
 
 /* Odd constants that decorrelate the hash inputs (golden ratio, splitmix). */
 #define SAMPLE_KEY_POINT 0x9e3779b97f4a7c15ull
@@ -100,6 +102,22 @@ static int offset_along_normal(const float *nrm, float off, float apex[3]) {
     return 1;
 }
 
+/* cos and sin of 2 pi frac(s GOLDEN_FRACTION), the unrotated azimuth
+ * lattice, for every sample index the contract allows (samples <= 4096):
+ * filled once per process, so a sample's azimuth costs two products of
+ * this row with the frame's rotation instead of a sincos. */
+static _Alignas(32) double g_cos[KD_SHADOW_MAX_SAMPLES], g_sin[KD_SHADOW_MAX_SAMPLES];
+static pthread_once_t g_lattice_once = PTHREAD_ONCE_INIT;
+
+static void lattice_fill(void) {
+    for (uint32_t s = 0; s < KD_SHADOW_MAX_SAMPLES; s++) {
+        const double phi = (double)s * GOLDEN_FRACTION;
+        const double a = TWO_PI * (phi - (double)(int64_t)phi);
+        g_cos[s] = cos(a);
+        g_sin[s] = sin(a);
+    }
+}
+
 int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
                          size_t i, size_t l, kd_shadow_frame *f) {
     const float *p = q->points + 3 * i;
@@ -145,6 +163,9 @@ int kd_shadow_frame_init(const kdr_scene *scene, const kdr_shadow_query *q,
     f->key = mix64(mix64(mix64(q->seed) ^ (i * SAMPLE_KEY_POINT)) ^
                    (l * SAMPLE_KEY_LIGHT));
     f->phi_shift = unit_double(mix64(f->key ^ SAMPLE_KEY_PHI));
+    pthread_once(&g_lattice_once, lattice_fill);
+    f->cos_shift = cos(TWO_PI * f->phi_shift);
+    f->sin_shift = sin(TWO_PI * f->phi_shift);
     return KDR_OK;
 }
 
@@ -180,16 +201,17 @@ void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
     const double one_minus_ct = u * f->one_minus_cos;
     const double ct = 1.0 - one_minus_ct;
     const double st = sqrt(one_minus_ct * (2.0 - one_minus_ct));
-    const double phi = TWO_PI * kd_shadow_frame_phase(f, s);
-    const double cp = cos(phi) * st, sp = sin(phi) * st;
-    double d[3], len2 = 0.0;
-    for (int k = 0; k < 3; k++) {
-        d[k] = ct * f->axis[k] + cp * f->b1[k] + sp * f->b2[k];
-        len2 += d[k] * d[k];
-    }
-    const double inv = 1.0 / sqrt(len2);
+    /* the azimuth 2 pi (frac(s g) + phi_shift), which is 2 pi times
+     * kd_shadow_frame_phase up to a whole turn, by the angle sum: within a
+     * few 1e-16 rad of it, far inside the 1e-6 rad that sub-cones allow
+     * for the rounding of directions */
+    const double cphi = g_cos[s] * f->cos_shift - g_sin[s] * f->sin_shift;
+    const double sphi = g_sin[s] * f->cos_shift + g_cos[s] * f->sin_shift;
+    const double cp = cphi * st, sp = sphi * st;
+    /* axis, b1, b2 are orthonormal and ct^2 + st^2 = 1: d is a unit
+     * vector up to double rounding, far below the float rounding of dir */
     for (int k = 0; k < 3; k++)
-        out->dir[k] = (float)(d[k] * inv);
+        out->dir[k] = (float)(ct * f->axis[k] + cp * f->b1[k] + sp * f->b2[k]);
     const double reach = near_surface(f, out->dir) - (double)f->along;
     for (int k = 0; k < 3; k++)
         out->org[k] = f->apex[k] + f->along * out->dir[k];
@@ -197,10 +219,83 @@ void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
     out->tmax = reach > 0.0 ? (float)reach : 0.0f;
 }
 
+/* Four samples s[0..4) of kd_shadow_frame_ray at once: every lane
+ * performs the scalar function's double operations in its order (no FMA
+ * in the build; sqrt, division and the float conversions round as the
+ * scalar ones; max(0, disc) keeps a NaN as the scalar test does), so the
+ * rays are the scalar ones bit for bit. The hash stays scalar (64-bit
+ * products). */
+KD_AVX2 static void frame_rays4(const kd_shadow_frame *f, const uint32_t s[4],
+                                uint32_t nsamples, kdr_ray *out) {
+    _Alignas(32) double sd[4], jit[4], lc[4], ls[4];
+    _Alignas(16) float dir[3][4], org[3][4], tmax[4];
+    for (int j = 0; j < 4; j++) {
+        sd[j] = (double)s[j];
+        jit[j] = unit_double(mix64(f->key ^ ((uint64_t)s[j] * SAMPLE_KEY_SAMPLE)));
+        lc[j] = g_cos[s[j]];
+        ls[j] = g_sin[s[j]];
+    }
+    const d4 zero = d4_zero();
+    const d4 u = d4_div(d4_add(d4_load(sd), d4_load(jit)), d4_set1((double)nsamples));
+    const d4 omc = d4_mul(u, d4_set1(f->one_minus_cos));
+    const d4 ct = d4_sub(d4_set1(1.0), omc);
+    const d4 st = d4_sqrt(d4_mul(omc, d4_sub(d4_set1(2.0), omc)));
+    const d4 cs = d4_set1(f->cos_shift), sn = d4_set1(f->sin_shift);
+    const d4 lcv = d4_load(lc), lsv = d4_load(ls);
+    const d4 cphi = d4_sub(d4_mul(lcv, cs), d4_mul(lsv, sn));
+    const d4 sphi = d4_add(d4_mul(lsv, cs), d4_mul(lcv, sn));
+    const d4 cp = d4_mul(cphi, st), sp = d4_mul(sphi, st);
+    d4 dd[3];
+    for (int k = 0; k < 3; k++) {
+        const d4 d = d4_add(d4_add(d4_mul(ct, d4_set1(f->axis[k])), d4_mul(cp, d4_set1(f->b1[k]))),
+                            d4_mul(sp, d4_set1(f->b2[k])));
+        const f4 df = d4_to_f4(d);
+        f4_store(dir[k], df);
+        dd[k] = d4_from_f4(df);
+        f4_store(org[k], f4_add(f4_set1(f->apex[k]), f4_mul(f4_set1(f->along), df)));
+    }
+    /* near_surface */
+    const d4 oc0 = d4_set1(f->oc[0]), oc1 = d4_set1(f->oc[1]), oc2 = d4_set1(f->oc[2]);
+    const d4 qq = d4_add(d4_add(d4_mul(dd[0], dd[0]), d4_mul(dd[1], dd[1])), d4_mul(dd[2], dd[2]));
+    const d4 b = d4_add(d4_add(d4_mul(oc0, dd[0]), d4_mul(oc1, dd[1])), d4_mul(oc2, dd[2]));
+    const d4 cx = d4_sub(d4_mul(oc1, dd[2]), d4_mul(oc2, dd[1]));
+    const d4 cy = d4_sub(d4_mul(oc2, dd[0]), d4_mul(oc0, dd[2]));
+    const d4 cz = d4_sub(d4_mul(oc0, dd[1]), d4_mul(oc1, dd[0]));
+    const d4 rr = d4_set1(f->radius);
+    d4 disc = d4_sub(d4_mul(d4_mul(qq, rr), rr),
+                     d4_add(d4_add(d4_mul(cx, cx), d4_mul(cy, cy)), d4_mul(cz, cz)));
+    disc = d4_max(zero, disc);
+    const d4 reach = d4_sub(d4_div(d4_set1(f->near_c), d4_add(b, d4_sqrt(disc))),
+                            d4_set1((double)f->along));
+    f4_store(tmax, d4_to_f4(d4_and(d4_gt(reach, zero), reach)));
+    for (int j = 0; j < 4; j++) {
+        for (int k = 0; k < 3; k++) {
+            out[j].org[k] = org[k][j];
+            out[j].dir[k] = dir[k][j];
+        }
+        out[j].tmin = 0.0f;
+        out[j].tmax = tmax[j];
+    }
+}
+
+void kd_shadow_frame_rays(const kd_shadow_frame *f, const uint32_t *idx, uint32_t s0,
+                          uint32_t count, uint32_t nsamples, kdr_ray *out) {
+    uint32_t i = 0;
+    if (__builtin_cpu_supports("avx2"))
+        for (; i + 4 <= count; i += 4) {
+            uint32_t s[4];
+            for (int j = 0; j < 4; j++)
+                s[j] = idx ? idx[i + (uint32_t)j] : s0 + i + (uint32_t)j;
+            frame_rays4(f, s, nsamples, out + i);
+        }
+    for (; i < count; i++)
+        kd_shadow_frame_ray(f, idx ? idx[i] : s0 + i, nsamples, out + i);
+}
+
 int kdr_shadow_ray(const kdr_scene *scene, const kdr_shadow_query *q, size_t i,
                    size_t l, uint32_t s, kdr_ray *out) {
     if (!scene || !q || !out || !q->points || !q->lights || i >= q->n ||
-        l >= q->nlights || q->samples < 1 || q->samples > 4096 ||
+        l >= q->nlights || q->samples < 1 || q->samples > KD_SHADOW_MAX_SAMPLES ||
         s >= q->samples)
         return KDR_EINVAL;
     kd_shadow_frame f;

@@ -155,6 +155,13 @@ KD_AVX2 static inline d4 d4_ge(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_GE_
 KD_AVX2 static inline d4 d4_and(d4 a, d4 b) { return _mm256_and_pd(a, b); }
 /* lanes of m: a, others b */
 KD_AVX2 static inline d4 d4_sel(d4 m, d4 a, d4 b) { return _mm256_blendv_pd(b, a, m); }
+KD_AVX2 static inline d4 d4_load(const double *p) { return _mm256_load_pd(p); }
+KD_AVX2 static inline d4 d4_sqrt(d4 a) { return _mm256_sqrt_pd(a); }
+KD_AVX2 static inline d4 d4_gt(d4 a, d4 b) { return _mm256_cmp_pd(a, b, _CMP_GT_OQ); }
+/* per lane a > b ? a : b, and b where either is NaN (as maxpd) */
+KD_AVX2 static inline d4 d4_max(d4 a, d4 b) { return _mm256_max_pd(a, b); }
+/* the four doubles rounded to float as a C cast does (to nearest) */
+KD_AVX2 static inline f4 d4_to_f4(d4 a) { return _mm256_cvtpd_ps(a); }
 
 /* ---- 8 lanes (AVX2) ------------------------------------------------------ */
 

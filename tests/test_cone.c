@@ -114,6 +114,48 @@ static void test_ray_definition(void) {
     free(b.v);
 }
 
+/* The sampler's batch form (kd_shadow_frame_rays: four samples at once in
+ * double lanes where AVX2 runs) gives kd_shadow_frame_ray's rays bit for
+ * bit: runs from any first sample and of any length (lanes and the scalar
+ * tail), lists of indices in any order, lights near and far, tiny and
+ * wide, with and without the offset along each ray. */
+static void test_batch_rays(void) {
+    const float pts[6] = {0.5f, -0.25f, 0.0f, 1e5f, -3e4f, 7.0f};
+    const float nrm[6] = {0, 0, 1, 0, 0, 0};
+    const kdr_sphere_light lights[4] = {{{3, 4, 12}, 1.0f},
+                                        {{0.5f, -0.25f, 2.0f}, 1.9f},
+                                        {{-7, 0, 0}, 1e-3f},
+                                        {{1e5f, 2e5f, -1e5f}, 3e4f}};
+    const uint32_t counts[] = {1, 3, 4, 5, 16, 63, 64, 4096};
+    static kdr_ray a[4096], b[4096];
+    static uint32_t idx[4096];
+    for (int with_normals = 0; with_normals < 2; with_normals++)
+        for (size_t c = 0; c < sizeof counts / sizeof *counts; c++) {
+            const uint32_t n = counts[c];
+            kdr_shadow_query q = make_query(pts, 2, lights, 4, n);
+            q.normals = with_normals ? nrm : NULL;
+            for (size_t i = 0; i < 2; i++)
+                for (size_t l = 0; l < 4; l++) {
+                    kd_shadow_frame f;
+                    CHECK(kd_shadow_frame_init(NULL, &q, i, l, &f) == KDR_OK, "frame");
+                    for (uint32_t s = 0; s < n; s++)
+                        kd_shadow_frame_ray(&f, s, n, &a[s]);
+                    kd_shadow_frame_rays(&f, NULL, 0, n, n, b);
+                    CHECK(memcmp(a, b, n * sizeof *a) == 0, "run of %u (point %zu, light %zu)",
+                          n, i, l);
+                    const uint32_t s0 = n > 5 ? n / 3 : 0, m = n - s0;
+                    kd_shadow_frame_rays(&f, NULL, s0, m, n, b);
+                    CHECK(memcmp(a + s0, b, m * sizeof *a) == 0, "run from %u of %u", s0, n);
+                    for (uint32_t s = 0; s < n; s++)
+                        idx[s] = (s * 2654435761u) % n; /* a permutation where n is odd */
+                    kd_shadow_frame_rays(&f, idx, 0, n, n, b);
+                    for (uint32_t s = 0; s < n; s++)
+                        CHECK(memcmp(&a[idx[s]], &b[s], sizeof *a) == 0,
+                              "list entry %u (sample %u of %u)", s, idx[s], n);
+                }
+        }
+}
+
 /* Analytic cases: a big blocker (0), an unoccluded light (1 with no rays)
  * and a half-plane blocker whose blocked solid-angle fraction is integrated
  * numerically (uniform in cos theta: a sampler uniform in theta fails). */
@@ -320,6 +362,7 @@ int main(int argc, char **argv) {
     }
     test_invalid();
     test_ray_definition();
+    test_batch_rays();
     test_analytic();
     test_normals();
     test_offsets();
