@@ -280,9 +280,14 @@
  * about 2 degrees, large: about 27), large lights, walks against bundles
  * (every point unwalked): default 0.35 / 0.48 / 0.64 / 0.79x against 0.50 /
  * 0.53 / 0.56 / 0.59x at 32 / 64 / 128 / 256 spp, 2CylinderEngine 0.44 /
- * 0.57 / 0.73 / 0.87x against 0.76 / 0.76 / 0.78 / 0.83x. */
+ * 0.57 / 0.73 / 0.87x against 0.76 / 0.76 / 0.78 / 0.83x. Stop 29, after
+ * the sampler became 4.5x cheaper (82ee76d): `kdray_bench_cone --section
+ * cone_split`, large lights, walks (auto at 128) against none (never) at
+ * 128 spp: default 28.1 / 27.9 ms, 2CylinderEngine 17.7 / 13.5 ms, engine9
+ * 16.0 / 13.5 ms; at 256 spp walks still win (default 43.4 / 53.2 ms,
+ * 2CylinderEngine 26.6 / 25.3, engine9 22.7 / 24.8): from 128 to 256. */
 #define CONE_WIDE_SIN 0.1
-#define CONE_WALK_WIDE_FROM 128u
+#define CONE_WALK_WIDE_FROM 256u
 #define UNWALKED_CHUNK_RAYS 1024u
 /* The route of those chunks (kd_cone_query.c, trace_chunk): at 1 to
  * UNWALKED_STREAM_MAX_SAMPLES samples on scenes of at least samples x
