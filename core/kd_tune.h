@@ -285,9 +285,18 @@
  * cone_split`, large lights, walks (auto at 128) against none (never) at
  * 128 spp: default 28.1 / 27.9 ms, 2CylinderEngine 17.7 / 13.5 ms, engine9
  * 16.0 / 13.5 ms; at 256 spp walks still win (default 43.4 / 53.2 ms,
- * 2CylinderEngine 26.6 / 25.3, engine9 22.7 / 24.8): from 128 to 256. */
+ * 2CylinderEngine 26.6 / 25.3, engine9 22.7 / 24.8): from 128 to 256.
+ * Then the unwalked samples went through the tree in disc order
+ * (UNWALKED_ORDER_FROM, 288c98d) and walks lost at every count measured
+ * (auto = walks from 256 against never, same process): 256 spp default
+ * 47.2 / 39.2 ms, 2CylinderEngine 26.1 / 17.4, engine9 24.4 / 18.0; 512
+ * spp 77.3 / 67.2, 44.3 / 32.4, 37.3 / 32.1; 2048 spp default 397 / 246,
+ * 2CylinderEngine 226 / 117. So a wide light's cone never walks (4097 is
+ * above the contract's 4096 samples). Measured on the benchmark's two
+ * light sizes only (about 2 and 27 degrees): a light just above
+ * CONE_WIDE_SIN has no row of its own. */
 #define CONE_WIDE_SIN 0.1
-#define CONE_WALK_WIDE_FROM 256u
+#define CONE_WALK_WIDE_FROM 4097u
 #define UNWALKED_CHUNK_RAYS 1024u
 /* From this many samples on, a pair's unwalked samples are traced in the
  * order of their positions on the light's disc (kd_cone_query.c,

@@ -190,8 +190,11 @@ static void test_analytic(void) {
      * (forced, or from CONE_WALK_FROM samples on) it decides the open
      * light's cones without rays; below CONE_WALK_FROM the cheap test sends
      * every sample to the any-hit bundles instead (both lights are wide:
-     * from CONE_WALK_WIDE_FROM on, AUTO walks too) */
-    const uint32_t spp[4] = {1, 4, 31, CONE_WALK_WIDE_FROM};
+     * from CONE_WALK_WIDE_FROM on, AUTO walks too; above the contract's
+     * 4096 it never does, and 4096 samples must not walk) */
+    const uint32_t spp[4] = {1, 4, 31,
+                             CONE_WALK_WIDE_FROM < KD_SHADOW_MAX_SAMPLES ? CONE_WALK_WIDE_FROM
+                                                                         : KD_SHADOW_MAX_SAMPLES};
     kdr_shadow_query q = make_query(pts, 16, lights, 2, 64);
     for (int k = 0; k < 8; k++) {
         float vis[32];
