@@ -269,8 +269,13 @@
  * 0.26-0.67x -> 0.46-0.73x; 32 spp small lights 0.73 / 1.04x -> 0.63 /
  * 0.76x (walks kept), large lights 0.36 / 0.43x -> 0.50 / 0.75x. A
  * per-light moving average of the samples walks saved (walk only where it
- * repays, probe one point in 8 otherwise) lost to both at 16-256 spp. */
-#define CONE_WALK_FROM 32u
+ * repays, probe one point in 8 otherwise) lost to both at 16-256 spp.
+ * Stop 29, with the sampler 4.5x cheaper (82ee76d): `kdray_bench_cone
+ * --section cone_split`, small lights, walks (auto) against none (never),
+ * same process: 32 spp default 5.09 / 4.12 ms, 2CylinderEngine 2.19 /
+ * 2.27, engine9 3.46 / 2.67; 64 spp 5.91 / 7.41, 2.31 / 3.82, 3.69 / 4.16
+ * (walks win): from 32 to 64. */
+#define CONE_WALK_FROM 64u
 /* From CONE_WALK_FROM samples on, a point whose light is wider than
  * CONE_WIDE_SIN (sin of the cone's half-angle; 0.1 is 5.7 degrees) walks
  * only from CONE_WALK_WIDE_FROM samples on; below, its samples go through
