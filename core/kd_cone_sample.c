@@ -228,7 +228,7 @@ void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
 KD_AVX2 static void frame_rays4(const kd_shadow_frame *f, const uint32_t s[4],
                                 uint32_t nsamples, kdr_ray *out) {
     _Alignas(32) double sd[4], jit[4], lc[4], ls[4];
-    _Alignas(16) float dir[3][4], org[3][4], tmax[4];
+    f4 lo[4], hi[4]; /* org x, y, z, dir x; dir y, z, tmin, tmax */
     for (int j = 0; j < 4; j++) {
         sd[j] = (double)s[j];
         jit[j] = unit_double(mix64(f->key ^ ((uint64_t)s[j] * SAMPLE_KEY_SAMPLE)));
@@ -250,9 +250,12 @@ KD_AVX2 static void frame_rays4(const kd_shadow_frame *f, const uint32_t s[4],
         const d4 d = d4_add(d4_add(d4_mul(ct, d4_set1(f->axis[k])), d4_mul(cp, d4_set1(f->b1[k]))),
                             d4_mul(sp, d4_set1(f->b2[k])));
         const f4 df = d4_to_f4(d);
-        f4_store(dir[k], df);
+        if (k == 0)
+            lo[3] = df;
+        else
+            hi[k - 1] = df;
         dd[k] = d4_from_f4(df);
-        f4_store(org[k], f4_add(f4_set1(f->apex[k]), f4_mul(f4_set1(f->along), df)));
+        lo[k] = f4_add(f4_set1(f->apex[k]), f4_mul(f4_set1(f->along), df));
     }
     /* near_surface */
     const d4 oc0 = d4_set1(f->oc[0]), oc1 = d4_set1(f->oc[1]), oc2 = d4_set1(f->oc[2]);
@@ -267,15 +270,14 @@ KD_AVX2 static void frame_rays4(const kd_shadow_frame *f, const uint32_t s[4],
     disc = d4_max(zero, disc);
     const d4 reach = d4_sub(d4_div(d4_set1(f->near_c), d4_add(b, d4_sqrt(disc))),
                             d4_set1((double)f->along));
-    f4_store(tmax, d4_to_f4(d4_and(d4_gt(reach, zero), reach)));
-    for (int j = 0; j < 4; j++) {
-        for (int k = 0; k < 3; k++) {
-            out[j].org[k] = org[k][j];
-            out[j].dir[k] = dir[k][j];
-        }
-        out[j].tmin = 0.0f;
-        out[j].tmax = tmax[j];
-    }
+    hi[2] = f4_set1(0.0f);
+    hi[3] = d4_to_f4(d4_and(d4_gt(reach, zero), reach));
+    /* kdr_ray is eight floats: org, dir, tmin, tmax */
+    _Static_assert(sizeof(kdr_ray) == 8 * sizeof(float), "kdr_ray layout");
+    float *const rows[4] = {(float *)(void *)&out[0], (float *)(void *)&out[1],
+                            (float *)(void *)&out[2], (float *)(void *)&out[3]};
+    f4_to_rows4(lo, rows, 0);
+    f4_to_rows4(hi, rows, 4);
 }
 
 void kd_shadow_frame_rays(const kd_shadow_frame *f, const uint32_t *idx, uint32_t s0,

@@ -101,6 +101,17 @@ static inline void f4_rows4(const float *const r[4], int off, f4 c[4]) {
     c[0] = a, c[1] = b, c[2] = d, c[3] = e;
 }
 
+/* The transpose of c[0..3] to rows: r[j][off + i] = lane j of c[i]
+ * (unaligned rows); f4_rows4's inverse. */
+static inline void f4_to_rows4(const f4 c[4], float *const r[4], int off) {
+    f4 a = c[0], b = c[1], d = c[2], e = c[3];
+    _MM_TRANSPOSE4_PS(a, b, d, e);
+    _mm_storeu_ps(r[0] + off, a);
+    _mm_storeu_ps(r[1] + off, b);
+    _mm_storeu_ps(r[2] + off, d);
+    _mm_storeu_ps(r[3] + off, e);
+}
+
 /* The largest / smallest lane (no NaN lanes). */
 static inline float f4_hmax(f4 a) {
     const f4 b = _mm_max_ps(a, _mm_movehl_ps(a, a));
