@@ -471,10 +471,17 @@ static void shadow_run(void *ctx) {
             }
             kdr_ray rays[64];
             for (uint32_t s = 0; s < q->samples; s++) {
-                /* the sampler's batch form, as kdray's own paths use it */
+                /* the sampler's batch form, as kdray's own paths use it
+                 * (bench/compare builds this file against older cores
+                 * too: those, without KD_SHADOW_MAX_SAMPLES, have only
+                 * the one-sample form) */
+#ifdef KD_SHADOW_MAX_SAMPLES
                 if (s % 64 == 0)
                     kd_shadow_frame_rays(&f, NULL, s, q->samples - s < 64 ? q->samples - s : 64,
                                          q->samples, rays);
+#else
+                kd_shadow_frame_ray(&f, s, q->samples, &rays[s % 64]);
+#endif
                 const kdr_ray *ray = &rays[s % 64];
                 if (j->api.width <= 1)
                     single_put(j->buf, used, KDR_ANY, ray);
