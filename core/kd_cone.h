@@ -52,6 +52,14 @@ void kd_shadow_frame_ray(const kd_shadow_frame *f, uint32_t s,
  * in double lanes where AVX2 runs. */
 void kd_shadow_frame_rays(const kd_shadow_frame *f, const uint32_t *idx, uint32_t s0,
                           uint32_t count, uint32_t nsamples, kdr_ray *out);
+/* order[0..n): the n samples of a pair along a Morton curve of the
+ * light's disc as seen without the pair's rotation (the stratum's middle
+ * for the radius, the lattice without its shift for the azimuth). A
+ * pair's rotation turns the whole disc, so samples consecutive in this
+ * order are neighbours on every pair's disc: bundles of them are compact
+ * without a sort by direction (kd_cone_query.c's unwalked chunks).
+ * KDR_ENOMEM when its scratch cannot be allocated. */
+int kd_shadow_disc_order(uint32_t n, uint32_t *order);
 /* The azimuth of sample s in turns, in [0, 1): the very value the ray is
  * built from, so a region of (stratum, phase) holds exactly the samples
  * whose parameters lie in it. */

@@ -18,15 +18,12 @@
  * so only the cost depends on the order (groups form among consecutive
  * points of the list).
  */
-#include <math.h>
 #include <stdlib.h>
 
 #include "kd_cone.h"
 #include "kd_internal.h"
 #include "kd_stream.h" /* kd_cpu_has_avx512, kd_stream_trace_far */
 #include "kd_traverse_bundle.h"
-
-
 
 /* The index of the j-th point traced: its samples' seed and its answers'
  * slots (kdr_shadow_trace_order passes points in its own order). */
@@ -53,7 +50,8 @@ static int query_valid(const kdr_scene *scene, const kdr_shadow_query *q,
  * samples there, where bundles trace them faster; on scenes of at least
  * UNWALKED_NARROW_MIN_BYTES, 8 lanes at most up to
  * UNWALKED_NARROW_MAX_SAMPLES samples (fewer points a bundle; kd_tune.h).
- * Above UNWALKED_ORDER_FROM samples a pair's samples arrive in disc_order
+ * Above UNWALKED_ORDER_FROM samples a pair's samples arrive in
+ * kd_shadow_disc_order
  * and the bundles take them as they come; below, each chunk's runs are
  * regrouped by direction (KB_SORT).
  * Every route returns the single-ray walk's answers. */
@@ -67,7 +65,7 @@ static void trace_chunk(const kdr_scene *scene, const kdr_ray_batch *b, size_t m
         return;
     }
     const int narrow = n <= UNWALKED_NARROW_MAX_SAMPLES && bytes >= UNWALKED_NARROW_MIN_BYTES;
-    /* samples in disc_order need no regrouping by direction */
+    /* samples in kd_shadow_disc_order need no regrouping by direction */
     const int sort = n > UNWALKED_ORDER_FROM ? 0 : KB_SORT;
     kd_batch_bundles(scene, b, 0, m, KDR_ANY, sort | KB_LIVE | KB_FAR_AUTO,
                      narrow ? 8 : 16, &out, ts);
@@ -86,49 +84,8 @@ typedef struct unwalked {
     uint8_t *hit;
     size_t *slot; /* the visibility index of each pending pair */
     uint32_t *order; /* the samples of a pair in the order they are traced
-                        (disc_order), NULL: 0..n-1 */
+                        (kd_shadow_disc_order), NULL: 0..n-1 */
 } unwalked;
-
-/* Spreads the low 16 bits of x to the even bits. */
-static uint32_t spread16(uint32_t x) {
-    x &= 0xffffu;
-    x = (x | x << 8) & 0x00ff00ffu;
-    x = (x | x << 4) & 0x0f0f0f0fu;
-    x = (x | x << 2) & 0x33333333u;
-    return (x | x << 1) & 0x55555555u;
-}
-
-static int by_key(const void *a, const void *b) {
-    const uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
-    return x < y ? -1 : x > y;
-}
-
-/* The n samples of a pair ordered along a Morton curve of the light's
- * disc as seen without the pair's rotation (stratum middle for the
- * radius, kd_shadow_frame_phase's lattice without its shift for the
- * azimuth): a pair's rotation turns the whole disc, so consecutive
- * samples in this order stay neighbours on every pair's disc and the
- * bundles of a chunk are compact without sorting each chunk's rays by
- * direction. The same order for every pair of the query; the answers do
- * not depend on it (a pair's lit samples are counted). */
-static int disc_order(uint32_t n, uint32_t *order) {
-    uint64_t *key = malloc(n * sizeof *key);
-    if (!key)
-        return KDR_ENOMEM;
-    const kd_shadow_frame unrotated = {.phi_shift = 0.0};
-    for (uint32_t s = 0; s < n; s++) {
-        const double r = sqrt(((double)s + 0.5) / (double)n);
-        const double a = 6.283185307179586 * kd_shadow_frame_phase(&unrotated, s);
-        const uint32_t x = (uint32_t)((r * cos(a) + 1.0) * 32767.0);
-        const uint32_t y = (uint32_t)((r * sin(a) + 1.0) * 32767.0);
-        key[s] = (uint64_t)(spread16(x) | spread16(y) << 1) << 32 | s;
-    }
-    qsort(key, n, sizeof *key, by_key);
-    for (uint32_t s = 0; s < n; s++)
-        order[s] = (uint32_t)key[s];
-    free(key);
-    return KDR_OK;
-}
 
 static int unwalked_init(unwalked *u, uint32_t n) {
     size_t per_chunk = UNWALKED_CHUNK_RAYS / n;
@@ -144,7 +101,7 @@ static int unwalked_init(unwalked *u, uint32_t n) {
     if (n <= UNWALKED_ORDER_FROM)
         return KDR_OK;
     u->order = malloc(n * sizeof *u->order);
-    return u->order ? disc_order(n, u->order) : KDR_ENOMEM;
+    return u->order ? kd_shadow_disc_order(n, u->order) : KDR_ENOMEM;
 }
 
 static void unwalked_free(unwalked *u) {

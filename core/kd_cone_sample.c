@@ -27,6 +27,7 @@
  */
 #include <math.h>
 #include <pthread.h>
+#include <stdlib.h>
 
 #include "kd_cone.h"
 #include "kd_internal.h"
@@ -292,6 +293,38 @@ void kd_shadow_frame_rays(const kd_shadow_frame *f, const uint32_t *idx, uint32_
         }
     for (; i < count; i++)
         kd_shadow_frame_ray(f, idx ? idx[i] : s0 + i, nsamples, out + i);
+}
+
+/* Spreads the low 16 bits of x to the even bits. */
+static uint32_t spread16(uint32_t x) {
+    x &= 0xffffu;
+    x = (x | x << 8) & 0x00ff00ffu;
+    x = (x | x << 4) & 0x0f0f0f0fu;
+    x = (x | x << 2) & 0x33333333u;
+    return (x | x << 1) & 0x55555555u;
+}
+
+static int by_key(const void *a, const void *b) {
+    const uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+int kd_shadow_disc_order(uint32_t n, uint32_t *order) {
+    uint64_t *key = malloc(n * sizeof *key);
+    if (!key)
+        return KDR_ENOMEM;
+    pthread_once(&g_lattice_once, lattice_fill);
+    for (uint32_t s = 0; s < n; s++) {
+        const double r = sqrt(((double)s + 0.5) / (double)n);
+        const uint32_t x = (uint32_t)((r * g_cos[s] + 1.0) * 32767.0);
+        const uint32_t y = (uint32_t)((r * g_sin[s] + 1.0) * 32767.0);
+        key[s] = (uint64_t)(spread16(x) | spread16(y) << 1) << 32 | s;
+    }
+    qsort(key, n, sizeof *key, by_key);
+    for (uint32_t s = 0; s < n; s++)
+        order[s] = (uint32_t)key[s];
+    free(key);
+    return KDR_OK;
 }
 
 int kdr_shadow_ray(const kdr_scene *scene, const kdr_shadow_query *q, size_t i,

@@ -304,8 +304,8 @@
 #define CONE_WALK_WIDE_FROM 4097u
 #define UNWALKED_CHUNK_RAYS 1024u
 /* From this many samples on, a pair's unwalked samples are traced in the
- * order of their positions on the light's disc (kd_cone_query.c,
- * disc_order) and the chunk's bundles are not sorted by direction. */
+ * order of their positions on the light's disc (kd_cone_sample.c,
+ * kd_shadow_disc_order) and the chunk's bundles are not sorted by direction. */
 #define UNWALKED_ORDER_FROM 16u
 /* The route of those chunks (kd_cone_query.c, trace_chunk): at 1 to
  * UNWALKED_STREAM_MAX_SAMPLES samples on scenes of at least samples x
